@@ -1,0 +1,1 @@
+"""rob6 kinematics service."""

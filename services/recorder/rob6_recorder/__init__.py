@@ -1,0 +1,1 @@
+"""rob6 recorder service and session-log tools (MCAP)."""

@@ -1,0 +1,1 @@
+"""rob6 shared library: bus, messages, robot models, configuration."""
