@@ -1,0 +1,73 @@
+"""rob6-gateway: the rob6server protocol on TCP (default port 5005)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import signal
+
+import click
+
+from rob6 import logs
+from rob6.bus import Bus
+from rob6.config import bus_options
+from rob6.robots import get_robot
+
+from .commands import Gateway, Options
+from .server import AddressFilter, Server
+
+log = logging.getLogger("rob6.gateway")
+
+
+@click.command()
+@bus_options
+@click.option("--port", envvar="ROB6_PORT", default=5005, show_default=True, type=int,
+              help="TCP port for clients [env ROB6_PORT].")
+@click.option("--bind", envvar="ROB6_BIND", default="0.0.0.0", show_default=True,
+              help="Address to listen on; all interfaces by default, as the original [env ROB6_BIND].")
+@click.option("--allow-shutdown/--no-allow-shutdown", envvar="ROB6_ALLOW_SHUTDOWN", default=False,
+              show_default=True, help="Let clients stop the whole system with Shutdown "
+                                      "[env ROB6_ALLOW_SHUTDOWN].")
+@click.option("--allow-direct-adept-cmd/--no-allow-direct-adept-cmd", envvar="ROB6_ALLOW_DIRECT_ADEPT_CMD",
+              default=False, show_default=True,
+              help="Let clients send raw controller commands (ad850) [env ROB6_ALLOW_DIRECT_ADEPT_CMD].")
+@click.option("--allow-client", "allow_clients", envvar="ROB6_ALLOW_CLIENTS", multiple=True,
+              help="Accept clients only from these addresses/networks (CIDR); repeat or comma-separate "
+                   "[env ROB6_ALLOW_CLIENTS]. Default: everyone.")
+@click.option("--pause-ms", envvar="ROB6_PAUSE_MS", default=5.0, show_default=True, type=float,
+              help="An unterminated command is complete when no byte follows for this long.")
+@click.option("--idle-timeout", envvar="ROB6_IDLE_TIMEOUT", default=0.0, show_default=True, type=float,
+              help="Close a client that sends nothing for this many seconds (0: never).")
+def main(settings, log_level, port, bind, allow_shutdown, allow_direct_adept_cmd, allow_clients,
+         pause_ms, idle_timeout):
+    """Serve the rob6server text protocol and forward the work to the rob6 services."""
+    logs.configure("gateway", log_level)
+    networks = [n.strip() for item in allow_clients for n in item.split(",") if n.strip()]
+    asyncio.run(_serve(settings, port, bind, Options(allow_shutdown, allow_direct_adept_cmd),
+                       AddressFilter(networks) if networks else None, pause_ms / 1000.0, idle_timeout))
+
+
+async def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) -> None:
+    bus = Bus(settings, "gateway")
+    logging.getLogger().addHandler(logs.BusLogHandler(bus))
+    gateway = Gateway(bus, get_robot(settings.robot), options)
+    server = Server(gateway, pause_s=pause_s, idle_timeout_s=idle_timeout, allow=allow)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(signum, stop.set)
+    tcp = await asyncio.start_server(server.handle, bind, port, reuse_address=True)
+    bus.announce()  # tells tools and the launcher the gateway is up
+    log.warning("gateway listening on %s:%d (robot %s)", bind, port, settings.robot)
+    done = asyncio.create_task(stop.wait())
+    shutdown = asyncio.create_task(gateway.shutdown_requested.wait())
+    await asyncio.wait({done, shutdown}, return_when=asyncio.FIRST_COMPLETED)
+    if gateway.shutdown_requested.is_set():
+        log.warning("shutting down rob6server.")
+        bus.publish("control/shutdown", b"{}", reliable=True)
+    tcp.close()
+    bus.close()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,561 @@
+"""The 78 commands of the rob6server protocol and what the gateway does with each.
+
+Every handler gets the parsed-on-demand argument cursor and returns the complete
+reply text (all lines, each ending in ``\\n``) or ``None`` for the few commands the
+original answers with nothing (``SetAllowedStatus``). Parsing errors use the
+original's words (``ERROR: incorrect joints`` + ``false``); an unreachable service
+gives ``ERROR: <service> unavailable`` within the bus timeout. Command names are
+case-sensitive, extra arguments are ignored, as in the original.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+
+from rob6 import logs
+from rob6.bus import Bus, BusError
+from rob6.messages import (
+    BackwardCalcRequest,
+    ClientExchange,
+    ConfigChange,
+    Empty,
+    FkRequest,
+    ForwardCalcRequest,
+    GripperCommand,
+    ModeRequest,
+    MoveRequest,
+    Verbosity,
+)
+from rob6.robots import RobotModel
+
+from .args import Args, ParseError
+from .state import Mirror, Session
+
+log = logging.getLogger("rob6.gateway")
+
+VERSION = "0.1.01"
+TRUE, FALSE = "true\n", "false\n"
+
+
+class Close(Exception):
+    """End the session after sending ``reply`` (Quit, Shutdown)."""
+
+    def __init__(self, reply: str, shutdown: bool = False):
+        self.reply = reply
+        self.shutdown = shutdown
+
+
+def fmt(values) -> str:
+    return " ".join("%f" % v for v in values)
+
+
+def boolean(ok: bool) -> str:
+    return TRUE if ok else FALSE
+
+
+def error(message: str, with_false: bool = True) -> str:
+    return f"ERROR: {message}\n" + (FALSE if with_false else "")
+
+
+@dataclass
+class Options:
+    allow_shutdown: bool = False
+    allow_direct_adept_cmd: bool = False
+    ping_max_count: int = 1000  # bound on PingRobot's n (the command blocks the session)
+    ping_max_wait_ms: int = 1000
+
+
+Handler = Callable[["Gateway", Session, Args], Awaitable[str | None]]
+COMMANDS: dict[str, Handler] = {}
+
+
+def command(*names: str):
+    def register(func: Handler) -> Handler:
+        for name in names:
+            COMMANDS[name] = func
+        return func
+    return register
+
+
+class Gateway:
+    """Global state shared by all sessions (they run one at a time, like the original)."""
+
+    def __init__(self, bus: Bus, robot: RobotModel, options: Options):
+        self.bus = bus
+        self.robot = robot
+        self.options = options
+        self.mirror = Mirror(bus, robot)
+        self.verbosity = 2
+        self.alter = False  # EnableAlter succeeded (the planner owns the mode; this is its echo)
+        self.shutdown_requested = asyncio.Event()
+        # a service (re)appearing gets the current verbosity, so all processes agree
+        bus.on_liveliness(lambda service, _i, alive: alive and service != "gateway"
+                          and self.bus.publish("control/verbosity", Verbosity(level=self.verbosity)))
+
+    async def execute(self, session: Session, line: str) -> str | None:
+        name, _, rest = _split_command(line)
+        handler = COMMANDS.get(name)
+        if handler is None:
+            return f"ERROR: {line}\n"
+        try:
+            return await handler(self, session, Args(rest))
+        except ParseError as exc:
+            return error(str(exc))
+        except BusError as exc:
+            log.warning("%s failed: %s (%s)", name, exc.message, exc.code)
+            return f"ERROR: {exc.message}\n"
+
+    async def call(self, session: Session, service: str, op: str, body, **kwargs):
+        return await self.bus.arequest(service, op, body, cid=session.cid, **kwargs)
+
+    def current(self, session: Session) -> list[float]:
+        """Where the robot is (or the virtual robot, while route testing)."""
+        if session.routetest is not None:
+            return session.routetest
+        state = self.mirror.state()
+        if state is None:
+            raise BusError("unavailable", "driver unavailable")
+        return state.q
+
+    def record(self, session: Session, received: float, line, reply: str | None) -> None:
+        """A copy of the exchange for the recorder, sent after the reply went out."""
+        self.bus.publish("trace/gateway/session", ClientExchange(
+            session=session.number, peer=session.peer, cid=session.cid, t_in=received,
+            t_out=time.time(), line=line.text if not line.too_long else f"<{line.too_long} bytes>",
+            reply=reply), reliable=True)
+
+    async def session_end(self, session: Session) -> None:
+        """The client left: the planner stops any real-time motion (Alter mode)."""
+        self.alter = False
+        try:
+            await self.call(session, "planner", "session_end", Empty())
+        except BusError as exc:
+            log.warning("planner did not confirm the end of session %d: %s", session.number, exc.message)
+
+
+def _split_command(line: str) -> tuple[str, str, str]:
+    stripped = line.lstrip(" \t\r\n\v\f")
+    for i, ch in enumerate(stripped):
+        if ch in " \t\r\n\v\f":
+            return stripped[:i], ch, stripped[i + 1:]
+    return stripped, "", ""
+
+
+# ====================================================================== management
+@command("GetRobot")
+async def get_robot(gw, session, args):
+    return gw.robot.name + "\n"
+
+
+def _identity(predicate):
+    async def handler(gw, session, args):
+        return boolean(predicate(gw.robot))
+    return handler
+
+
+command("IsAdept")(_identity(lambda r: r.is_adept))
+command("IsKuka")(_identity(lambda r: r.is_kuka))
+command("IsKawa")(_identity(lambda r: r.is_kawa))
+command("IsKR3")(_identity(lambda r: r.is_kr3))
+command("IsKR16")(_identity(lambda r: r.is_kr16))
+
+
+@command("GetVersion")
+async def get_version(gw, session, args):
+    return VERSION + "\n"
+
+
+@command("GetTimestamp")
+async def get_timestamp(gw, session, args):
+    return "%.3f\n" % time.time()
+
+
+@command("CM_PING")
+async def cm_ping(gw, session, args):
+    return "PONG\n"
+
+
+@command("GetVerbosity")
+async def get_verbosity(gw, session, args):
+    return f"{gw.verbosity}\n"
+
+
+@command("SetVerbosity")
+async def set_verbosity(gw, session, args):
+    level = args.index()
+    if not 0 <= level <= 4:
+        log.error("invalid verbosity level %d", level)
+        return FALSE
+    gw.verbosity = level
+    logs.set_verbosity(level)
+    gw.bus.publish("control/verbosity", Verbosity(level=level), reliable=True)
+    return TRUE
+
+
+@command("Quit")
+async def quit_(gw, session, args):
+    raise Close("bye!\n")
+
+
+@command("Shutdown")
+async def shutdown(gw, session, args):
+    if not gw.options.allow_shutdown:
+        return error("Shutdown is disabled on this server (start the gateway with --allow-shutdown)",
+                     with_false=False)
+    raise Close("bye!\nshutting down ...\n", shutdown=True)
+
+
+@command("PingRobot")
+async def ping_robot(gw, session, args):
+    """n round trips gateway -> driver, ``wait`` ms apart.
+
+    Reply: mean round trip (s), robot time zero, server time zero, and the two
+    coefficients c1, c2 of the fit (server - server0) - (robot - robot0) =
+    c1 (robot - robot0) + c2 (robot - robot0)^2 (clock drift model).
+    """
+    count = args.integer() if not args.at_end() else 10
+    wait_ms = args.double() if not args.at_end() else 0.0
+    if count is None or wait_ms is None:
+        raise ParseError("value")
+    if not 1 <= count <= gw.options.ping_max_count or not 0 <= wait_ms <= gw.options.ping_max_wait_ms:
+        return FALSE
+    samples = []
+    for i in range(count):
+        if i and wait_ms:
+            await asyncio.sleep(wait_ms / 1000.0)
+        sent = time.time()
+        reply = await gw.call(session, "driver", "ping", Empty())
+        received = time.time()
+        samples.append((received - sent, reply.robot_time, (sent + received) / 2))
+    mean_rtt = sum(s[0] for s in samples) / count
+    robot0, server0 = samples[0][1], samples[0][2]
+    c1, c2 = _drift_fit([(r - robot0, s - server0) for _, r, s in samples])
+    return "%.6f %.10f %.10f %.8g %.8g\n" % (mean_rtt, robot0, server0, c1, c2)
+
+
+def _drift_fit(points: list[tuple[float, float]]) -> tuple[float, float]:
+    """Least squares of d = s - r over c1 r + c2 r^2 (no constant: both start at zero)."""
+    s11 = sum(r * r for r, _ in points)
+    s12 = sum(r ** 3 for r, _ in points)
+    s22 = sum(r ** 4 for r, _ in points)
+    b1 = sum(r * (s - r) for r, s in points)
+    b2 = sum(r * r * (s - r) for r, s in points)
+    det = s11 * s22 - s12 * s12
+    if abs(det) < 1e-30:
+        return (b1 / s11 if s11 > 1e-30 else 0.0), 0.0
+    return (b1 * s22 - b2 * s12) / det, (s11 * b2 - s12 * b1) / det
+
+
+# ====================================================================== position
+@command("GetPositionJoints")
+async def get_position_joints(gw, session, args):
+    return fmt(gw.current(session)) + "\n"
+
+
+@command("GetPositionHomRowWise")
+async def get_position_hom(gw, session, args):
+    reply = await gw.call(session, "kinematics", "fk", FkRequest(joints=[gw.current(session)]))
+    return fmt(reply.poses[0]) + "\n"
+
+
+@command("GetStatus")
+async def get_status(gw, session, args):
+    return " ".join(gw.robot.status(gw.current(session))) + "\n"
+
+
+# ====================================================================== limits and configuration
+def _config_getter(field: str):
+    async def handler(gw, session, args):
+        config = await gw.call(session, "planner", "config", Empty())
+        gw.mirror.config = config
+        return fmt(getattr(config, field)) + "\n"
+    return handler
+
+
+for _name, _field in (("GetJointsMaxSpeed", "speed"), ("GetJointsMaxAcceleration", "accel"),
+                      ("GetJointsMaxChange", "max_change"), ("GetJointsMaxTurnMax", "turn_max"),
+                      ("GetJointsMaxTurnMin", "turn_min"), ("GetMinChangeWeights", "weights")):
+    command(_name)(_config_getter(_field))
+
+
+async def _change(gw, session, name: str, values=(), words=()) -> bool:
+    reply = await gw.call(session, "planner", "config_change",
+                          ConfigChange(command=name, args=list(values), words=list(words)))
+    gw.mirror.config = reply.config
+    return reply.ok
+
+
+def _six(name):
+    async def handler(gw, session, args):
+        return boolean(await _change(gw, session, name, args.joints()))
+    return handler
+
+
+def _single(name):
+    async def handler(gw, session, args):
+        index = args.index()
+        value = args.value()
+        return boolean(await _change(gw, session, name, (index, value)))
+    return handler
+
+
+def _reset(name):
+    async def handler(gw, session, args):
+        return boolean(await _change(gw, session, name))
+    return handler
+
+
+for _name in ("SetJointsMaxSpeed", "SetJointsMaxAcceleration", "SetJointsMaxChange",
+              "SetJointsMaxTurnMax", "SetJointsMaxTurnMin", "SetMinChangeWeights"):
+    command(_name)(_six(_name))
+for _name in ("SetSingleJointMaxSpeed", "SetSingleJointMaxAcceleration", "SetSingleJointMaxChange",
+              "SetSingleJointMaxTurnMax", "SetSingleJointMaxTurnMin"):
+    command(_name)(_single(_name))
+for _name in ("ResetJointsMaxSpeed", "ResetJointsMaxAcceleration", "ResetJointsMaxChange",
+              "ResetJointsMaxTurn", "ResetMinChangeWeights", "ResetAllowedStatus"):
+    command(_name)(_reset(_name))
+
+
+@command("GetAllowedStatus")
+async def get_allowed_status(gw, session, args):
+    config = await gw.call(session, "planner", "config", Empty())
+    return " ".join(config.allowed) + "\n"
+
+
+@command("SetAllowedStatus")
+async def set_allowed_status(gw, session, args):
+    try:
+        words = args.status()
+    except ParseError:
+        return error("incorrect status", with_false=False)
+    await _change(gw, session, "SetAllowedStatus", words=words)
+    return None  # the original sends nothing on success; its clients do not read a reply
+
+
+@command("GetRTSpeedControl")
+async def get_rt_speed_control(gw, session, args):
+    config = await gw.call(session, "planner", "config", Empty())
+    return f"{config.rt_speed_control}\n"
+
+
+@command("SetRTSpeedControl")
+async def set_rt_speed_control(gw, session, args):
+    return boolean(await _change(gw, session, "SetRTSpeedControl", (args.index(),)))
+
+
+@command("SetKukaRTSpeed")
+async def set_kuka_rt_speed(gw, session, args):
+    if not gw.robot.rt:  # kr16, kr3, ad850, kaw_fs: arguments not even read
+        return FALSE
+    return boolean(await _change(gw, session, "SetKukaRTSpeed", args.joints()))
+
+
+def _adept_setting(name):
+    # the original answers true to anything, on every robot type; only the Adept uses them
+    async def handler(gw, session, args):
+        values = args.leading_doubles(2)
+        if gw.robot.is_adept and values:
+            await _change(gw, session, name, values)
+        return TRUE
+    return handler
+
+
+for _name in ("SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoarse"):
+    command(_name)(_adept_setting(_name))
+
+
+# ====================================================================== kinematics
+@command("ForwardCalc")
+async def forward_calc(gw, session, args):
+    numbers = args.leading_doubles(6)
+    if not numbers:
+        return FALSE
+    config = gw.mirror.config
+    reply = await gw.call(session, "kinematics", "forward_calc", ForwardCalcRequest(
+        numbers=numbers, turn_min=config.turn_min, turn_max=config.turn_max))
+    if reply.pose is None:
+        return FALSE
+    return fmt(reply.pose) + "\n" + reply.status + "\n"
+
+
+async def _backward(gw, session, args) -> list[float] | None:
+    pose = args.matrix()
+    pattern = args.status()
+    config = gw.mirror.config
+    reply = await gw.call(session, "kinematics", "backward_calc", BackwardCalcRequest(
+        pose=pose, pattern=pattern, current=gw.current(session), turn_min=config.turn_min,
+        turn_max=config.turn_max, max_change=config.max_change))
+    return reply.joints
+
+
+@command("BackwardCalc", "GetJointsRowWise")
+async def backward_calc(gw, session, args):
+    joints = await _backward(gw, session, args)
+    return FALSE if joints is None else fmt(joints) + "\n"
+
+
+@command("IsPossible")
+async def is_possible(gw, session, args):
+    return boolean(await _backward(gw, session, args) is not None)
+
+
+# ====================================================================== motion
+async def _move(gw, session, kind: str, **fields) -> str:
+    if session.routetest is not None:  # real moves are refused while route testing
+        return FALSE
+    reply = await gw.call(session, "planner", "move", MoveRequest(kind=kind, **fields))
+    if reply.state is not None:
+        gw.mirror.set_state(reply.state)
+    if not reply.ok and reply.reason:
+        log.warning("%s refused: %s", kind, reply.reason)
+    return boolean(reply.ok)
+
+
+@command("MovePTPJoints")
+async def move_ptp_joints(gw, session, args):
+    return await _move(gw, session, "MovePTPJoints", joints=args.joints())
+
+
+@command("MovePTPJointsStatus")
+async def move_ptp_joints_status(gw, session, args):
+    joints = args.joints()
+    return await _move(gw, session, "MovePTPJointsStatus", joints=joints, pattern=args.status())
+
+
+@command("MovePTPHomRowWise")
+async def move_ptp_hom(gw, session, args):
+    return await _move(gw, session, "MovePTPHomRowWise", pose=args.matrix())
+
+
+def _pose_status_move(kind):
+    async def handler(gw, session, args):
+        pose = args.matrix()
+        return await _move(gw, session, kind, pose=pose, pattern=args.status())
+    return handler
+
+
+for _name in ("MovePTPHomRowWiseStatusTurn", "MoveMinChangeRowWiseStatus"):
+    command(_name)(_pose_status_move(_name))
+
+
+# ---------------------------------------------------------------------- route test
+@command("EnableRoutetest")
+async def enable_routetest(gw, session, args):
+    if session.routetest is not None:
+        return FALSE
+    session.routetest = list(gw.current(session))
+    return TRUE
+
+
+@command("DisableRoutetest")
+async def disable_routetest(gw, session, args):
+    session.routetest = None
+    return TRUE
+
+
+async def _routetest(gw, session, request: MoveRequest) -> str:
+    request.dry_run, request.start = True, session.routetest
+    reply = await gw.call(session, "planner", "move", request)
+    if reply.ok and reply.joints is not None:
+        session.routetest = list(reply.joints)
+    return boolean(reply.ok)
+
+
+@command("RoutetestJoints")
+async def routetest_joints(gw, session, args):
+    if session.routetest is None:
+        return FALSE
+    return await _routetest(gw, session, MoveRequest(kind="MovePTPJoints", joints=args.joints()))
+
+
+@command("RoutetestRowWiseStatus")
+async def routetest_row_wise_status(gw, session, args):
+    if session.routetest is None:
+        return FALSE
+    pose = args.matrix()
+    return await _routetest(gw, session, MoveRequest(
+        kind="RoutetestRowWiseStatus", pose=pose, pattern=args.status()))
+
+
+# ---------------------------------------------------------------------- real-time (Alter) and LIN modes
+def _mode(name):
+    async def handler(gw, session, args):
+        reply = await gw.call(session, "planner", "mode", ModeRequest(command=name))
+        if name in ("EnableAlter", "EnableAdeptAlter") and reply.ok:
+            gw.alter = True
+        elif name == "DisableAlter":
+            gw.alter = False
+        return boolean(reply.ok)
+    return handler
+
+
+for _name in ("EnableAlter", "DisableAlter", "EnableAdeptAlter", "EnableLin", "DisableLin"):
+    command(_name)(_mode(_name))
+
+
+def _alter_move(kind, parse):
+    async def handler(gw, session, args):
+        if not gw.alter:  # the original answers false without reading the arguments
+            return FALSE
+        return await _move(gw, session, kind, **parse(args))
+    return handler
+
+
+def _pose_and_status(args):
+    pose = args.matrix()
+    return {"pose": pose, "pattern": args.status()}
+
+
+command("MoveRTJoints")(_alter_move("MoveRTJoints", lambda a: {"joints": a.joints()}))
+command("MoveRTHomRowWise")(_alter_move("MoveRTHomRowWise", lambda a: {"pose": a.matrix()}))
+command("MoveRTHomRowWiseStatus")(_alter_move("MoveRTHomRowWiseStatus", _pose_and_status))
+command("DoAlterJoint")(_alter_move("DoAlterJoint", lambda a: {"joints": a.joints()}))
+command("DoAlterCart")(_alter_move("DoAlterCart", lambda a: {"pose": a.doubles(6, "joints")}))
+
+
+@command("MoveLINHomRowWise")
+async def move_lin(gw, session, args):
+    # the planner knows whether LIN mode is on; without it the answer is false
+    try:
+        pose = args.matrix()
+    except ParseError:
+        return FALSE  # the original answers false without reading arguments when LIN is off
+    return await _move(gw, session, "MoveLINHomRowWise", pose=pose)
+
+
+# ====================================================================== gripper and Adept
+def _gripper(name, needs_value):
+    async def handler(gw, session, args):
+        if not gw.robot.is_adept:
+            return FALSE
+        value = None
+        if needs_value:
+            value = args.double()
+            if value is None:
+                raise ParseError("value")
+        reply = await gw.call(session, "gripper", "command", GripperCommand(command=name, value=value))
+        if not reply.ok and reply.reason:
+            return "".join(line + "\n" for line in reply.lines) + error(reply.reason)
+        return "".join(line + "\n" for line in reply.lines) + boolean(reply.ok)
+    return handler
+
+
+command("HasGripper")(_gripper("HasGripper", False))
+command("GripperGoHome")(_gripper("GripperGoHome", False))
+command("GripperMove")(_gripper("GripperMove", True))
+command("GripperMoveToPosition")(_gripper("GripperMoveToPosition", True))
+
+
+@command("DirectAdeptCmd")
+async def direct_adept_cmd(gw, session, args):
+    if not gw.robot.is_adept:
+        return FALSE
+    if not gw.options.allow_direct_adept_cmd:
+        return error("DirectAdeptCmd is disabled on this server (it forwards raw controller "
+                     "commands; start the gateway with --allow-direct-adept-cmd)")
+    return error("DirectAdeptCmd: the simulated Adept has no V+ command interpreter")
+

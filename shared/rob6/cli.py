@@ -1,0 +1,79 @@
+"""The ``rob6`` command: run the system, the Zenoh router, health checks, session logs."""
+
+from __future__ import annotations
+
+import socket
+import sys
+
+import click
+
+from . import logs
+from .config import bus_options
+from .robots import ROBOT_TYPES
+
+
+@click.group()
+def main():
+    """rob6: a distributed rob6server (see README.md)."""
+
+
+@main.command()
+@click.option("--robot", envvar="ROB6_ROBOT", default="kr16", show_default=True, type=click.Choice(ROBOT_TYPES))
+@click.option("--robot-id", envvar="ROB6_ROBOT_ID", default="robot1", show_default=True)
+@click.option("--port", envvar="ROB6_PORT", default=5005, show_default=True, type=int)
+@click.option("--router-port", envvar="ROB6_ROUTER_PORT", default=7447, show_default=True, type=int)
+@click.option("--log-dir", envvar="ROB6_LOG_DIR", default="./logs", show_default=True)
+@click.option("--dummy/--real-time", envvar="ROB6_DUMMY", default=False, show_default=True,
+              help="Instantaneous motion (the original's -d) or real time.")
+@click.option("--allow-shutdown/--no-allow-shutdown", envvar="ROB6_ALLOW_SHUTDOWN", default=True,
+              show_default=True, help="Let a client's Shutdown stop the system.")
+@click.option("--restart/--no-restart", default=True, show_default=True,
+              help="Restart a service that died (it is reported either way).")
+@click.option("--service", "services", multiple=True, help="Start only these services (repeat).")
+@click.option("--log-level", envvar="ROB6_LOG_LEVEL", default="WARNING", show_default=True)
+def run(robot, robot_id, port, router_port, log_dir, dummy, allow_shutdown, restart, services, log_level):
+    """Start everything on this machine: router, services and gateway."""
+    from .launcher import SERVICES, run as run_system
+    sys.exit(run_system(robot=robot, robot_id=robot_id, port=port, router_port=router_port,
+                        log_dir=log_dir, dummy=dummy, allow_shutdown=allow_shutdown, restart=restart,
+                        services=tuple(services) or SERVICES, log_level=log_level.upper()))
+
+
+@main.command()
+@bus_options
+def router(settings, log_level):
+    """Run a Zenoh router (every rob6 process connects to it); --listen defaults to tcp/127.0.0.1:7447."""
+    from .router import run as run_router
+    logs.configure("router", log_level)
+    run_router(settings, settings.listen or ("tcp/127.0.0.1:7447",))
+
+
+@main.command()
+@bus_options
+@click.argument("service")
+@click.option("--port", envvar="ROB6_PORT", default=5005, show_default=True, type=int)
+@click.option("--timeout", default=3.0, show_default=True, type=float)
+def health(settings, log_level, service, port, timeout):
+    """Exit 0 when SERVICE is up: its liveliness token is on the bus (gateway: it accepts TCP)."""
+    if service == "gateway":
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=timeout) as sock:
+                sock.settimeout(timeout)
+                # a busy server (another client connected) is up too
+                ok = sock.recv(64).startswith((b"welcome to rob6server", b"ERROR: server busy"))
+        except OSError:
+            ok = False
+    else:
+        from .bus import Bus
+        bus = Bus(settings, "health", mode="client")
+        try:
+            ok = not bus.wait_for([service], timeout)
+        finally:
+            bus.close()
+    click.echo(f"{service}: {'up' if ok else 'DOWN'}")
+    sys.exit(0 if ok else 1)
+
+
+if __name__ == "__main__":
+    main()
+

@@ -1,0 +1,302 @@
+"""Typed message schemas of the rob6 bus (JSON payloads, schema version 1).
+
+Every request and reply travels in an envelope that carries the schema version and
+the correlation id (``cid``) of the client command that caused it, so one client
+command can be followed through every inner request (and in the recordings).
+
+``OPS`` lists every request/reply operation: ``(service, operation) -> (request
+type, reply type)``. The bus validates both directions against these types, so a
+malformed payload is refused at the boundary with a structured error instead of
+surfacing as a traceback somewhere else.
+
+Units are the protocol's: millimetres, degrees, speeds in degrees per 12 ms cycle.
+A pose is the 3x4 matrix row-wise (12 numbers), a status pattern is three words in
+hand/elbow/arm order (explicit, ``toggle…`` or ``noToggle…``).
+"""
+
+from __future__ import annotations
+
+from typing import Generic, NamedTuple, TypeVar
+
+import msgspec
+
+SCHEMA_VERSION = 1
+
+T = TypeVar("T")
+
+Joints = list[float]  # 6 values, degrees
+Pose = list[float]  # 12 values, row-wise 3x4
+Pattern = list[str]  # 3 words, hand/elbow/arm
+
+
+class Struct(msgspec.Struct, kw_only=True, omit_defaults=True):
+    """Base of every message body."""
+
+
+# ---------------------------------------------------------------- envelopes
+class ErrorBody(Struct):
+    code: str  # unavailable | timeout | invalid | rejected | internal | unknown_op | schema
+    message: str
+
+
+class RequestEnvelope(msgspec.Struct, Generic[T]):
+    v: int
+    cid: str
+    body: T
+
+
+class ReplyEnvelope(msgspec.Struct, Generic[T], omit_defaults=True):
+    v: int
+    cid: str
+    ok: bool
+    body: T | None = None
+    error: ErrorBody | None = None
+
+
+# ---------------------------------------------------------------- common
+class Empty(Struct):
+    pass
+
+
+class Ack(Struct):
+    ok: bool = True
+    reason: str = ""  # why ok is False, for logs and recordings
+
+
+# ---------------------------------------------------------------- driver
+class PingReply(Struct):
+    robot_time: float  # driver (robot controller) clock, seconds
+    wall_time: float  # driver host epoch time, seconds
+
+
+class JointState(Struct):
+    """Published by the driver every controller cycle on ``rob6/<id>/driver/state``."""
+
+    t: float  # driver clock, seconds
+    cycle: int
+    q: Joints
+    qd: Joints  # degrees per second
+    moving: bool = False
+    mode: str = "idle"  # idle | trajectory | alter | stopping | fault
+
+
+class Trajectory(Struct):
+    """Positions sampled at the driver cycle (the planner's output)."""
+
+    dt: float  # sample period, seconds
+    q: list[Joints]
+
+
+class ExecuteRequest(Struct):
+    trajectory: Trajectory
+    wait: bool = True  # reply only after the robot arrived
+
+
+class ExecuteReply(Struct):
+    ok: bool
+    reason: str = ""
+    state: JointState | None = None  # at the end of the motion (or where it stopped)
+
+
+class LimitsUpdate(Struct):
+    """Limits the driver enforces on its own (defence in depth)."""
+
+    turn_min: Joints
+    turn_max: Joints
+    max_speed: Joints  # deg per 12 ms cycle
+    max_accel: Joints  # deg per cycle^2
+
+
+class AlterTarget(Struct):
+    q: Joints
+    synchronized: bool = False  # RTSpeedControl 0: axes arrive together
+
+
+class AlterMode(Struct):
+    enable: bool
+    timeout_s: float = 0.5  # stop if no target arrives for this long
+
+
+# ---------------------------------------------------------------- kinematics
+class FkRequest(Struct):
+    joints: list[Joints]
+
+
+class FkReply(Struct):
+    poses: list[Pose]
+    status: list[str]
+
+
+class ForwardCalcRequest(Struct):
+    numbers: list[float]  # 0..6 leading numbers as the client gave them
+    turn_min: Joints
+    turn_max: Joints
+
+
+class ForwardCalcReply(Struct):
+    pose: Pose | None = None
+    status: str = ""
+
+
+class BackwardCalcRequest(Struct):
+    pose: Pose
+    pattern: Pattern
+    current: Joints
+    turn_min: Joints
+    turn_max: Joints
+    max_change: Joints
+
+
+class JointsReply(Struct):
+    joints: Joints | None = None  # None: no admissible solution ("false")
+
+
+class IkBatchRequest(Struct):
+    poses: list[Pose]
+
+
+class IkBatchReply(Struct):
+    branches: list[str]  # the 8 status labels, in the order of each solution list
+    solutions: list[list[Joints | None]]  # per pose, per branch
+
+
+class SelectRequest(Struct):
+    """Configuration choice for a Cartesian move (the original's min-change rule)."""
+
+    pose: Pose
+    pattern: Pattern
+    current: Joints
+    turn_min: Joints
+    turn_max: Joints
+    max_change: Joints
+    weights: Joints
+    allowed: Pattern
+
+
+# ---------------------------------------------------------------- planner
+class ConfigChange(Struct):
+    """A Set*/Reset* protocol command with its parsed arguments."""
+
+    command: str
+    args: list[float] = []
+    words: list[str] = []
+
+
+class MotionConfig(Struct):
+    speed: Joints
+    accel: Joints
+    max_change: Joints
+    turn_max: Joints
+    turn_min: Joints
+    weights: Joints
+    allowed: Pattern
+    rt_speed_control: int
+
+
+class ConfigReply(Struct):
+    ok: bool
+    config: MotionConfig
+
+
+class MoveRequest(Struct):
+    """A motion command. ``kind`` is the protocol command name."""
+
+    kind: str
+    joints: Joints | None = None
+    pose: Pose | None = None
+    pattern: Pattern | None = None
+    dry_run: bool = False  # route test: check and plan only, from ``start``
+    start: Joints | None = None
+
+
+class MoveReply(Struct):
+    ok: bool
+    joints: Joints | None = None  # where the robot is (or would be, dry run) afterwards
+    reason: str = ""
+    state: JointState | None = None  # the driver's state when the move ended
+
+
+class ModeRequest(Struct):
+    command: str  # EnableAlter, DisableAlter, EnableLin, ...
+
+
+# ---------------------------------------------------------------- gripper
+class GripperCommand(Struct):
+    command: str  # HasGripper | GripperGoHome | GripperMove | GripperMoveToPosition
+    value: float | None = None
+
+
+class GripperReply(Struct):
+    ok: bool
+    lines: list[str] = []  # extra reply lines before true/false (e.g. "Start moving with ...")
+    reason: str = ""
+
+
+class GripperState(Struct):
+    position: float  # m
+    velocity: float  # m/s
+    current: float  # A
+    mode: str  # idle | moving | gripping | error
+    error: str = ""
+
+
+# ---------------------------------------------------------------- control topics
+class Verbosity(Struct):
+    level: int  # the protocol's 0..4
+
+
+class LogRecord(Struct):
+    t: float
+    service: str
+    instance: str
+    level: str
+    name: str
+    message: str
+
+
+class ClientExchange(Struct):
+    """One client line and the gateway's reply (``rob6/<id>/trace/gateway/session``)."""
+
+    session: int
+    peer: str
+    cid: str
+    t_in: float
+    t_out: float
+    line: str  # latin-1 text, terminator removed
+    reply: str | None  # None: no reply (empty line, SetAllowedStatus)
+
+
+class Op(NamedTuple):
+    request: type
+    reply: type
+    timeout: float = 0.2  # default per-call timeout, seconds
+
+
+#: Every request/reply operation on the bus.
+OPS: dict[tuple[str, str], Op] = {
+    ("driver", "ping"): Op(Empty, PingReply),
+    ("driver", "state"): Op(Empty, JointState),
+    ("driver", "execute"): Op(ExecuteRequest, ExecuteReply, timeout=600.0),
+    ("driver", "limits"): Op(LimitsUpdate, Ack),
+    ("driver", "alter_mode"): Op(AlterMode, Ack),
+    ("driver", "alter_target"): Op(AlterTarget, Ack),
+    ("driver", "stop"): Op(Empty, Ack, timeout=5.0),
+    ("kinematics", "fk"): Op(FkRequest, FkReply),
+    ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply),
+    ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply),
+    ("kinematics", "ik_batch"): Op(IkBatchRequest, IkBatchReply, timeout=2.0),
+    ("kinematics", "select"): Op(SelectRequest, JointsReply),
+    ("planner", "config"): Op(Empty, MotionConfig),
+    ("planner", "config_change"): Op(ConfigChange, ConfigReply),
+    ("planner", "move"): Op(MoveRequest, MoveReply, timeout=600.0),
+    ("planner", "mode"): Op(ModeRequest, Ack),
+    ("planner", "session_end"): Op(Empty, Ack, timeout=1.0),
+    ("gripper", "command"): Op(GripperCommand, GripperReply, timeout=30.0),
+    ("gripper", "state"): Op(Empty, GripperState),
+}
+
+#: Services whose operations have no side effects: a failed call may be retried on
+#: another replica.
+IDEMPOTENT_SERVICES = frozenset({"kinematics"})
+
+SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder")

@@ -1,0 +1,89 @@
+"""Where rob6 deliberately answers differently from the original's transcripts, and why.
+
+Each entry maps ``(file stem, record number)`` (1-based line of the .jsonl, the same on
+every robot type for the robot-independent scripts) or ``(robot, file stem, record
+number)`` to a function ``(robot, records) -> expected reply`` (``None``: not judged).
+docs/COMPATIBILITY.md describes the same differences for users.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "services" / "gateway"))
+from rob6_gateway.args import Args, ParseError  # noqa: E402
+
+#: kaw_fs uses the self-consistent +250 geometry: forward kinematics differ by design
+KAW_FS_FK_BY_DESIGN = {"ForwardCalc", "GetPositionHomRowWise"}
+
+
+def _name(robot: str) -> str:
+    return robot + "\n"
+
+
+def _reply(records, number):
+    return records[number - 1]["reply"]
+
+
+# Several commands in one write: the original executed only the first; rob6 answers all.
+# Over-long lines: the original cut every 1024 bytes into separate messages; rob6 keeps
+# the line whole (up to 64 KiB). Lines split across writes inside one line: see framing.
+DEVIATIONS = {
+    ("framing", 17): lambda robot, records: "ERROR:  \n" + _name(robot),  # " \r\nGetRobot\n": two lines
+    ("framing", 43): lambda robot, records: "ERROR: Foo\nERROR: Bar\n",
+    ("framing", 44): lambda robot, records: "ERROR: Foo\nERROR: Bar\n",
+    ("framing", 45): lambda robot, records: "ERROR: Foo\n",  # the empty second line gets no reply
+    ("framing", 50): lambda robot, records: "ERROR: Foo\n",
+    ("framing", 58): lambda robot, records: _name(robot) + "0.1.01\n",
+    ("framing", 59): lambda robot, records: _name(robot) + "0.1.01\n",
+    ("framing", 61): lambda robot, records: "PONG\n" * 3,
+    ("framing", 62): lambda robot, records: "0.1.01\nERROR: Foo\n",
+    ("framing", 68): lambda robot, records: "ERROR: " + "A" * 2000 + "\n",
+    ("framing", 69): lambda robot, records: _name(robot),  # trailing blanks are ignored arguments
+    ("framing", 72): lambda robot, records: "ERROR: " + "X" * 1024 + "GetRobot\n",
+    # ForwardCalc + 1000 blanks + " 5": one line; the 7th number is an ignored extra
+    ("framing", 74): lambda robot, records: _reply(records, 74).rsplit("ERROR:", 1)[0],
+    ("framing", 75): lambda robot, records: "ERROR: " + "Y" * 5000 + "\n",
+    # "ForwardCalc 10 0 0\n0 0 0\n": two lines, the partial FK of record 66, then an unknown command
+    ("framing", 115): lambda robot, records: (
+        None if robot == "kaw_fs" else _reply(records, 66) + "ERROR: 0 0 0\n"),
+}
+
+# the arguments of the commands the original waited for when they were missing
+_SIX = ("joints",)
+_POSE_STATUS = ("matrix", "status")
+_SIGNATURES = {
+    **{name: _SIX for name in ("MovePTPJoints", "SetJointsMaxSpeed", "SetJointsMaxAcceleration",
+                               "SetJointsMaxChange", "SetJointsMaxTurnMax", "SetJointsMaxTurnMin",
+                               "SetMinChangeWeights", "SetKukaRTSpeed", "RoutetestJoints")},
+    **{name: _POSE_STATUS for name in ("BackwardCalc", "GetJointsRowWise", "IsPossible",
+                                       "MovePTPHomRowWiseStatusTurn", "MoveMinChangeRowWiseStatus",
+                                       "RoutetestRowWiseStatus")},
+    **{name: ("index", "value") for name in ("SetSingleJointMaxSpeed", "SetSingleJointMaxAcceleration",
+                                             "SetSingleJointMaxChange", "SetSingleJointMaxTurnMax",
+                                             "SetSingleJointMaxTurnMin")},
+    "MovePTPJointsStatus": ("joints", "status"),
+    "MovePTPHomRowWise": ("matrix",),
+    "SetVerbosity": ("index",),
+    "SetRTSpeedControl": ("index",),
+}
+_READERS = {"joints": Args.joints, "matrix": Args.matrix, "status": Args.status,
+            "value": Args.value, "index": Args.index}
+
+
+def bare_command_error(send: str) -> str | None:
+    """rob6's immediate reply to a command whose arguments are missing, else None."""
+    words = send.split(None, 1)
+    if not words:
+        return None
+    name, rest = words[0], (words[1] if len(words) > 1 else "")
+    if name == "SetAllowedStatus":
+        return "ERROR: incorrect status\n" if not rest.strip() else None
+    args = Args(rest)
+    try:
+        for kind in _SIGNATURES.get(name, ()):
+            _READERS[kind](args)
+    except ParseError as exc:
+        return f"ERROR: {exc}\nfalse\n"
+    return None
