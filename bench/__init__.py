@@ -1,0 +1,1 @@
+"""rob6 benchmarks: ``make bench`` (python -m bench) prints one table per area."""

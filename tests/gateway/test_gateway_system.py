@@ -1,0 +1,154 @@
+"""The gateway against real processes: client styles, one client at a time, failures, Shutdown."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import time
+
+import pytest
+from system import Client, running
+
+GATEWAY_AND_DRIVER = ("driver", "gateway")
+
+
+@pytest.fixture(scope="module")
+def system():
+    with running("kr16", services=GATEWAY_AND_DRIVER) as system:
+        yield system
+
+
+def test_separate_processes(system):
+    pids = system.pids()
+    assert {"router", "driver", "gateway"} <= set(pids)
+    assert len(set(pids.values())) == len(pids)
+
+
+@pytest.mark.parametrize("terminator", [b"\n", b"\r\n"])
+def test_terminated_commands(system, terminator):
+    with system.client() as client:
+        client.send(b"GetRobot" + terminator)
+        assert client.read_lines(1) == "kr16\n"
+
+
+def test_unterminated_commands_one_per_write(system):
+    with system.client() as client:
+        for command, reply in ((b"GetRobot", "kr16\n"), (b"CM_PING", "PONG\n"), (b"GetVersion", "0.1.01\n")):
+            client.send(command)
+            assert client.read_lines(1) == reply
+
+
+def test_client_that_reads_one_recv_per_reply(system):
+    """A multi-line reply arrives in one segment, so one recv() gets all of it."""
+    with system.client() as client:
+        client.send(b"SetVerbosity x\n")
+        client.sock.settimeout(2)
+        assert client.sock.recv(4096) == b"ERROR: incorrect value\nfalse\n"
+
+
+def test_several_commands_in_one_write_answered_in_order(system):
+    with system.client() as client:
+        client.send(b"GetRobot\nCM_PING\r\nGetVersion\nFoo\n")
+        assert client.read_lines(4) == "kr16\nPONG\n0.1.01\nERROR: Foo\n"
+
+
+def test_command_split_across_writes_is_reassembled(system):
+    with system.client() as client:
+        client.send(b"GetRo")
+        client.send(b"bot\n")  # well within the pause: one line
+        assert client.read_lines(1) == "kr16\n"
+
+
+def test_missing_arguments_are_answered_at_once(system):
+    with system.client() as client:
+        start = time.monotonic()
+        assert client.ask("MovePTPJoints", 2) == "ERROR: incorrect joints\nfalse\n"
+        assert client.ask("SetVerbosity", 2) == "ERROR: incorrect value\nfalse\n"
+        assert client.ask("SetAllowedStatus", 1) == "ERROR: incorrect status\n"
+        assert time.monotonic() - start < 1.0
+        assert client.ask("GetRobot") == "kr16\n"  # the next command is a command, not arguments
+
+
+def test_unknown_and_malformed_commands_keep_the_connection(system):
+    with system.client() as client:
+        assert client.ask("getrobot") == "ERROR: getrobot\n"
+        assert client.ask("MovePTPJoints 1 2 3", 2) == "ERROR: incorrect joints\nfalse\n"
+        assert client.ask("SetVerbosity nan", 2) == "ERROR: incorrect value\nfalse\n"
+        client.send(b"\xff\xfe\x00junk\n")
+        assert client.read_lines(1) == "ERROR: \xff\xfe\n"
+        client.send(b"X" * (1 << 20) + b"\n")  # 1 MiB line
+        assert client.read_lines(1).startswith("ERROR: line too long (1048577 bytes")
+        assert client.ask("CM_PING") == "PONG\n"
+
+
+def test_second_client_is_refused_without_disturbing_the_first(system):
+    with system.client() as first:
+        with Client(system.port, handshake=False) as second:
+            assert second.greeting == "ERROR: server busy, another client is connected\n"
+            assert second.closed()
+        assert first.ask("CM_PING") == "PONG\n"
+        assert first.ask("Quit") == "bye!\n"
+    with system.client() as third:  # accepted at once after Quit
+        assert third.ask("GetRobot") == "kr16\n"
+
+
+def test_next_client_accepted_right_after_a_disconnect(system):
+    client = system.client()
+    client.close()
+    deadline = time.monotonic() + 1.0
+    while True:
+        with Client(system.port, handshake=False) as again:
+            if again.greeting.startswith("welcome") or time.monotonic() > deadline:
+                assert again.greeting.startswith("welcome")
+                break
+        time.sleep(0.01)
+
+
+def test_ping_robot_measures_the_driver(system):
+    with system.client() as client:
+        numbers = client.ask("PingRobot 5 1").split()
+        assert len(numbers) == 5
+        assert 0 < float(numbers[0]) < 0.2  # seconds
+        assert client.ask("PingRobot 0 0") == "false\n"
+
+
+def test_a_killed_service_gives_an_error_reply_not_a_hang():
+    with running("kr16", services=GATEWAY_AND_DRIVER) as system:
+        with system.client() as client:
+            assert client.ask("PingRobot 1 0").count(" ") == 4
+            os.kill(system.pids()["driver"], signal.SIGKILL)
+            time.sleep(0.3)
+            start = time.monotonic()
+            assert client.ask("PingRobot 1 0", timeout=3) == "ERROR: driver unavailable\n"
+            assert client.ask("GetPositionJoints", timeout=3).startswith("ERROR: driver unavailable")
+            assert time.monotonic() - start < 2.5
+            assert client.ask("CM_PING") == "PONG\n"  # still connected
+        assert any("driver exited with code" in line for line in system.output)
+
+
+def test_shutdown_stops_the_whole_system():
+    with running("kr16", services=GATEWAY_AND_DRIVER) as system:
+        pids = system.pids()
+        with system.client() as client:
+            assert client.ask("Shutdown", 2) == "bye!\nshutting down ...\n"
+            assert client.closed()
+        system.process.wait(5)
+        assert system.process.returncode == 0
+        for pid in pids.values():
+            with pytest.raises(ProcessLookupError):
+                os.kill(pid, 0)
+        with pytest.raises(ConnectionRefusedError):
+            socket.create_connection(("127.0.0.1", system.port), timeout=1)
+
+
+def test_ctrl_c_stops_everything_within_two_seconds():
+    with running("kr16", services=GATEWAY_AND_DRIVER) as system:
+        pids = system.pids()
+        start = time.monotonic()
+        system.process.send_signal(signal.SIGINT)
+        system.process.wait(5)
+        assert time.monotonic() - start < 2.0
+        for pid in pids.values():
+            with pytest.raises(ProcessLookupError):
+                os.kill(pid, 0)
