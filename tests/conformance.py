@@ -4,10 +4,11 @@ Rules (docs/COMPATIBILITY.md explains each deliberate difference):
 * text compares exactly, numbers within a tolerance (joints 1e-5 deg, J6 5e-3 deg,
   matrices 2e-6), ``GetTimestamp`` and ``PingRobot`` by shape only;
 * a record the original left without reply because it waited for missing
-  arguments (``no_reply_within_ms`` on an argument-less command) is answered by rob6
-  at once with the original's parse error; the record after it (the message the
-  original swallowed as those arguments) is executed normally, so its reply is read
-  but not judged;
+  arguments (``no_reply_within_ms`` on an argument-less command) must be answered
+  by rob6 at once with the original's parse error. The original then read the next
+  message as those arguments; the runner reproduces that by sending the command
+  and that message as one line, judged against the transcript's reply, so the
+  state of both servers stays the same for the rest of the file;
 * records listed in ``DEVIATIONS`` expect rob6's documented answer instead of the
   original's (several commands in one write, over-long lines, crashes, kaw_fs...).
 """
@@ -87,7 +88,7 @@ def replay(system: System, robot: str, path: Path) -> Result:
     result = Result()
     records = load(path)
     client: Client | None = None
-    skip_next = False
+    waiting = ""  # an argument-less command the original completed with the next message
     name = path.stem
     for index, record in enumerate(records):
         where = f"{robot}/{name}.jsonl:{index + 1}"
@@ -102,17 +103,14 @@ def replay(system: System, robot: str, path: Path) -> Result:
             continue
         send, expected = record["send"], record["reply"]
         deviation = DEVIATIONS.get((name, index + 1)) or DEVIATIONS.get((robot, name, index + 1))
+        if waiting:  # the original took this message as the arguments of the waiting command
+            send, waiting = waiting.rstrip("\r\n") + " " + send.rstrip("\r\n") + "\n", ""
         client.send(send.encode("latin-1"))
-        if skip_next:  # the message the original swallowed as missing arguments
-            skip_next = False
-            client.read_quiet(QUIET_S)
-            result.skipped += 1
-            continue
         bare = record.get("no_reply_within_ms") is not None and bare_command_error(send)
         if bare:
-            expected, skip_next = bare, True
+            expected, waiting = bare, send
         if deviation is not None:
-            expected = deviation(robot) if callable(deviation) else deviation
+            expected = deviation(robot, records)
             if expected is None:  # not judged (the reason is in DEVIATIONS)
                 client.read_quiet(QUIET_S)
                 result.skipped += 1
