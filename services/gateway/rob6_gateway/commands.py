@@ -31,9 +31,10 @@ from rob6.messages import (
     Verbosity,
 )
 from rob6.robots import RobotModel
+from rob6.state import JointStateMirror
 
 from .args import Args, ParseError
-from .state import Mirror, Session
+from .state import ConfigMirror, Session
 
 log = logging.getLogger("rob6.gateway")
 
@@ -88,7 +89,8 @@ class Gateway:
         self.bus = bus
         self.robot = robot
         self.options = options
-        self.mirror = Mirror(bus, robot)
+        self.joints = JointStateMirror(bus)
+        self.limits = ConfigMirror(bus, robot)
         self.verbosity = 2
         self.alter = False  # EnableAlter succeeded (the planner owns the mode; this is its echo)
         self.shutdown_requested = asyncio.Event()
@@ -116,7 +118,7 @@ class Gateway:
         """Where the robot is (or the virtual robot, while route testing)."""
         if session.routetest is not None:
             return session.routetest
-        state = self.mirror.state()
+        state = self.joints.get()
         if state is None:
             raise BusError("unavailable", "driver unavailable")
         return state.q
@@ -271,7 +273,7 @@ async def get_status(gw, session, args):
 def _config_getter(field: str):
     async def handler(gw, session, args):
         config = await gw.call(session, "planner", "config", Empty())
-        gw.mirror.config = config
+        gw.limits.config = config
         return fmt(getattr(config, field)) + "\n"
     return handler
 
@@ -285,7 +287,7 @@ for _name, _field in (("GetJointsMaxSpeed", "speed"), ("GetJointsMaxAcceleration
 async def _change(gw, session, name: str, values=(), words=()) -> bool:
     reply = await gw.call(session, "planner", "config_change",
                           ConfigChange(command=name, args=list(values), words=list(words)))
-    gw.mirror.config = reply.config
+    gw.limits.config = reply.config
     return reply.ok
 
 
@@ -374,7 +376,7 @@ async def forward_calc(gw, session, args):
     numbers = args.leading_doubles(6)
     if not numbers:
         return FALSE
-    config = gw.mirror.config
+    config = gw.limits.config
     reply = await gw.call(session, "kinematics", "forward_calc", ForwardCalcRequest(
         numbers=numbers, turn_min=config.turn_min, turn_max=config.turn_max))
     if reply.pose is None:
@@ -385,7 +387,7 @@ async def forward_calc(gw, session, args):
 async def _backward(gw, session, args) -> list[float] | None:
     pose = args.matrix()
     pattern = args.status()
-    config = gw.mirror.config
+    config = gw.limits.config
     reply = await gw.call(session, "kinematics", "backward_calc", BackwardCalcRequest(
         pose=pose, pattern=pattern, current=gw.current(session), turn_min=config.turn_min,
         turn_max=config.turn_max, max_change=config.max_change))
@@ -409,7 +411,7 @@ async def _move(gw, session, kind: str, **fields) -> str:
         return FALSE
     reply = await gw.call(session, "planner", "move", MoveRequest(kind=kind, **fields))
     if reply.state is not None:
-        gw.mirror.set_state(reply.state)
+        gw.joints.update(reply.state)
     if not reply.ok and reply.reason:
         log.warning("%s refused: %s", kind, reply.reason)
     return boolean(reply.ok)
