@@ -1,1 +1,11 @@
-"""rob6 gripper service."""
+"""rob6 gripper service.
+
+Library modules (the service wraps them):
+
+* ``backend``     -- the interface (:class:`GripperBackend`, :class:`GripperStatus`,
+                     :class:`Result`) and clocks
+* ``sim``         -- physical simulation (:class:`GripperModel`, backend :class:`SimGripper`)
+* ``smp``         -- Schunk Motion Protocol frames/CRC/decoder and the serial backend
+                     :class:`SchunkGripper`
+* ``fake_device`` -- a fake SMP module on a pseudo-terminal, for tests
+"""

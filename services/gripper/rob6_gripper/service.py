@@ -1,0 +1,64 @@
+"""The gripper service: the Adept's serial gripper (or its simulation) on the bus."""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+from rob6.bus import Bus
+from rob6.messages import Empty, GripperCommand, GripperReply, GripperState
+
+from .backend import GripperBackend, Result
+
+log = logging.getLogger("rob6.gripper")
+
+STATE_PERIOD_S = 0.02  # 50 Hz: fast enough to plot a 0.3 s closing motion
+
+
+class GripperService:
+    def __init__(self, bus: Bus, backend: GripperBackend, timeout: float = 10.0):
+        self.bus = bus
+        self.backend = backend
+        self.timeout = timeout
+        self._stop = threading.Event()
+        self._publisher = threading.Thread(target=self._publish_state, name="gripper-state", daemon=True)
+
+    def command(self, req: GripperCommand, _ctx) -> GripperReply:
+        name, value = req.command, req.value
+        if name == "HasGripper":
+            return GripperReply(ok=self.backend.has_gripper())
+        if name == "GripperGoHome":
+            return self._reply(self.backend.go_home(self.timeout))
+        if name == "GripperMove":
+            # the original announces the move before it waits for its end
+            return self._reply(self.backend.move_current(value, self.timeout),
+                               [f"Start moving with amperage {value:.3f}"])
+        if name == "GripperMoveToPosition":
+            return self._reply(self.backend.move_to_position(value, self.timeout))
+        return GripperReply(ok=False, reason=f"unknown gripper command {name!r}")
+
+    @staticmethod
+    def _reply(result: Result, lines: list[str] | None = None) -> GripperReply:
+        if not result.ok:
+            log.warning("gripper: %s", result.error)
+        return GripperReply(ok=result.ok, lines=lines or [], reason=result.error)
+
+    def state(self, _req: Empty, _ctx) -> GripperState:
+        return GripperState(**self.backend.state().as_dict())
+
+    def _publish_state(self) -> None:
+        while not self._stop.wait(STATE_PERIOD_S):
+            try:
+                self.bus.publish("gripper/state", GripperState(**self.backend.state().as_dict()))
+            except Exception:
+                log.exception("could not read the gripper state")
+                self._stop.wait(1.0)
+
+    def start(self) -> None:
+        self.bus.serve({"command": self.command, "state": self.state}, workers=2)
+        self._publisher.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.backend.stop()
+        self.backend.close()
