@@ -9,7 +9,9 @@ from system import CONFORMANCE, running
 ROBOTS = ("kr16", "ad850", "kaw_fs", "kr3rt", "kr16rt", "kr3")
 
 #: transcript files rob6 replays (the rest is covered by the issue that implements it)
-FILES = ("framing", "framing_wait", "management", "session", "misc")
+FILES = ("framing", "framing_wait", "management", "session", "misc", "adept_grippergohome",
+         "adept_grippermove", "adept_grippermove_noarg", "adept_grippermovetopos", "adept_directcmd",
+         "adept_directcmd_noarg", "debug_grippergohome")
 
 
 def cases():

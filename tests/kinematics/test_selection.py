@@ -1,16 +1,20 @@
 """Configuration selection of Cartesian moves, replayed against the original's transcripts.
 
-Offline replay of ``/work/shared/conformance/<robot>/motion_{minchange,ptp,routetest}.jsonl``:
-the position, routetest mode, min-change weights, allowed status and max change are tracked
-from the transcript; every Cartesian move (``MoveMinChangeRowWiseStatus``,
-``MovePTPHomRowWise``, ``MovePTPHomRowWiseStatusTurn``, ``RoutetestRowWiseStatus``) is
-recomputed with ``rob6_kinematics.selection`` and compared with the original's ``true``/``false``
-and the following ``GetPositionJoints`` (J1–J5 within 1e-5°, J6 within 5e-3°); every
-``MovePTPJoints``/``RoutetestJoints`` is checked with ``joint_move_allowed``.
+Offline replay of ``/work/shared/conformance/<robot>/{motion_minchange,motion_ptp,
+motion_routetest,session}.jsonl``: the position, routetest mode, min-change weights, allowed
+status, turn limits and max change are tracked from the transcript; every Cartesian move
+(``MoveMinChangeRowWiseStatus``, ``MovePTPHomRowWise``, ``MovePTPHomRowWiseStatusTurn``,
+``RoutetestRowWiseStatus``) is recomputed with ``rob6_kinematics.selection`` on the closed-form
+IK (``opw.ik``) and compared with the original's ``true``/``false`` and the following
+``GetPositionJoints`` (J1–J5 within 1e-5°, J6 within 5e-3°); every ``MovePTPJoints``,
+``RoutetestJoints`` and ``MovePTPJointsStatus`` is checked with ``joint_move_allowed``.
+``ik.jsonl`` (BackwardCalc/GetJointsRowWise/IsPossible) is replayed with the same rule without
+the ±360° representatives.
 
-kr16, ad850, kr3rt: every move matches. kaw_fs: rob6 deliberately differs where the original's
-a2 = −250 status formula disagreed with its a2 = +250 IK (robots.md); those records are listed
-in ``KAW_FS_EXPECTED_DIFFERENCES`` and asserted to be exactly the differing ones.
+kr16, ad850, kr3rt: everything matches (per robot 112 Cartesian moves, 191 joint moves,
+83 BackwardCalc-type answers; kaw_fs's 83 too). kaw_fs: rob6 deliberately differs where the original's
+a2 = −250 status formula disagreed with its a2 = +250 IK (robots.md); those 19 records are
+listed in ``KAW_FS_EXPECTED_DIFFERENCES`` and asserted to be exactly the differing ones.
 """
 
 from __future__ import annotations
@@ -32,11 +36,12 @@ from rob6_kinematics.selection import (
     joint_move_allowed,
     normalize_pattern,
     pattern_matches,
+    select,
     select_from_solutions,
 )
 
 CONFORMANCE = Path("/work/shared/conformance")
-FILES = ("motion_minchange", "motion_ptp", "motion_routetest")
+FILES = ("motion_minchange", "motion_ptp", "motion_routetest", "session")
 CART_MOVES = (
     "MoveMinChangeRowWiseStatus",
     "MovePTPHomRowWise",
@@ -44,6 +49,7 @@ CART_MOVES = (
     "RoutetestRowWiseStatus",
 )
 JOINT_MOVES = ("MovePTPJoints", "RoutetestJoints")
+IK_COMMANDS = ("BackwardCalc", "GetJointsRowWise", "IsPossible")
 DEFAULT_WEIGHTS = [4.0, 1.0, 1.0, 1.0, 1.0, 1.0]
 
 # kaw_fs records (file, record index among the "send" records) where rob6 differs on purpose:
@@ -65,7 +71,9 @@ KAW_FS_EXPECTED_DIFFERENCES = {
     ("motion_ptp", 205), ("motion_ptp", 208),
     # ... and the other way round with allowed "noflip down righty"
     ("motion_ptp", 210), ("motion_ptp", 213),
-    # allowed "flip …" from where 210 left the original (rob6 did not move there): J4/J6 differ
+    # allowed "flip …" at the pose the robot is at (noflip -> flip): the flip J4 lies 180° either
+    # side of the current J4; the replay's current J4 is the printed (rounded) one, so rounding
+    # picks -299.66 where the original (exact current, tie -> c + 180) kept 60.34
     ("motion_ptp", 215),
     # MovePTPHomRowWiseStatusTurn noToggle×3 from the start: as the noToggleArm cases
     ("motion_ptp", 256),
@@ -149,18 +157,36 @@ def replay(robot: str, name: str):
             st["mc"] = _floats(args, 6)
         elif cmd == "ResetJointsMaxChange":
             st["mc"] = list(model.default_max_change)
+        elif cmd in ("SetJointsMaxTurnMax", "SetJointsMaxTurnMin") and reply == "true":
+            st["tmax" if cmd.endswith("Max") else "tmin"] = _floats(args, 6)
+        elif cmd == "ResetJointsMaxTurn":
+            st["tmin"], st["tmax"] = list(model.turn_min), list(model.turn_max)
+        elif cmd == "Quit":
+            st["virt"] = None  # routetest ends with the session
         elif cmd == "EnableRoutetest" and reply == "true":
             st["virt"] = st["pos"][:]
         elif cmd == "DisableRoutetest":
             st["virt"] = None
-        elif cmd == "GetPositionJoints":
-            st[key] = [float(x) for x in reply.split()]
+        elif cmd == "GetPositionJoints" and _floats(reply.split(), 6) is not None:
+            st[key] = _floats(reply.split(), 6)
         elif cmd in JOINT_MOVES:
             q = _floats(args, 6)
             if q is not None and (cmd == "RoutetestJoints") == (key == "virt"):
                 ok = joint_move_allowed(
                     q, st[key], st["tmin"], st["tmax"], st["mc"], st["allowed"], status
                 )
+                if ok == (reply == "true"):
+                    matched["joints"] += 1
+                else:
+                    mismatches.append((i, cmd, args, reply == "true", None, ok))
+                if ok:
+                    st[key] = q
+        elif cmd == "MovePTPJointsStatus" and not reply.startswith("ERROR"):
+            q, pat = _floats(args, 6), normalize_pattern(args[6:])
+            if q is not None and pat is not None and key == "pos":
+                ok = joint_move_allowed(
+                    q, st[key], st["tmin"], st["tmax"], st["mc"], st["allowed"], status
+                ) and pattern_matches(pat, status(q), status(st[key]))
                 if ok == (reply == "true"):
                     matched["joints"] += 1
                 else:
@@ -206,8 +232,9 @@ def replay(robot: str, name: str):
 # Moves compared per transcript (the same scripts on every robot type).
 EXPECTED_COUNTS = {
     "motion_minchange": {"cartesian": 77, "joints": 80},
-    "motion_ptp": {"cartesian": 25, "joints": 82},
+    "motion_ptp": {"cartesian": 25, "joints": 93},
     "motion_routetest": {"cartesian": 10, "joints": 15},
+    "session": {"cartesian": 0, "joints": 3},
 }
 
 
@@ -243,7 +270,8 @@ def test_weighted_max_not_sum_and_tie_goes_to_earlier_branch():
         noflip_down_righty=[92.000011, -101.255190, -15.130995, 29.346113, 45.773234, 130.504044],
     )
     lim = get_robot("kr16")
-    args = (cur, lim.turn_min, lim.turn_max, lim.default_max_change, DEFAULT_WEIGHTS, TOGGLE_ALL, status)
+    args = (cur, lim.turn_min, lim.turn_max, lim.default_max_change, DEFAULT_WEIGHTS, TOGGLE_ALL)
+    args += (status,)
     got = select_from_solutions(sols, ("noflip", "toggleElbow", "righty"), *args)
     assert got == sols[("noflip", "up", "righty")]
 
@@ -251,7 +279,8 @@ def test_weighted_max_not_sum_and_tie_goes_to_earlier_branch():
 def test_wrist_joints_take_nearest_turn():
     lim = get_robot("kr16")
     cur = [-84.0, -75.0, -41.0, -60.0, 27.0, 38.0]
-    sols = _sols(flip_down_lefty=[-87.999989, -77.999998, -38.000008, 116.000047, -23.000014, -146.000053])
+    q = [-87.999989, -77.999998, -38.000008, 116.000047, -23.000014, -146.000053]
+    sols = _sols(flip_down_lefty=q)
     got = select_from_solutions(
         sols, ("flip", "down", "lefty"), cur, lim.turn_min, lim.turn_max,
         lim.default_max_change, DEFAULT_WEIGHTS, TOGGLE_ALL, lim.status,
@@ -291,5 +320,88 @@ def test_joint_move_allowed_limits_and_status():
     assert not joint_move_allowed([10.5, 0, 0, 0, 0, 0], z, *args, TOGGLE_ALL, m.status)
     assert not joint_move_allowed([0, 20, 0, 0, 0, 0], [0, 15, 0, 0, 0, 0], *args, None, m.status)
     # allowed noToggle…: the target must keep the current status
-    assert not joint_move_allowed([0, 0, 0, 0, -5, 0], z, *args, ("noToggleHand",) + TOGGLE_ALL[1:], m.status)
-    assert joint_move_allowed([0, 0, 0, 0, 5, 0], z, *args, ("noToggleHand",) + TOGGLE_ALL[1:], m.status)
+    keep_hand = ("noToggleHand",) + TOGGLE_ALL[1:]
+    assert not joint_move_allowed([0, 0, 0, 0, -5, 0], z, *args, keep_hand, m.status)
+    assert joint_move_allowed([0, 0, 0, 0, 5, 0], z, *args, keep_hand, m.status)
+
+
+# ---------------------------------------------------------------- BackwardCalc
+def replay_backward_calc(robot: str):
+    """ik.jsonl: BackwardCalc/GetJointsRowWise/IsPossible (explicit and toggle words) by the
+    same rule without the ±360° variants and without the allowed status."""
+    model = get_robot(robot)
+    pos, mc = [0.0] * 6, list(model.default_max_change)
+    tmin, tmax = list(model.turn_min), list(model.turn_max)
+    matched, mismatches = 0, []
+    recs = _records(robot, "ik")
+    i = 0
+    while i < len(recs):
+        rec = recs[i]
+        toks, reply = rec["send"].split(), rec["reply"].strip()
+        if "no_reply_within_ms" in rec:
+            i += 2
+            continue
+        cmd, args = (toks[0], toks[1:]) if toks else ("", [])
+        if cmd == "MovePTPJoints" and reply == "true":
+            pos = _floats(args, 6)
+        elif cmd == "SetJointsMaxChange" and reply == "true":
+            mc = _floats(args, 6)
+        elif cmd == "ResetJointsMaxChange":
+            mc = list(model.default_max_change)
+        elif cmd == "SetJointsMaxTurnMax" and reply == "true":
+            tmax = _floats(args, 6)
+        elif cmd == "ResetJointsMaxTurn":
+            tmin, tmax = list(model.turn_min), list(model.turn_max)
+        elif cmd in IK_COMMANDS and not reply.startswith("ERROR"):
+            pose, pattern = _floats(args, 12), normalize_pattern(args[12:])
+            got = select_from_solutions(
+                _branches(robot, tuple(pose)), pattern, pos, tmin, tmax, mc,
+                DEFAULT_WEIGHTS, None, model.status, shift_360=False,
+            )  # fmt: skip
+            if cmd == "IsPossible":
+                good = (got is not None) == (reply == "true")
+            else:
+                good = (got is None) == (reply == "false")
+                if good and got is not None:
+                    err = [abs(a - float(b)) for a, b in zip(got, reply.split())]
+                    good = max(err[:5]) <= 1e-5 and err[5] <= 5e-3
+            if good:
+                matched += 1
+            else:
+                mismatches.append((i, cmd, args[12:], reply, got))
+        i += 1
+    return matched, mismatches
+
+
+@pytest.mark.parametrize("robot", ["kr16", "ad850", "kr3rt", "kaw_fs"])
+def test_backward_calc_uses_the_same_rule_without_turns(robot):
+    matched, mismatches = replay_backward_calc(robot)
+    assert mismatches == []
+    assert matched == 83
+
+
+def test_select_wrapper_with_the_kinematics_service_class():
+    """``select`` = IK + rule; the REFERENCE 6.6 examples on kr16 (start noflip down lefty)."""
+    from rob6_kinematics.calc import Kinematics
+
+    m = get_robot("kr16")
+    kin = Kinematics(m)
+    target = [-0.409282, 0.838520, 0.359683, -51.974354, 0.909251, 0.342075, 0.237164,
+              101.572356, 0.075829, 0.424109, -0.902431, 2100.259435]  # fmt: skip
+    start = [-84.0, -75.0, -41.0, -60.0, 27.0, 38.0]
+    lim = (m.turn_min, m.turn_max, m.default_max_change)
+
+    def run(pattern, weights=DEFAULT_WEIGHTS, allowed=TOGGLE_ALL):
+        q = select(kin, target, pattern, start, *lim, weights, allowed)
+        return None if q is None else m.status(q)
+
+    assert run(TOGGLE_ALL) == ("noflip", "down", "lefty")
+    assert run(("noflip", "toggleElbow", "righty")) == ("noflip", "up", "righty")
+    assert run(("toggleHand", "up", "righty")) == ("flip", "up", "righty")
+    assert run(TOGGLE_ALL, [100, 1, 1, 1, 1, 1]) == ("flip", "up", "lefty")
+    assert run(TOGGLE_ALL, [1, 100, 100, 1, 1, 1]) == ("flip", "down", "lefty")
+    assert run(TOGGLE_ALL, [1, 1, 1, 100, 100, 100]) == ("noflip", "down", "lefty")
+    assert run(TOGGLE_ALL, [1, 1, 1, 1, 1, 1]) == ("noflip", "down", "lefty")
+    assert run(PTP_HOM_PATTERN, allowed=("noflip", "up", "righty")) is None
+    q = select(kin, target, ("flip", "down", "lefty"), start, *lim, DEFAULT_WEIGHTS)
+    assert q[5] == pytest.approx(213.999947, abs=5e-3)

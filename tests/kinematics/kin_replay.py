@@ -1,0 +1,199 @@
+"""Offline replay of the original's kinematics transcripts against rob6_kinematics.
+
+Only the kinematics commands are judged (ForwardCalc, BackwardCalc,
+GetJointsRowWise, IsPossible, GetPositionHomRowWise, GetStatus); the commands that
+change the state they depend on (MovePTPJoints, Set/Reset of turn limits and max
+change) are tracked.  Arguments are parsed simply (C-like leading numbers, status
+words); the real protocol parser is the gateway's.  A record with
+``no_reply_within_ms`` and the record after it are skipped (conformance/README.md).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rob6_kinematics.calc import Kinematics, parse_pattern
+
+CONFORMANCE = Path("/work/shared/conformance")
+_NUM = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+
+JOINT_TOL = 1e-5
+J6_TOL = 5e-3
+MATRIX_TOL = 2e-6
+
+JUDGED = {
+    "ForwardCalc",
+    "BackwardCalc",
+    "GetJointsRowWise",
+    "IsPossible",
+    "GetPositionHomRowWise",
+    "GetStatus",
+}
+
+
+def leading_numbers(text: str, limit: int) -> tuple[list[float], str, bool]:
+    """Parse up to ``limit`` whitespace-separated numbers like ``istream >> double``.
+
+    Returns (numbers, rest_of_text, failed): ``failed`` is True when a token that
+    is present does not start with a number (or only partially is one).
+    """
+    out: list[float] = []
+    pos = 0
+    while len(out) < limit:
+        m = re.compile(r"\s*").match(text, pos)
+        pos = m.end()
+        if pos >= len(text):
+            return out, "", False
+        m = _NUM.match(text, pos)
+        if not m:
+            return out, text[pos:], True
+        v = float(m.group(0))
+        if not np.isfinite(v):
+            return out, text[pos:], True
+        out.append(v)
+        pos = m.end()
+        if pos < len(text) and not text[pos].isspace():
+            return out, text[pos:], True
+    return out, text[pos:], False
+
+
+def fmt(values) -> str:
+    return " ".join("%f" % v for v in values)
+
+
+@dataclass
+class State:
+    kin: Kinematics
+    q: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    turn_min: np.ndarray | None = None
+    turn_max: np.ndarray | None = None
+    max_change: np.ndarray | None = None
+
+    def __post_init__(self):
+        self.reset_turn()
+        self.reset_change()
+
+    def reset_turn(self):
+        self.turn_min = self.kin.turn_min.copy()
+        self.turn_max = self.kin.turn_max.copy()
+
+    def reset_change(self):
+        self.max_change = self.kin.max_change.copy()
+
+
+def answer(st: State, line: str) -> str | None:
+    """rob6's reply text for a judged command (None when not judged)."""
+    k = st.kin
+    cmd, _, args = line.strip("\r\n").partition(" ")
+    cmd = cmd.strip()
+    if cmd == "ForwardCalc":
+        nums, _, _ = leading_numbers(args, 6)
+        r = k.forward_calc(nums, st.turn_min, st.turn_max)
+        if r is None:
+            return "false\n"
+        return fmt(r[0]) + "\n" + r[1] + "\n"
+    if cmd in ("BackwardCalc", "GetJointsRowWise", "IsPossible"):
+        nums, rest, failed = leading_numbers(args, 12)
+        if len(nums) < 12:
+            return "ERROR: incorrect matrix\nfalse\n"
+        try:
+            pattern = parse_pattern(rest.split())
+        except ValueError:
+            return "ERROR: incorrect status\nfalse\n"
+        q = k.backward_calc(nums, pattern, st.q, st.turn_min, st.turn_max, st.max_change)
+        if cmd == "IsPossible":
+            return "true\n" if q is not None else "false\n"
+        return "false\n" if q is None else fmt(q) + "\n"
+    if cmd == "GetPositionHomRowWise":
+        return fmt(k.fk(st.q)[0].reshape(12)) + "\n"
+    if cmd == "GetStatus":
+        return k.status(st.q) + "\n"
+    return None
+
+
+def track(st: State, line: str, reply: str) -> None:
+    """Apply the state changes of a non-judged command that the original accepted."""
+    cmd, _, args = line.strip("\r\n").partition(" ")
+    ok = reply.strip() == "true"
+    if not ok:
+        return
+    nums, _, _ = leading_numbers(args, 6)
+    if cmd == "MovePTPJoints" and len(nums) == 6:
+        st.q = np.array(nums)
+    elif cmd == "SetJointsMaxChange" and len(nums) == 6:
+        st.max_change = np.array(nums)
+    elif cmd == "ResetJointsMaxChange":
+        st.reset_change()
+    elif cmd == "SetJointsMaxTurnMax" and len(nums) == 6:
+        st.turn_max = np.array(nums)
+    elif cmd == "SetJointsMaxTurnMin" and len(nums) == 6:
+        st.turn_min = np.array(nums)
+    elif cmd == "ResetJointsMaxTurn":
+        st.reset_turn()
+
+
+def same(expected: str, got: str) -> bool:
+    """Compare two reply texts: numbers with the tolerances above, words exactly."""
+    el, gl = expected.rstrip("\n").split("\n"), got.rstrip("\n").split("\n")
+    if len(el) != len(gl):
+        return False
+    for e, g in zip(el, gl):
+        et, gt = e.split(), g.split()
+        if len(et) != len(gt):
+            return False
+        try:
+            ev = np.array([float(x) for x in et])
+            gv = np.array([float(x) for x in gt])
+        except ValueError:
+            if e != g:
+                return False
+            continue
+        if len(ev) == 6:
+            tol = np.array([JOINT_TOL] * 5 + [J6_TOL])
+            d = np.abs(ev - gv)
+            d = np.minimum(d, np.abs(360.0 - d))
+        else:
+            tol = MATRIX_TOL
+            d = np.abs(ev - gv)
+        if not np.all(d <= tol):
+            return False
+    return True
+
+
+@dataclass
+class Result:
+    path: str
+    lineno: int
+    send: str
+    expected: str
+    got: str
+    ok: bool
+
+
+def replay(kin: Kinematics, path: Path, judge=JUDGED) -> list[Result]:
+    st = State(kin)
+    records = [json.loads(l) for l in path.read_text().splitlines() if l.strip()]
+    out: list[Result] = []
+    skip_next = False
+    for i, rec in enumerate(records):
+        if "send" not in rec:
+            continue
+        if skip_next:
+            skip_next = False
+            continue
+        if "no_reply_within_ms" in rec:
+            skip_next = True
+            continue
+        send, reply = rec["send"], rec["reply"]
+        cmd = send.split()[0] if send.split() else ""
+        if cmd in judge:
+            got = answer(st, send)
+            out.append(Result(str(path), i + 1, send.strip(), reply, got, same(reply, got)))
+        else:
+            track(st, send, reply)
+    return out

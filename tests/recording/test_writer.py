@@ -1,0 +1,272 @@
+"""Recorder/McapFile/LeanWriter: content, order, schemas, rotation, drop accounting."""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+import time
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from mcap.reader import make_reader
+
+from rob6_recorder.geometry import TfDeriver, pose_from_fk
+from rob6_recorder.mcapwriter import LeanWriter
+from rob6_recorder.reader import is_complete, read_records, RecordingReader
+from rob6_recorder.schemas import schema_for, to_foxglove_log
+from rob6_recorder.writer import Recorder
+
+from .rec_helpers import record_session
+
+NAME = re.compile(r"^\d{8}T\d{6}Z_kr16_robot1_(session3|system_\d{3})(-\d+)?\.mcap$")
+
+
+def _files(d, kind):
+    return sorted(p for p in d.iterdir() if p.suffix == ".mcap" and f"_{kind}" in p.name)
+
+
+def _checked_summary(path):
+    """The stock mcap reader accepts the file, with CRCs validated."""
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, validate_crcs=True)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        messages = list(reader.iter_messages(log_time_order=False))
+        assert len(messages) == summary.statistics.message_count
+        return summary, messages
+
+
+def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
+    fk = lambda q: [1, 0, 0, 1000.0, 0, 1, 0, 0, 0, 0, 1, 500.0]  # noqa: E731
+    with Recorder(tmp_path, "kr16", "robot1", urdf=urdf, fk=fk, tf_max_rate=0) as rec:
+        submitted = record_session(rec, session=3)
+    session_files, system_files = _files(tmp_path, "session"), _files(tmp_path, "system")
+    assert len(session_files) == 1 and len(system_files) == 1
+    for p in session_files + system_files:
+        assert NAME.match(p.name), p.name
+        assert is_complete(p)
+
+    for path in (session_files[0], system_files[0]):
+        got = [(r.topic, r.log_time, r.data) for r in read_records(path)
+               if r.topic not in ("/tf", "/flange", "/robot_description")]
+        expected = []
+        for topic, t, data in submitted:
+            if topic == "/log":
+                data = to_foxglove_log(data, t)
+            expected.append((topic, t, data))
+        assert got == expected  # every record, in submission order, with its cid
+
+        # the cid chain: each client line -> its bus traffic -> its reply
+        cids = [d.get("cid") for topic, _, d in got if topic.startswith(("/session/3/client", "/bus/"))]
+        assert [c for c in cids if c] == [d.get("cid") for topic, _, d in submitted
+                                           if topic.startswith(("/session/3/client", "/bus/")) and d.get("cid")]
+
+        summary, messages = _checked_summary(path)
+        schemas = {summary.schemas[ch.schema_id].name for ch in summary.channels.values()}
+        assert all(ch.schema_id != 0 and ch.message_encoding == "json"
+                   for ch in summary.channels.values())
+        assert {"rob6.ClientLine", "rob6.ClientReply", "rob6.JointState", "foxglove.Log",
+                "foxglove.FrameTransforms", "foxglove.PosesInFrame", "std_msgs/String",
+                "rob6.BusRequest", "rob6.BusReply", "rob6.SessionEvent"} <= schemas
+        assert all(s.encoding == "jsonschema" for s in summary.schemas.values())
+        with open(path, "rb") as fh:
+            reader = make_reader(fh)
+            assert [a.name for a in reader.iter_attachments()] == ["robot.urdf"]
+            meta = {m.name: m.metadata for m in reader.iter_metadata()}
+        assert meta["rob6"]["robot"] == "kr16" and meta["rob6"]["robot_id"] == "robot1"
+        assert "rob6.end" in meta
+
+    reader = RecordingReader(session_files[0])
+    recs = list(reader.records())
+    assert reader.metadata["rob6"]["kind"] == "session" and reader.metadata["rob6"]["session"] == "3"
+    # one /tf and one /flange per joint state, derived from the URDF / fk
+    n_js = sum(1 for r in recs if r.topic == "/driver/joint_state")
+    assert sum(1 for r in recs if r.topic == "/tf") == n_js
+    flange = [r for r in recs if r.topic == "/flange"]
+    assert len(flange) == n_js
+    assert flange[0].data["poses"][0]["position"] == {"x": 1.0, "y": 0.0, "z": 0.5}
+    assert flange[0].data["frame_id"] == "base_link"
+    tf = [r for r in recs if r.topic == "/tf"][0].data["transforms"]
+    assert [t["child_frame_id"] for t in tf] == ["link1", "link2", "flange", "fk_flange"]
+    assert tf[-1]["parent_frame_id"] == "base_link"
+    assert tf[-1]["translation"] == {"x": 1.0, "y": 0.0, "z": 0.5}
+    desc = [r for r in recs if r.topic == "/robot_description"]
+    assert len(desc) == 1 and desc[0].data == {"data": urdf}
+    log = [r for r in recs if r.topic == "/log"][0]
+    assert log.data["level"] == 3 and log.data["name"] == "gateway/rob6.gateway"
+
+
+def test_records_outside_sessions_go_to_system_only(tmp_path):
+    with Recorder(tmp_path, "kr16", "robot1") as rec:
+        t = time.time_ns()
+        rec.submit("/driver/joint_state", t, {"q": [0] * 6})
+        rec.submit("/session/1/client_in", t + 1, {"session": 1, "cid": "a", "text": "GetRobot\n"})
+        rec.submit("/driver/joint_state", t + 2, {"q": [1] * 6})
+        rec.submit("/session/1/event", t + 3, {"session": 1, "event": "close"})
+        rec.flush()
+        time.sleep(1.2)  # linger (0.5 s) passes: the session file is finished
+        rec.submit("/driver/joint_state", t + 4, {"q": [2] * 6})
+        rec.submit("/session/1/client_out", t + 5, {"session": 1, "cid": "a", "text": "late\n"})
+    (session,), (system,) = _files(tmp_path, "session"), _files(tmp_path, "system")
+    assert is_complete(session)
+    assert [r.log_time - t for r in read_records(session)] == [1, 2, 3]
+    assert [r.log_time - t for r in read_records(system)] == [0, 1, 2, 3, 4, 5]
+
+
+def test_rotation_by_size_and_time(tmp_path):
+    with Recorder(tmp_path / "size", "kr16", "robot1", rotate_bytes=20_000, rotate_seconds=0,
+                  chunk_interval=0.05, fsync=False) as rec:
+        t = time.time_ns()
+        for i in range(3000):
+            rec.submit("/driver/joint_state", t + i, {"cycle": i, "q": [i * 1.1] * 6, "qd": [0.5] * 6})
+            if i % 300 == 0:
+                time.sleep(0.06)
+    files = _files(tmp_path / "size", "system")
+    assert len(files) >= 2
+    cycles = [r.data["cycle"] for p in files for r in read_records(p)]
+    assert cycles == list(range(3000))
+    assert all(is_complete(p) for p in files)
+
+    with Recorder(tmp_path / "time", "kr16", "robot1", rotate_seconds=0.3, chunk_interval=0.05,
+                  fsync=False) as rec:
+        t = time.time_ns()
+        for i in range(8):
+            rec.submit("/log", t + i, {"level": "INFO", "name": "x", "message": str(i)})
+            time.sleep(0.1)
+    files = _files(tmp_path / "time", "system")
+    assert len(files) >= 2
+    assert [r.data["message"] for p in files for r in read_records(p)] == [str(i) for i in range(8)]
+
+
+def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path, caplog):
+    rec = Recorder(tmp_path, "kr16", "robot1", max_backlog=100, warn_backlog=50)
+    t = time.time_ns()
+    with caplog.at_level(logging.WARNING, logger="rob6.recorder"):
+        accepted = [rec.submit("/driver/joint_state", t + i, {"cycle": i}) for i in range(150)]
+        assert accepted == [True] * 100 + [False] * 50  # never blocks, refuses past the bound
+        stats = rec.stats()
+        assert stats.dropped == 50 and stats.dropped_by_topic == {"/driver/joint_state": 50}
+        assert stats.backlog == 100
+        rec.start()
+        rec.close()
+    assert any("falling behind" in r.message for r in caplog.records)
+    assert any("dropping" in r.message for r in caplog.records)
+    (system,) = _files(tmp_path, "system")
+    recs = list(read_records(system))
+    assert [r.data["cycle"] for r in recs if r.topic == "/driver/joint_state"] == list(range(100))
+    (status,) = [r.data for r in recs if r.topic == "/recorder/status"]
+    assert status["dropped"] == 50 and status["dropped_since_last"] == {"/driver/joint_state": 50}
+    assert status["first_drop_ns"] == t + 100 and status["last_drop_ns"] == t + 149
+    assert rec.stats().written == 100
+
+
+def test_submit_after_close_is_refused_and_counted(tmp_path):
+    rec = Recorder(tmp_path, "kr16", "robot1").start()
+    rec.close()
+    assert rec.submit("/log", 1, {"message": "late"}) is False
+    assert rec.stats().dropped == 1
+
+
+def test_bytes_and_structs_and_unserialisable(tmp_path):
+    import msgspec
+
+    class JS(msgspec.Struct):
+        q: list[float]
+        cycle: int
+
+    with Recorder(tmp_path, "kr16", "robot1") as rec:
+        rec.submit("/driver/joint_state", 1, JS(q=[1.0] * 6, cycle=7))
+        rec.submit("/bus/x/y/reply", 2, b'{"cid":"k","ok":true}')
+        rec.submit("/other/topic", 3, {"obj": object()})  # falls back to repr, not lost
+    (system,) = _files(tmp_path, "system")
+    recs = list(read_records(system))
+    assert recs[0].data == {"q": [1.0] * 6, "cycle": 7}
+    assert recs[1].data == {"cid": "k", "ok": True}
+    assert recs[2].schema == "rob6.Record" and recs[2].data["obj"].startswith("<object")
+
+
+def test_fk_without_urdf_gives_tf_and_flange(tmp_path):
+    fk = lambda q: None if q[0] > 100 else [1, 0, 0, q[0], 0, 1, 0, 0, 0, 0, 1, 0]  # noqa: E731
+    with Recorder(tmp_path, "kr16", "robot1", fk=fk, tf_max_rate=0) as rec:
+        rec.submit("/driver/joint_state", 1, {"q": [500.0] + [0] * 5})  # unreachable: nothing
+        rec.submit("/driver/joint_state", 2, {"q": [250.0] + [0] * 5})
+        rec.submit("/driver/joint_state", 3, {"q": [50.0] + [0] * 5})
+    (system,) = _files(tmp_path, "system")
+    recs = [(r.topic, r.log_time) for r in read_records(system)]
+    assert recs == [("/driver/joint_state", 1), ("/driver/joint_state", 2),
+                    ("/driver/joint_state", 3), ("/tf", 3), ("/flange", 3)]
+    tf = [r.data for r in read_records(system, ["/tf"])][0]["transforms"]
+    assert tf[0]["parent_frame_id"] == "base" and tf[0]["translation"]["x"] == 0.05
+
+
+def test_schema_mapping():
+    assert schema_for("/session/12/client_in").name == "rob6.ClientLine"
+    assert schema_for("/bus/kinematics/fk/request").name == "rob6.BusRequest"
+    assert schema_for("/bus/kinematics/fk/reply").name == "rob6.BusReply"
+    assert schema_for("/tf").name == "foxglove.FrameTransforms"
+    assert schema_for("/whatever").name == "rob6.Record"
+
+
+def test_log_mapping_levels():
+    assert to_foxglove_log({"level": "ERROR", "name": "n", "message": "m", "service": "driver",
+                            "time": 12.5}, 0) == {
+        "timestamp": {"sec": 12, "nsec": 500_000_000}, "level": 4, "message": "m",
+        "name": "driver/n", "file": "", "line": 0, "service": "driver"}
+    assert to_foxglove_log({"level": 20, "message": "x"}, 5)["level"] == 2
+    assert to_foxglove_log({"level": "DEBUG", "message": "x"}, 7)["timestamp"] == {"sec": 0, "nsec": 7}
+
+
+def test_tf_from_urdf(urdf):
+    tf = TfDeriver(urdf)
+    msg = tf.transforms([90.0, 0.0, 0, 0, 0, 0], 1_500_000_000)
+    frames = [(t["parent_frame_id"], t["child_frame_id"]) for t in msg["transforms"]]
+    assert frames == [("base_link", "link1"), ("link1", "link2"), ("link2", "flange")]
+    first = msg["transforms"][0]
+    assert first["timestamp"] == {"sec": 1, "nsec": 500_000_000}
+    assert first["translation"] == {"x": 0.0, "y": 0.0, "z": 0.675}
+    r = first["rotation"]
+    assert math.isclose(r["z"], math.sqrt(0.5)) and math.isclose(r["w"], math.sqrt(0.5))
+    # joint_map: sign/offset per axis
+    flipped = TfDeriver(urdf, joint_map=[(-1, 0), (1, 90)]).transforms([90.0, 0.0], 0)
+    assert math.isclose(flipped["transforms"][0]["rotation"]["z"], -math.sqrt(0.5))
+    assert math.isclose(flipped["transforms"][1]["rotation"]["y"], math.sqrt(0.5))
+
+
+def test_pose_from_fk_forms():
+    (p, q) = pose_from_fk([0, -0.173648, -0.984808, 1741.140107, 0, -0.984808, 0.173648,
+                           -307.009978, -1, 0, 0, 640])
+    assert p == pytest.approx((1.741140107, -0.307009978, 0.64))
+    assert sum(c * c for c in q) == pytest.approx(1.0)
+    assert pose_from_fk(None) is None
+    assert pose_from_fk([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1000], [0, 0, 0, 1]])[0] == (0, 0, 1.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 3), st.integers(0, 2**40), st.binary(max_size=300)),
+                max_size=300),
+       st.integers(64, 4096))
+def test_lean_writer_is_valid_mcap(tmp_path_factory, messages, chunk_size):
+    path = tmp_path_factory.mktemp("lean") / "x.mcap"
+    with open(path, "wb") as fh:
+        w = LeanWriter(fh, chunk_size=chunk_size)
+        w.start("", "test")
+        sid = w.register_schema("s", "jsonschema", b"{}")
+        channels = [w.register_channel(f"/t{i}", "json", sid) for i in range(3)]
+        w.add_metadata("m", {"k": "v"})
+        for n, (ch, t, data) in enumerate(messages):
+            w.add_message(channels[ch - 1], t, data, t + 1, n)
+            if n % 17 == 0:
+                w.flush()
+        w.add_attachment(1, 2, "a.txt", "text/plain", b"hello")
+        w.finish()
+    summary, got = _checked_summary(path)
+    assert [(c.topic, m.log_time, m.data, m.sequence) for _, c, m in got] == \
+        [(f"/t{ch - 1}", t, data, n) for n, (ch, t, data) in enumerate(messages)]
+    assert summary.statistics.message_count == len(messages)
+    # the chunk indexes and message indexes are right: the seeking reader's topic filter
+    with open(path, "rb") as fh:
+        only = [m.log_time for _, _, m in make_reader(fh, validate_crcs=True).iter_messages(
+            topics=["/t1"], log_time_order=False)]
+    assert sorted(only) == sorted(t for ch, t, _ in messages if ch == 2)
