@@ -95,13 +95,13 @@ def bare_command_error(send: str) -> str | None:
 _ZERO = "0.000000 0.000000 0.000000 0.000000 0.000000 0.000000\n"
 _DIRECT_DISABLED = ("ERROR: DirectAdeptCmd is disabled on this server (it forwards raw controller "
                     "commands; start the gateway with --allow-direct-adept-cmd)\nfalse\n")
-for _name, _first in (("adept_grippergohome", "true\n"),
+for _file, _first in (("adept_grippergohome", "true\n"),
                       ("adept_grippermove", "Start moving with amperage -1.000\ntrue\n"),
                       ("adept_grippermove_noarg", "ERROR: incorrect value\nfalse\n"),
                       ("adept_grippermovetopos", "true\n"),
                       ("adept_directcmd", _DIRECT_DISABLED),
                       ("adept_directcmd_noarg", _DIRECT_DISABLED)):
     for _number, _reply in ((4, _first), (5, "ad850\n"), (6, _ZERO), (7, "bye!\n")):
-        DEVIATIONS[("ad850", _name, _number)] = lambda robot, records, reply=_reply: reply
+        DEVIATIONS[("ad850", _file, _number)] = lambda robot, records, reply=_reply: reply
 DEVIATIONS[("ad850", "debug_grippergohome", 5)] = lambda robot, records: "true\n"
 DEVIATIONS[("ad850", "debug_grippergohome", 6)] = lambda robot, records: "ad850\n"
