@@ -101,7 +101,7 @@ for _file, _first in (("adept_grippergohome", "true\n"),
                       ("adept_grippermovetopos", "true\n"),
                       ("adept_directcmd", _DIRECT_DISABLED),
                       ("adept_directcmd_noarg", _DIRECT_DISABLED)):
-    for _number, _reply in ((4, _first), (5, "ad850\n"), (6, _ZERO), (7, "bye!\n")):
-        DEVIATIONS[("ad850", _file, _number)] = lambda robot, records, reply=_reply: reply
+    for _number, _answer in ((4, _first), (5, "ad850\n"), (6, _ZERO), (7, "bye!\n")):
+        DEVIATIONS[("ad850", _file, _number)] = lambda robot, records, answer=_answer: answer
 DEVIATIONS[("ad850", "debug_grippergohome", 5)] = lambda robot, records: "true\n"
 DEVIATIONS[("ad850", "debug_grippergohome", 6)] = lambda robot, records: "ad850\n"
