@@ -145,6 +145,7 @@ class BackwardCalcRequest(Struct):
     turn_min: Joints
     turn_max: Joints
     max_change: Joints
+    weights: Joints  # MinChangeWeights: which admissible branch toggle words pick
 
 
 class JointsReply(Struct):

@@ -174,6 +174,37 @@ class Result:
     got: str
     ok: bool
 
+    @property
+    def exact(self) -> bool:
+        return self.expected == self.got
+
+    def known_mismatch(self, kin: Kinematics) -> str | None:
+        """Classify a mismatch the original's float noise explains (else None).
+
+        * ``partial-status``: ForwardCalc with 1..5 numbers, matrix line identical,
+          only the status line differs (robots.md: the status line is meaningless).
+        * ``stretched-status``: ForwardCalc with 6 numbers whose elbow is exactly
+          stretched (d4 sin q3 - a3 cos q3 == 0, i.e. q3 = 0 on kr3/kaw_fs):
+          matrix identical, only the elbow word differs.  The original decides
+          up/down there by rounding noise that depends on q2 (``ForwardCalc 0
+          -134.999 0 0 0 0`` -> up, ``ForwardCalc 0 0 0 0 0 0`` -> down); rob6
+          applies the formula (down).
+        """
+        if self.ok or not self.send.startswith("ForwardCalc"):
+            return None
+        el, gl = self.expected.split("\n"), self.got.split("\n")
+        if len(el) < 2 or len(gl) < 2 or el[0] != gl[0]:
+            return None
+        nums, _, _ = leading_numbers(self.send[len("ForwardCalc"):], 6)
+        if len(nums) < 6:
+            return "partial-status"
+        ew, gw = el[1].split(), gl[1].split()
+        q3 = np.radians(nums[2])
+        v = kin.g.d4 * np.sin(q3) - kin.g.a3 * np.cos(q3)
+        if abs(v) < 1e-9 and ew[0] == gw[0] and ew[2] == gw[2]:
+            return "stretched-status"
+        return None
+
 
 def replay(kin: Kinematics, path: Path, judge=JUDGED) -> list[Result]:
     st = State(kin)

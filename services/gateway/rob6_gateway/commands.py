@@ -390,7 +390,7 @@ async def _backward(gw, session, args) -> list[float] | None:
     config = gw.limits.config
     reply = await gw.call(session, "kinematics", "backward_calc", BackwardCalcRequest(
         pose=pose, pattern=pattern, current=gw.current(session), turn_min=config.turn_min,
-        turn_max=config.turn_max, max_change=config.max_change))
+        turn_max=config.turn_max, max_change=config.max_change, weights=config.weights))
     return reply.joints
 
 

@@ -46,7 +46,8 @@ class KinematicsService:
 
     def backward_calc(self, req: BackwardCalcRequest, _ctx) -> JointsReply:
         return JointsReply(joints=self.kin.backward_calc(
-            req.pose, req.pattern, req.current, req.turn_min, req.turn_max, req.max_change))
+            req.pose, req.pattern, req.current, req.turn_min, req.turn_max, req.max_change,
+            req.weights))
 
     def ik_batch(self, req: IkBatchRequest, _ctx) -> IkBatchReply:
         solutions = self.kin.ik(np.asarray(req.poses, dtype=float).reshape(-1, 12))

@@ -1,0 +1,116 @@
+"""IK throughput benchmark (for ``make bench``).
+
+``bench_ik()`` times, on the same random reachable poses of one robot:
+
+* ``batch_ik``   — ``Kinematics.ik`` on all poses at once (numpy, all 8 branches);
+* ``single_ik``  — ``Kinematics.ik`` called once per pose (all 8 branches);
+* ``clik``       — Pinocchio's numeric CLIK (damped least squares on ``pin.log6``,
+  the loop of Pinocchio's ``examples/inverse-kinematics.py`` on the flange frame),
+  one solution per pose, started from q = 0.
+
+Figures are poses per second on one core (``clik`` also reports its success rate).
+``python -m rob6_kinematics.bench [robot]`` prints them.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import numpy as np
+
+
+def _single_thread() -> None:
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+
+
+def random_poses(kin, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """n poses (N,3,4) from random joints inside the turn limits, and the joints."""
+    rng = np.random.default_rng(seed)
+    lo = np.maximum(kin.turn_min, -179.0)
+    hi = np.minimum(kin.turn_max, 179.0)
+    q = rng.uniform(lo, hi, size=(n, 6))
+    return kin.fk(q), q
+
+
+def clik(pm, T_mm: np.ndarray, q0=None, eps=1e-4, it_max=1000, dt=1e-1, damp=1e-12):
+    """Pinocchio example CLIK to the flange pose T (mm). Returns (q_deg, success)."""
+    import pinocchio as pin
+
+    model, data, fid = pm.model, pm.data, pm.flange
+    oMdes = pin.SE3(np.array(T_mm[:, :3]), np.array(T_mm[:, 3]) / 1000.0)
+    q = pin.neutral(model) if q0 is None else np.radians(np.asarray(q0, float))
+    for _ in range(it_max):
+        pin.framesForwardKinematics(model, data, q)
+        iMd = data.oMf[fid].actInv(oMdes)
+        err = pin.log6(iMd).vector
+        if np.linalg.norm(err) < eps:
+            return np.degrees(q), True
+        J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
+        J = -np.dot(pin.Jlog6(iMd.inverse()), J)
+        v = -J.T.dot(np.linalg.solve(J.dot(J.T) + damp * np.eye(6), err))
+        q = pin.integrate(model, q, v * dt)
+    return np.degrees(q), False
+
+
+def bench_ik(robot: str = "kr16", n_batch: int = 20000, n_single: int = 2000, n_clik: int = 50,
+             repeat: int = 3, seed: int = 0) -> dict:
+    """Poses/s of batch IK, single-call IK and Pinocchio CLIK on the same poses."""
+    _single_thread()
+    from rob6.robots import get_robot
+
+    from .calc import Kinematics
+
+    kin = Kinematics(get_robot(robot))
+    T, _ = random_poses(kin, n_batch, seed)
+    kin.ik(T[:10])  # warm-up
+
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        Q = kin.ik(T)
+        best = min(best, time.perf_counter() - t0)
+    batch = n_batch / best
+    solved = float(np.mean(np.isfinite(Q).all(axis=-1).any(axis=-1)))
+
+    Ts = T[:n_single]
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for t in Ts:
+            kin.ik(t)
+        best = min(best, time.perf_counter() - t0)
+    single = len(Ts) / best
+
+    pm = kin.pin
+    Tc = T[:n_clik]
+    ok = 0
+    t0 = time.perf_counter()
+    for t in Tc:
+        ok += clik(pm, t)[1]
+    dt = time.perf_counter() - t0
+    return {
+        "robot": robot,
+        "batch_ik_poses_per_s": batch,
+        "single_ik_poses_per_s": single,
+        "clik_poses_per_s": len(Tc) / dt,
+        "clik_success_rate": ok / len(Tc),
+        "batch_solved_rate": solved,
+        "n_batch": n_batch,
+        "n_single": len(Ts),
+        "n_clik": len(Tc),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    res = bench_ik(argv[0] if argv else "kr16")
+    for k, v in res.items():
+        print(f"{k:24s} {v:,.1f}" if isinstance(v, float) else f"{k:24s} {v}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

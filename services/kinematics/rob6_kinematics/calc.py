@@ -1,0 +1,299 @@
+"""Kinematics with the semantics of the original rob6server's protocol commands.
+
+``Kinematics`` wraps one robot (``rob6.robots.RobotModel``):
+
+* ``fk`` / ``ik`` — vectorised numpy FK and the 8-branch closed-form IK (``opw``);
+* ``forward_calc`` — ``ForwardCalc`` incl. the partial-frame quirk for < 6 numbers;
+* ``backward_calc`` / ``is_possible`` — ``BackwardCalc`` = ``GetJointsRowWise``,
+  ``IsPossible``: branch selection from a status pattern, (-180, 180] joints,
+  one +-360 shift into the limits, strict turn limits, inclusive max change;
+* ``jacobian`` / ``manipulability`` — via Pinocchio (``model.PinModel``).
+
+Angles in degrees, lengths in mm, poses as (3,4) matrices or 12 row-wise numbers.
+No networking here; the gateway parses the text, this module computes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from functools import cached_property
+
+import numpy as np
+
+from . import opw
+from .opw import BRANCH_INDEX, BRANCHES, DEG, Geometry
+
+HAND_WORDS = {"flip": "flip", "noflip": "noflip", "toggleHand": "toggle", "noToggleHand": "keep"}
+ELBOW_WORDS = {"up": "up", "down": "down", "toggleElbow": "toggle", "noToggleElbow": "keep"}
+ARM_WORDS = {"lefty": "lefty", "righty": "righty", "toggleArm": "toggle", "noToggleArm": "keep"}
+_CATEGORY = [HAND_WORDS, ELBOW_WORDS, ARM_WORDS]
+#: Min-change weights the original starts with (GetMinChangeWeights).
+DEFAULT_WEIGHTS = np.array([4.0, 1.0, 1.0, 1.0, 1.0, 1.0])
+#: Tie-break order of the branches (indices into BRANCHES): flip before noflip, up
+#: before down, lefty before righty -- selection.STATUS_ORDER.
+TIE_ORDER = [BRANCH_INDEX[f"{h} {e} {a}"] for h in ("flip", "noflip") for e in ("up", "down")
+             for a in ("lefty", "righty")]
+TIE_EPS = 1e-9
+
+_CANONICAL = [
+    {"toggle": "toggleHand", "keep": "noToggleHand"},
+    {"toggle": "toggleElbow", "keep": "noToggleElbow"},
+    {"toggle": "toggleArm", "keep": "noToggleArm"},
+]
+
+
+def parse_pattern(words: str | Sequence[str]) -> tuple[str, str, str]:
+    """Normalise 1-3 status words (any order) to (hand, elbow, arm) words.
+
+    Missing categories become ``toggle…``; words beyond the third are ignored (as
+    the original does).  Unknown words or two words of one category raise
+    ``ValueError`` (the gateway answers ``ERROR: incorrect status``).
+    """
+    if isinstance(words, str):
+        words = words.split()
+    words = list(words)[:3]
+    if not words:
+        raise ValueError("no status words")
+    out: list[str | None] = [None, None, None]
+    for w in words:
+        for i, table in enumerate(_CATEGORY):
+            if w in table:
+                if out[i] is not None:
+                    raise ValueError(f"two {('hand', 'elbow', 'arm')[i]} words")
+                out[i] = w
+                break
+        else:
+            raise ValueError(f"unknown status word {w!r}")
+    for i in range(3):
+        if out[i] is None:
+            out[i] = _CANONICAL[i]["toggle"]
+    return out[0], out[1], out[2]  # type: ignore[return-value]
+
+
+class Kinematics:
+    """Kinematics of one robot type.
+
+    ``geometry`` overrides the DH lengths (tests use it to reproduce the original's
+    kaw_fs ForwardCalc with a2 = -250); by default both FK and IK use the robot's.
+    """
+
+    BRANCHES: tuple[str, ...] = BRANCHES
+
+    def __init__(self, robot, geometry: Geometry | None = None):
+        self.robot = robot
+        self.g = geometry or Geometry.of(robot)
+        self.turn_min = np.array(robot.turn_min, dtype=float)
+        self.turn_max = np.array(robot.turn_max, dtype=float)
+        self.max_change = np.array(robot.default_max_change, dtype=float)
+
+    # ------------------------------------------------------------------ FK / IK
+    def fk(self, q) -> np.ndarray:
+        """Flange pose(s) of joints q (deg), (6,) or (N,6) -> (N,3,4), mm.
+
+        Computed like the original (``opw.fk_compiled``): its ``%f`` text is the
+        original's byte for byte.  ``fk_fast`` is the ~4x faster closed form
+        (equal to ~1e-12 mm).
+        """
+        return opw.fk_compiled(self.g, q)
+
+    def fk_fast(self, q) -> np.ndarray:
+        """Closed-form vectorised FK (same result as ``fk`` up to rounding)."""
+        return opw.fk(self.g, q)
+
+    def ik(self, T) -> np.ndarray:
+        """All 8 closed-form solutions, (N,3,4)/(N,12) -> (N,8,6) deg in (-180,180].
+
+        NaN where a branch has no solution; branch order ``BRANCHES``.  No limits.
+        """
+        return opw.ik(self.g, T)
+
+    def ik_limited(self, T, turn_min=None, turn_max=None) -> np.ndarray:
+        """``ik`` with the original's limit handling, vectorised: each joint outside
+        its turn limits is shifted once by -+360 deg; a branch with a joint not
+        strictly inside the limits afterwards becomes NaN."""
+        lo = self.turn_min if turn_min is None else np.asarray(turn_min, float)
+        hi = self.turn_max if turn_max is None else np.asarray(turn_max, float)
+        return apply_limits(self.ik(T), lo, hi)
+
+    def status(self, q) -> str:
+        """Status words of joints q (deg), e.g. ``"noflip up lefty"``."""
+        return " ".join(self.robot_status(q))
+
+    def robot_status(self, q) -> tuple[str, str, str]:
+        q = [float(x) for x in np.asarray(q, dtype=float).reshape(6)]
+        g = self.g
+        if g == Geometry.of(self.robot):
+            return self.robot.status(q)
+        return replace(self.robot, d1=g.d1, a1=g.a1, a2=g.a2, a3=g.a3, d4=g.d4, d6=g.d6).status(q)
+
+    def status_batch(self, q) -> np.ndarray:
+        """Vectorised status as branch indices (N,) (index into ``BRANCHES``)."""
+        q = opw.as_joints(q)
+        g = self.g
+        q2, q3 = q[:, 1] * DEG, q[:, 2] * DEG
+        flip = q[:, 4] < 0
+        down = ~(g.d4 * np.sin(q3) - g.a3 * np.cos(q3) > 0)
+        reach = g.a1 + g.a2 * np.cos(q2) + g.d4 * np.cos(q2 + q3) + g.a3 * np.sin(q2 + q3)
+        righty = ~(reach > 0)
+        return 4 * flip + 2 * down + righty
+
+    # ------------------------------------------------------------------ ForwardCalc
+    def partial_frame(self, q_deg, n: int) -> np.ndarray:
+        """Frame of joint n (1..6) of the original's compiled chain, (3,4).
+
+        The chain (robots.md "ForwardCalc quirks"): A1..An with
+        theta = [-q1, q2, q3+90, q4, q5, q6], d4 -> -d4, d6 -> -d6, a3 -> -a3, the
+        same twists, and no final Ry(180); n = 6 is the flange pose.
+        """
+        return opw.fk_compiled(self.g, np.asarray(q_deg, float).reshape(1, 6), n)[0]
+
+    def forward_calc(self, numbers: Sequence[float], turn_min=None, turn_max=None):
+        """``ForwardCalc``: -> (list of 12 floats, status string) or None (``false``).
+
+        ``numbers`` are the leading numbers that parsed (the gateway stops at the
+        first one that does not).  0 numbers -> None; more than 6 -> extras ignored.
+        With N < 6 numbers the missing joints are the midpoints of the hardware
+        ranges (J2 max = the hardware value, not 20), all 6 are limit-checked, and
+        the frame of joint N of the compiled chain is returned; the status line is
+        then the status of the filled joint vector (meaningless, as in the original).
+        Turn limits are strict: min < q < max.
+        """
+        nums = [float(x) for x in list(numbers)[:6]]
+        n = len(nums)
+        if n == 0:
+            return None
+        lo = self.turn_min if turn_min is None else np.asarray(turn_min, float)
+        hi = self.turn_max if turn_max is None else np.asarray(turn_max, float)
+        mid = (np.asarray(self.robot.hw_min, float) + np.asarray(self.robot.hw_max, float)) / 2
+        q = mid.copy()
+        q[:n] = nums
+        if not np.all(np.isfinite(q)) or not np.all((lo < q) & (q < hi)):
+            return None
+        T = self.partial_frame(q, n)
+        return [float(x) for x in T.reshape(12)], self.status(q)
+
+    # ------------------------------------------------------------------ BackwardCalc
+    def resolve_pattern(self, pattern, current_q) -> list[int]:
+        """Branch indices (``BRANCHES`` order) admitted by a status pattern at the
+        current joints (``noToggle…`` = the current status' word)."""
+        hand, elbow, arm = parse_pattern(pattern)
+        cur = self.robot_status(current_q)
+        words = []
+        for i, (w, opts) in enumerate(
+            zip((hand, elbow, arm), (opw.HANDS, opw.ELBOWS, opw.ARMS))
+        ):
+            kind = _CATEGORY[i][w]
+            if kind == "keep":
+                words.append([cur[i]])
+            elif kind == "toggle":
+                words.append(list(opts))
+            else:
+                words.append([kind])
+        return [BRANCH_INDEX[f"{h} {e} {a}"] for h in words[0] for e in words[1] for a in words[2]]
+
+    def backward_calc(
+        self,
+        matrix: Sequence[float],
+        pattern,
+        current_q,
+        turn_min=None,
+        turn_max=None,
+        max_change=None,
+        weights=None,
+    ) -> list[float] | None:
+        """``BackwardCalc`` / ``GetJointsRowWise``: -> list of 6 joints (deg) or None.
+
+        ``matrix``: 12 row-wise numbers (or (3,4)); ``pattern``: 1-3 status words
+        (string or list, any order, see ``parse_pattern``); ``current_q``: the
+        robot's current joints; limits, max change and min-change weights default
+        to the robot's defaults (weights ``4 1 1 1 1 1``).
+
+        Each IK branch is solved in closed form (``opw.ik``: joints in (-180, 180],
+        wrist-singularity rule, stretched-elbow clamp), then every joint outside
+        its turn limits is shifted once by -+360 deg, and the branch is possible
+        when all joints are strictly inside the limits and no joint changes by more
+        than ``max_change`` from ``current_q`` (change == max_change is allowed).
+
+        Pattern -> branch.  Explicit words fix a category, ``noToggle…`` fixes it
+        to the category of ``current_q``'s status, ``toggle…`` leaves it free.  Of
+        the admitted possible branches the one with the smallest **weighted maximum
+        joint change** ``max_j w_j |q_j - current_j|`` wins; ties (within 1e-9 —
+        common, since the branches of one arm share J1 and ``4 |dq1|`` usually
+        dominates) go to the earlier branch in ``TIE_ORDER``: flip before noflip, up
+        before down, lefty before righty.  This is the rule of the Cartesian moves
+        (``selection.py``) without their +-360 representatives.
+
+        Found from every toggle case of the transcripts (15 BackwardCalc /
+        GetJointsRowWise cases with more than one possible branch on kr16, kr3,
+        ad850, kaw_fs; all from current position 0):  e.g. kr16
+        FK(-88 -78 -38 -64 23 34) + ``toggleHand toggleElbow toggleArm`` ->
+        ``flip up lefty`` (all lefty branches cost 4*88; the first of the tie wins,
+        although ``noflip down lefty`` has the smaller summed change); ad850
+        FK(10 -60 80 20 40 30) -> ``noflip up lefty`` (cost 80 against 100.6 of the
+        current configuration ``noflip down lefty``); ad850 FK(0) -> the current
+        joints (cost 0).  A sum / squared-sum cost contradicts these cases.  The
+        weights the original used here are not observable (never changed before a
+        BackwardCalc in the transcripts); the defaults are assumed.
+        """
+        raw = self.ik(np.asarray(matrix, float).reshape(1, 12))[0]
+        cands = self._check(raw, current_q, turn_min, turn_max, max_change)
+        allowed = set(self.resolve_pattern(pattern, current_q))
+        w = DEFAULT_WEIGHTS if weights is None else np.asarray(weights, float)
+        cur = np.asarray(current_q, float).reshape(6)
+        best, best_cost = None, np.inf
+        for b in TIE_ORDER:
+            q = cands[b]
+            if b not in allowed or not np.all(np.isfinite(q)):
+                continue
+            cost = float(np.max(w * np.abs(q - cur)))
+            if cost < best_cost - TIE_EPS:
+                best, best_cost = q, cost
+        return None if best is None else [float(x) for x in best]
+
+    def is_possible(self, matrix, pattern, current_q, turn_min=None, turn_max=None, max_change=None) -> bool:
+        """``IsPossible`` = BackwardCalc would return joints (independent of weights)."""
+        cands = self.candidates(matrix, current_q, turn_min, turn_max, max_change)
+        return any(np.all(np.isfinite(cands[b])) for b in self.resolve_pattern(pattern, current_q))
+
+    def candidates(self, matrix, current_q, turn_min=None, turn_max=None, max_change=None) -> np.ndarray:
+        """(8,6) solutions after the limit shift, limit and max-change checks, in
+        ``BRANCHES`` order; NaN rows are not possible."""
+        raw = self.ik(np.asarray(matrix, float).reshape(1, 12))[0]
+        return self._check(raw, current_q, turn_min, turn_max, max_change)
+
+    def _check(self, raw, current_q, turn_min, turn_max, max_change) -> np.ndarray:
+        lo = self.turn_min if turn_min is None else np.asarray(turn_min, float)
+        hi = self.turn_max if turn_max is None else np.asarray(turn_max, float)
+        mc = self.max_change if max_change is None else np.asarray(max_change, float)
+        Q = apply_limits(raw, lo, hi)
+        cur = np.asarray(current_q, float).reshape(6)
+        with np.errstate(invalid="ignore"):
+            too_far = np.any(np.abs(Q - cur) > mc, axis=1)
+        Q[too_far] = np.nan
+        return Q
+
+    # ------------------------------------------------------------------ Pinocchio
+    @cached_property
+    def pin(self):
+        from .model import PinModel
+
+        return PinModel(self.robot, self.g)
+
+    def jacobian(self, q):
+        """Flange Jacobian (6,6) at q (deg), LOCAL_WORLD_ALIGNED, rows (v [mm/rad], w [rad/rad])."""
+        return self.pin.jacobian(q)
+
+    def manipulability(self, q) -> float:
+        """Yoshikawa manipulability sqrt(det(J J^T)) of the flange Jacobian (m, rad)."""
+        return self.pin.manipulability(q)
+
+
+def apply_limits(Q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Shift each joint outside (lo, hi) once by -+360, then NaN the branches that
+    are still not strictly inside.  Q: (..., 6) degrees."""
+    Q = np.array(Q, dtype=float, copy=True)
+    Q = np.where(Q >= hi, Q - 360.0, np.where(Q <= lo, Q + 360.0, Q))
+    inside = np.all((lo < Q) & (Q < hi), axis=-1)
+    Q[~inside] = np.nan
+    return Q
