@@ -146,6 +146,8 @@ class FakeServer:
                     if close:
                         writer.close()
                         return
+        except (asyncio.CancelledError, ConnectionError):
+            pass
         finally:
             writer.close()
 
@@ -155,11 +157,17 @@ class FakeServer:
         return self
 
     def __exit__(self, *exc) -> None:
-        def stop() -> None:
+        async def stop() -> None:
             self.server.close()
+            await self.server.wait_closed()
+            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
             self.loop.stop()
-        self.loop.call_soon_threadsafe(stop)
+        asyncio.run_coroutine_threadsafe(stop(), self.loop)
         self._thread.join(5)
+        self.loop.close()
 
 
 def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = None):

@@ -53,6 +53,9 @@ def _kill_while_writing(directory, after: float) -> float:
     finally:
         if proc.poll() is None:
             proc.kill()
+            proc.wait(10)
+        proc.stdout.close()
+        proc.stderr.close()
     return killed_at
 
 

@@ -270,3 +270,51 @@ def test_lean_writer_is_valid_mcap(tmp_path_factory, messages, chunk_size):
         only = [m.log_time for _, _, m in make_reader(fh, validate_crcs=True).iter_messages(
             topics=["/t1"], log_time_order=False)]
     assert sorted(only) == sorted(t for ch, t, _ in messages if ch == 2)
+
+
+def test_bus_trace_adapter():
+    from rob6_recorder.adapters import bus_trace_records
+
+    payload = (b'{"t":1700000000.5,"dt":0.002,"instance":"k-1","request":{"v":1,"cid":"abc",'
+               b'"body":{"joints":[[0,0,0,0,0,0]]}},"reply":{"v":1,"cid":"abc","ok":false,'
+               b'"error":{"code":"invalid","message":"x"}}}')
+    (req, rep) = bus_trace_records("kinematics", "fk", payload, received_ns=5)
+    assert req == ("/bus/kinematics/fk/request", 1_700_000_000_500_000_000, 1_700_000_000_500_000_000,
+                   {"cid": "abc", "service": "kinematics", "op": "fk", "instance": "k-1",
+                    "body": {"joints": [[0, 0, 0, 0, 0, 0]]}})
+    assert rep[0] == "/bus/kinematics/fk/reply" and rep[1] == 1_700_000_000_502_000_000 and rep[2] == 5
+    assert rep[3]["ok"] is False and rep[3]["error"]["code"] == "invalid" and rep[3]["cid"] == "abc"
+
+
+def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk():
+    """Composing /tf from the shipped URDF gives the protocol's flange pose."""
+    import pathlib
+
+    np = pytest.importorskip("numpy")
+    opw = pytest.importorskip("rob6_kinematics.opw")
+    import rob6
+    from rob6.robots import get_robot
+
+    path = pathlib.Path(rob6.__file__).parent / "urdf" / "kr16.urdf"
+    if not path.exists():
+        pytest.skip("no shipped URDF")
+    tf = TfDeriver(path.read_text())
+
+    def matrix(t):
+        x, y, z, w = (t["rotation"][k] for k in "xyzw")
+        m = np.eye(4)
+        m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+        m[:3, 3] = [t["translation"][k] for k in "xyz"]
+        return m
+
+    for q in ([0, 0, 0, 0, 0, 0], [10, -60, 80, 20, 40, 30], [-84, -75, -41, -60, 27, 38]):
+        T = np.eye(4)
+        for t in tf.transforms(q, 0)["transforms"]:
+            T = T @ matrix(t)
+            if t["child_frame_id"] == "flange":
+                break
+        P = opw.fk(opw.Geometry.of(get_robot("kr16")), q)[0]
+        assert np.allclose(T[:3, 3] * 1000, P[:, 3], atol=1e-6)
+        assert np.allclose(T[:3, :3], P[:, :3], atol=1e-9)

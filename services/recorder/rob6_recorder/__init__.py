@@ -1,1 +1,15 @@
-"""rob6 recorder service and session-log tools (MCAP)."""
+"""rob6 recorder service and session-log tools (MCAP).
+
+Library API (the service in ``service.py`` feeds ``Recorder``):
+
+* ``rob6_recorder.writer``: ``Recorder`` (non-blocking ``submit``, per-session files,
+  rolling system file), ``McapFile`` (one file).
+* ``rob6_recorder.reader``: ``read_records`` / ``scan`` (also unfinished files).
+* ``rob6_recorder.recover``: ``recover(path, out_path)``.
+* ``rob6_recorder.inspect``: ``summarize``, ``export_csv``.
+* ``rob6_recorder.replay``: ``load_script``, ``replay``, ``replay_joints``.
+* ``rob6_recorder.adapters``: ``bus_trace_records`` (bus trace payload -> records).
+* ``rob6_recorder.cli``: the ``rob6-log`` click commands.
+"""
+
+__version__ = "0.1.0"

@@ -1,0 +1,195 @@
+"""Recording and replay throughput.
+
+    python bench/bench_recording.py            # small table
+    python bench/bench_recording.py --quick    # shorter runs
+
+``bench_burst``: a producer submits joint-state-sized records as fast as it can;
+reports the submit cost, the writer throughput (records written per second until
+everything is on disk) and the peak backlog. ``bench_sustained``: a producer paced
+at ``rate`` records/s for ``seconds``; reports drops (target 0 at 50,000/s) and the
+peak backlog. Both with a client session open (every record goes to the session
+file *and* the system file) or not. ``bench_replay``: replays a recorded session of
+``lines`` commands as fast as possible against a local fake server (lines/s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import shutil
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from rob6_recorder.replay import load_script, replay
+from rob6_recorder.writer import Recorder
+
+
+def _state(i: int) -> dict:
+    return {"t": i * 0.012, "cycle": i, "q": [10.123456 + i * 1e-4, -20.5, 30.25, 0.0, 45.0, -90.0],
+            "qd": [0.01, 0.0, -0.02, 0.0, 0.0, 0.0], "moving": True, "mode": "trajectory"}
+
+
+def _recorder(directory: Path, **kw) -> Recorder:
+    kw.setdefault("max_backlog", 1_000_000)
+    kw.setdefault("warn_backlog", 1_000_000)
+    return Recorder(directory, "kr16", "robot1", **kw).start()
+
+
+def bench_burst(n: int = 200_000, session: bool = True) -> dict:
+    d = Path(tempfile.mkdtemp(prefix="rob6-bench-"))
+    try:
+        rec = _recorder(d)
+        t = time.time_ns()
+        if session:
+            rec.submit("/session/1/client_in", t, {"session": 1, "cid": "x", "text": "Hello Robot\n"})
+        states = [_state(i) for i in range(n)]
+        start = time.perf_counter()
+        for i, s in enumerate(states):
+            rec.submit("/driver/joint_state", t + i * 20_000, s)
+        submitted = time.perf_counter()
+        rec.close()
+        done = time.perf_counter()
+        st = rec.stats()
+        size = sum(p.stat().st_size for p in d.glob("*.mcap"))
+        return {"case": f"burst {n} ({'session+system' if session else 'system'})",
+                "submit_us": (submitted - start) / n * 1e6,
+                "msgs_per_s": n / (done - start), "dropped": st.dropped,
+                "max_backlog": st.max_backlog_seen, "bytes_per_msg": size / n}
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def bench_sustained(rate: int = 50_000, seconds: float = 3.0, session: bool = True) -> dict:
+    d = Path(tempfile.mkdtemp(prefix="rob6-bench-"))
+    try:
+        rec = _recorder(d, max_backlog=100_000, warn_backlog=100_000)
+        t = time.time_ns()
+        if session:
+            rec.submit("/session/1/client_in", t, {"session": 1, "cid": "x", "text": "Hello Robot\n"})
+        n = int(rate * seconds)
+        states = [_state(i) for i in range(n)]
+        batch = max(1, rate // 1000)  # one batch per millisecond
+        start = time.perf_counter()
+        i = 0
+        while i < n:
+            due = start + i / rate
+            now = time.perf_counter()
+            if due > now:
+                time.sleep(due - now)
+            for s in states[i:i + batch]:
+                rec.submit("/driver/joint_state", time.time_ns(), s)
+            i += batch
+        produced = time.perf_counter()
+        rec.close()
+        done = time.perf_counter()
+        st = rec.stats()
+        return {"case": f"sustained {rate}/s x {seconds:g} s ({'session+system' if session else 'system'})",
+                "submit_us": float("nan"), "msgs_per_s": n / (produced - start),
+                "dropped": st.dropped, "max_backlog": st.max_backlog_seen,
+                "drain_s": done - produced}
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+class _EchoServer:
+    """Answers ``GetRobot`` with ``kr16`` and ``Move...`` with ``true``, after a greeting."""
+
+    def __init__(self) -> None:
+        self.loop = asyncio.new_event_loop()
+        self.ready = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.port = 0
+
+    def _run(self) -> None:
+        asyncio.set_event_loop(self.loop)
+        self.server = self.loop.run_until_complete(asyncio.start_server(self._client, "127.0.0.1", 0))
+        self.port = self.server.sockets[0].getsockname()[1]
+        self.ready.set()
+        self.loop.run_forever()
+
+    async def _client(self, reader, writer) -> None:
+        try:
+            writer.write(b"welcome to rob6server 0.1.01 !\n")
+            while line := await reader.readline():
+                if line.startswith(b"Hello Robot"):
+                    writer.write(b"accepted\n")
+                elif line.startswith(b"ForwardCalc"):
+                    writer.write(b"0.000000 -0.173648 -0.984808 1741.140107 0.000000 -0.984808 "
+                                 b"0.173648 -307.009978 -1.000000 -0.000000 -0.000000 640.000000\n"
+                                 b"noflip up lefty\n")
+                else:
+                    writer.write(b"kr16\n")
+                await writer.drain()
+        except (asyncio.CancelledError, ConnectionError):
+            pass
+        finally:
+            writer.close()
+
+    def __enter__(self):
+        self.thread.start()
+        self.ready.wait(5)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        async def stop() -> None:
+            self.server.close()
+            await self.server.wait_closed()
+            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            self.loop.stop()
+        asyncio.run_coroutine_threadsafe(stop(), self.loop)
+        self.thread.join(5)
+        self.loop.close()
+
+
+def bench_replay(lines: int = 2000) -> dict:
+    d = Path(tempfile.mkdtemp(prefix="rob6-bench-"))
+    try:
+        fc = ("0.000000 -0.173648 -0.984808 1741.140107 0.000000 -0.984808 0.173648 -307.009978 "
+              "-1.000000 -0.000000 -0.000000 640.000000\nnoflip up lefty\n")
+        with Recorder(d, "kr16", "robot1", system=False) as rec:
+            t = time.time_ns()
+            rec.submit("/session/1/client_in", t, {"session": 1, "cid": "h", "text": "Hello Robot\n"})
+            rec.submit("/session/1/client_out", t, {"session": 1, "cid": "h", "text": "accepted\n"})
+            for i in range(lines):
+                cmd, reply = ("ForwardCalc 10 0 0 0 0 0\n", fc) if i % 2 else ("GetRobot\n", "kr16\n")
+                rec.submit("/session/1/client_in", t + i * 1000, {"session": 1, "cid": f"c{i}", "text": cmd})
+                rec.submit("/session/1/client_out", t + i * 1000 + 500,
+                           {"session": 1, "cid": f"c{i}", "text": reply})
+        (path,) = d.glob("*.mcap")
+        load_start = time.perf_counter()
+        scripts = load_script(path)
+        load_s = time.perf_counter() - load_start
+        with _EchoServer() as server:
+            result = asyncio.run(replay(scripts, "127.0.0.1", server.port, speed=None))
+        return {"case": f"replay {lines} lines, as fast as possible",
+                "lines_per_s": result.exchanges / result.elapsed, "differences": len(result.differences),
+                "load_s": load_s}
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args()
+    n = 100_000 if args.quick else 300_000
+    seconds = 1.5 if args.quick else 4.0
+    rows = [bench_burst(n, session=False), bench_burst(n, session=True),
+            bench_sustained(50_000, seconds, session=True),
+            bench_sustained(80_000, seconds, session=True)]
+    print(f"{'case':<48} {'submit us':>9} {'msgs/s':>10} {'dropped':>8} {'max backlog':>11}")
+    for r in rows:
+        print(f"{r['case']:<48} {r['submit_us']:>9.2f} {r['msgs_per_s']:>10.0f} "
+              f"{r['dropped']:>8} {r['max_backlog']:>11}")
+    rp = bench_replay(1000 if args.quick else 4000)
+    print(f"{rp['case']:<48} {'':>9} {rp['lines_per_s']:>10.0f} lines/s, "
+          f"{rp['differences']} differences, load {rp['load_s'] * 1000:.0f} ms")
+
+
+if __name__ == "__main__":
+    main()

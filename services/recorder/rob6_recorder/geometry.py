@@ -1,0 +1,216 @@
+"""Derived 3D channels: per-link ``/tf`` from the URDF and the flange pose from FK.
+
+``TfDeriver`` turns a joint state (``q`` in degrees) into a ``foxglove.FrameTransforms``
+message with one transform per URDF joint (parent link -> child link), so Foxglove's
+3D panel, which loads the URDF from ``/robot_description``, moves the robot. No FK
+callable is needed for that: the joint origins and axes come from the URDF.
+
+The i-th recorded joint angle drives the i-th movable (revolute/continuous/prismatic)
+joint met walking the URDF tree from its root. ``joint_map`` (sign, offset in degrees
+per axis) adapts the controller's zero/sign convention to the URDF's when they differ:
+``urdf_angle = sign * q + offset``.
+
+``flange_pose`` turns the optional forward-kinematics callable's result (the
+protocol's 3x4 row-wise matrix, millimetres) into a ``foxglove.PosesInFrame`` in the
+URDF root frame (metres).
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from .schemas import stamp
+
+Quat = tuple[float, float, float, float]  # x, y, z, w
+
+
+def quat_from_rpy(r: float, p: float, y: float) -> Quat:
+    cr, sr = math.cos(r / 2), math.sin(r / 2)
+    cp, sp = math.cos(p / 2), math.sin(p / 2)
+    cy, sy = math.cos(y / 2), math.sin(y / 2)
+    return (sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)
+
+
+def quat_axis_angle(axis: Sequence[float], angle: float) -> Quat:
+    n = math.sqrt(sum(a * a for a in axis)) or 1.0
+    s = math.sin(angle / 2) / n
+    return (axis[0] * s, axis[1] * s, axis[2] * s, math.cos(angle / 2))
+
+
+def quat_mul(a: Quat, b: Quat) -> Quat:
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
+
+
+def quat_from_matrix(m: Sequence[Sequence[float]]) -> Quat:
+    """Quaternion of a 3x3 rotation matrix (rows)."""
+    m00, m01, m02 = m[0][0], m[0][1], m[0][2]
+    m10, m11, m12 = m[1][0], m[1][1], m[1][2]
+    m20, m21, m22 = m[2][0], m[2][1], m[2][2]
+    tr = m00 + m11 + m22
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        q = ((m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s)
+    elif m00 > m11 and m00 > m22:
+        s = math.sqrt(1.0 + m00 - m11 - m22) * 2
+        q = (0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s)
+    elif m11 > m22:
+        s = math.sqrt(1.0 + m11 - m00 - m22) * 2
+        q = ((m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s)
+    else:
+        s = math.sqrt(1.0 + m22 - m00 - m11) * 2
+        q = ((m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s)
+    n = math.sqrt(sum(c * c for c in q)) or 1.0
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    name: str
+    type: str
+    parent: str
+    child: str
+    xyz: tuple[float, float, float]
+    rpy_quat: Quat
+    axis: tuple[float, float, float]
+
+    @property
+    def movable(self) -> bool:
+        return self.type in ("revolute", "continuous", "prismatic")
+
+
+@dataclass(frozen=True)
+class UrdfModel:
+    name: str
+    root: str
+    joints: tuple[UrdfJoint, ...]  # tree order from the root (depth first)
+
+    @property
+    def movable(self) -> tuple[UrdfJoint, ...]:
+        return tuple(j for j in self.joints if j.movable)
+
+
+def _floats(text: str | None, default: tuple[float, float, float]) -> tuple[float, float, float]:
+    if not text:
+        return default
+    parts = [float(v) for v in text.split()]
+    return (parts + list(default))[:3] if len(parts) < 3 else (parts[0], parts[1], parts[2])
+
+
+def parse_urdf(text: str) -> UrdfModel:
+    """The kinematic tree of a URDF (links, joints, origins, axes)."""
+    root = ET.fromstring(text)
+    joints: dict[str, UrdfJoint] = {}
+    children: dict[str, list[UrdfJoint]] = {}
+    for el in root.findall("joint"):
+        origin = el.find("origin")
+        axis = el.find("axis")
+        parent = el.find("parent").get("link")  # type: ignore[union-attr]
+        child = el.find("child").get("link")  # type: ignore[union-attr]
+        rpy = _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0))
+        joint = UrdfJoint(
+            name=el.get("name", ""), type=el.get("type", "fixed"), parent=parent, child=child,
+            xyz=_floats(origin.get("xyz") if origin is not None else None, (0.0, 0.0, 0.0)),
+            rpy_quat=quat_from_rpy(*rpy),
+            axis=_floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0)))
+        joints[joint.name] = joint
+        children.setdefault(parent, []).append(joint)
+    links = [el.get("name") for el in root.findall("link")]
+    child_links = {j.child for j in joints.values()}
+    roots = [name for name in links if name not in child_links] or \
+        [j.parent for j in joints.values() if j.parent not in child_links]
+    base = roots[0] if roots else ""
+    ordered: list[UrdfJoint] = []  # depth first: a chain comes out parent before child
+
+    def walk(link: str) -> None:
+        for joint in children.get(link, []):
+            ordered.append(joint)
+            walk(joint.child)
+
+    walk(base)
+    return UrdfModel(name=root.get("name", ""), root=base, joints=tuple(ordered))
+
+
+class TfDeriver:
+    """Joint state -> foxglove.FrameTransforms (one transform per URDF joint)."""
+
+    def __init__(self, urdf: str, joint_map: Sequence[tuple[float, float]] | None = None,
+                 frame_prefix: str = ""):
+        self.model = parse_urdf(urdf)
+        self.joint_map = list(joint_map) if joint_map else None
+        self.prefix = frame_prefix
+        self._movable_index = {j.name: i for i, j in enumerate(self.model.movable)}
+
+    @property
+    def root_frame(self) -> str:
+        return self.prefix + self.model.root
+
+    def transforms(self, q_deg: Sequence[float], t_ns: int) -> dict:
+        ts = stamp(t_ns)
+        out = []
+        for joint in self.model.joints:
+            rot = joint.rpy_quat
+            xyz = joint.xyz
+            idx = self._movable_index.get(joint.name)
+            if idx is not None and idx < len(q_deg):
+                value = float(q_deg[idx])
+                if self.joint_map and idx < len(self.joint_map):
+                    sign, offset = self.joint_map[idx]
+                    value = sign * value + offset
+                if joint.type == "prismatic":  # value in mm
+                    d = value / 1000.0
+                    n = math.sqrt(sum(a * a for a in joint.axis)) or 1.0
+                    local = tuple(a / n * d for a in joint.axis)
+                    # rotate the local offset into the parent frame by the origin rotation
+                    lq = quat_mul(quat_mul(rot, (local[0], local[1], local[2], 0.0)),
+                                  (-rot[0], -rot[1], -rot[2], rot[3]))
+                    xyz = (xyz[0] + lq[0], xyz[1] + lq[1], xyz[2] + lq[2])
+                else:
+                    rot = quat_mul(rot, quat_axis_angle(joint.axis, math.radians(value)))
+            out.append({
+                "timestamp": ts,
+                "parent_frame_id": self.prefix + joint.parent,
+                "child_frame_id": self.prefix + joint.child,
+                "translation": {"x": xyz[0], "y": xyz[1], "z": xyz[2]},
+                "rotation": {"x": rot[0], "y": rot[1], "z": rot[2], "w": rot[3]},
+            })
+        return {"transforms": out}
+
+
+def pose_from_fk(result) -> tuple[tuple[float, float, float], Quat] | None:
+    """(position in m, orientation) from an FK result: 12 numbers (3x4 row-wise, mm),
+    16 numbers (4x4), a nested 3x4/4x4 list, or ``None`` (unreachable)."""
+    if result is None:
+        return None
+    flat: list[float]
+    if len(result) in (3, 4) and isinstance(result[0], (list, tuple)):
+        flat = [float(v) for row in result[:3] for v in row[:4]]
+    else:
+        flat = [float(v) for v in result]
+        if len(flat) == 16:
+            flat = flat[:12]
+    if len(flat) != 12:
+        return None
+    rows = [flat[0:4], flat[4:8], flat[8:12]]
+    pos = (rows[0][3] / 1000.0, rows[1][3] / 1000.0, rows[2][3] / 1000.0)
+    return pos, quat_from_matrix([r[:3] for r in rows])
+
+
+def flange_message(fk: Callable, q_deg: Sequence[float], t_ns: int, frame_id: str) -> dict | None:
+    pose = pose_from_fk(fk(list(q_deg)))
+    if pose is None:
+        return None
+    (x, y, z), (qx, qy, qz, qw) = pose
+    return {"timestamp": stamp(t_ns), "frame_id": frame_id,
+            "poses": [{"position": {"x": x, "y": y, "z": z},
+                       "orientation": {"x": qx, "y": qy, "z": qz, "w": qw}}]}

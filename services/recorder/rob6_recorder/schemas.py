@@ -1,0 +1,300 @@
+"""JSON schemas of the recorded channels and the topic -> schema mapping.
+
+Every channel of a rob6 recording has ``message_encoding="json"`` and a registered
+``jsonschema`` schema (never schemaless). Foxglove recognises its well-known schemas
+by *name* (``foxglove.Log``, ``foxglove.FrameTransforms``, ``foxglove.PosesInFrame``);
+the rob6 ones (``rob6.*``) are plain JSON that the Plot / Raw Messages / State
+Transitions panels read directly (e.g. plot ``/driver/joint_state.q[0]``).
+
+``/robot_description`` uses the name ``std_msgs/String`` with ``{"data": <urdf>}``:
+Foxglove's 3D panel loads a URDF published on that topic (and a custom URDF layer
+with source "Topic" accepts schema ``std_msgs/String``).
+
+The topic layout is documented in ``services/recorder/README.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+
+_TIME = {
+    "type": "object",
+    "title": "time",
+    "properties": {
+        "sec": {"type": "integer", "minimum": 0},
+        "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999},
+    },
+}
+_VEC3 = {
+    "type": "object",
+    "title": "foxglove.Vector3",
+    "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}},
+}
+_QUAT = {
+    "type": "object",
+    "title": "foxglove.Quaternion",
+    "properties": {"x": {"type": "number"}, "y": {"type": "number"},
+                   "z": {"type": "number"}, "w": {"type": "number"}},
+}
+_JOINTS = {"type": "array", "items": {"type": "number"}, "minItems": 6, "maxItems": 6}
+
+FOXGLOVE_LOG = {
+    "title": "foxglove.Log",
+    "description": "A log message",
+    "type": "object",
+    "properties": {
+        "timestamp": _TIME,
+        "level": {"title": "foxglove.LogLevel", "description": "Log level", "oneOf": [
+            {"title": "UNKNOWN", "const": 0}, {"title": "DEBUG", "const": 1},
+            {"title": "INFO", "const": 2}, {"title": "WARNING", "const": 3},
+            {"title": "ERROR", "const": 4}, {"title": "FATAL", "const": 5}]},
+        "message": {"type": "string"},
+        "name": {"type": "string", "description": "service/logger"},
+        "file": {"type": "string"},
+        "line": {"type": "integer", "minimum": 0},
+        "service": {"type": "string", "description": "rob6 extension: emitting service"},
+        "instance": {"type": "string", "description": "rob6 extension: service instance"},
+    },
+    "required": ["timestamp", "level", "message", "name", "file", "line"],
+}
+
+FOXGLOVE_FRAME_TRANSFORM = {
+    "title": "foxglove.FrameTransform",
+    "type": "object",
+    "properties": {
+        "timestamp": _TIME,
+        "parent_frame_id": {"type": "string"},
+        "child_frame_id": {"type": "string"},
+        "translation": _VEC3,
+        "rotation": _QUAT,
+    },
+}
+
+FOXGLOVE_FRAME_TRANSFORMS = {
+    "title": "foxglove.FrameTransforms",
+    "description": "An array of FrameTransform messages",
+    "type": "object",
+    "properties": {"transforms": {"type": "array", "items": FOXGLOVE_FRAME_TRANSFORM}},
+}
+
+FOXGLOVE_POSES_IN_FRAME = {
+    "title": "foxglove.PosesInFrame",
+    "description": "An array of timestamped poses for an object or reference frame in 3D space",
+    "type": "object",
+    "properties": {
+        "timestamp": _TIME,
+        "frame_id": {"type": "string"},
+        "poses": {"type": "array", "items": {
+            "title": "foxglove.Pose", "type": "object",
+            "properties": {"position": _VEC3, "orientation": _QUAT}}},
+    },
+}
+
+STD_STRING = {
+    "title": "std_msgs/String",
+    "type": "object",
+    "properties": {"data": {"type": "string"}},
+}
+
+CLIENT_LINE = {
+    "title": "rob6.ClientLine",
+    "description": "One line received from the TCP client (exact bytes as latin-1 text, "
+                   "including its terminator).",
+    "type": "object",
+    "properties": {
+        "session": {"type": "integer"},
+        "cid": {"type": "string", "description": "correlation id of the command"},
+        "text": {"type": "string", "description": "raw bytes decoded as latin-1"},
+        "peer": {"type": "string"},
+    },
+    "required": ["session", "cid", "text"],
+}
+
+CLIENT_REPLY = {
+    "title": "rob6.ClientReply",
+    "description": "Everything sent to the client for one command (or the greeting): "
+                   "latin-1 text, every line ending in \\n; empty when nothing was sent.",
+    "type": "object",
+    "properties": {
+        "session": {"type": "integer"},
+        "cid": {"type": "string"},
+        "text": {"type": "string"},
+        "kind": {"type": "string", "enum": ["reply", "greeting", "busy", "error"]},
+        "dt": {"type": "number", "description": "seconds from line received to reply sent"},
+    },
+    "required": ["session", "cid", "text"],
+}
+
+SESSION_EVENT = {
+    "title": "rob6.SessionEvent",
+    "type": "object",
+    "properties": {
+        "session": {"type": "integer"},
+        "event": {"type": "string", "description": "open | handshake | close | ..."},
+        "peer": {"type": "string"},
+        "reason": {"type": "string"},
+    },
+    "required": ["session", "event"],
+}
+
+BUS_REQUEST = {
+    "title": "rob6.BusRequest",
+    "type": "object",
+    "properties": {
+        "cid": {"type": "string"},
+        "service": {"type": "string"},
+        "op": {"type": "string"},
+        "instance": {"type": "string"},
+        "body": {},
+    },
+    "required": ["cid"],
+}
+
+BUS_REPLY = {
+    "title": "rob6.BusReply",
+    "type": "object",
+    "properties": {
+        "cid": {"type": "string"},
+        "service": {"type": "string"},
+        "op": {"type": "string"},
+        "instance": {"type": "string"},
+        "ok": {"type": "boolean"},
+        "body": {},
+        "error": {"type": ["object", "null"], "properties": {
+            "code": {"type": "string"}, "message": {"type": "string"}}},
+        "dt": {"type": "number", "description": "service time, seconds"},
+    },
+    "required": ["cid"],
+}
+
+JOINT_STATE = {
+    "title": "rob6.JointState",
+    "description": "Driver state every cycle; degrees and degrees/s. Plot q[0]..q[5].",
+    "type": "object",
+    "properties": {
+        "t": {"type": "number", "description": "driver clock, s"},
+        "cycle": {"type": "integer"},
+        "q": _JOINTS,
+        "qd": _JOINTS,
+        "moving": {"type": "boolean"},
+        "mode": {"type": "string"},
+    },
+    "required": ["q"],
+}
+
+GRIPPER_STATE = {
+    "title": "rob6.GripperState",
+    "type": "object",
+    "properties": {
+        "position": {"type": "number", "description": "m"},
+        "velocity": {"type": "number", "description": "m/s"},
+        "current": {"type": "number", "description": "A"},
+        "mode": {"type": "string"},
+        "error": {"type": "string"},
+    },
+}
+
+RECORDER_STATUS = {
+    "title": "rob6.RecorderStatus",
+    "description": "Recorder accounting: records dropped because the writer fell behind.",
+    "type": "object",
+    "properties": {
+        "submitted": {"type": "integer"},
+        "written": {"type": "integer"},
+        "dropped": {"type": "integer", "description": "total dropped so far"},
+        "dropped_since_last": {"type": "object",
+                               "additionalProperties": {"type": "integer"}},
+        "backlog": {"type": "integer"},
+        "max_backlog_seen": {"type": "integer"},
+        "first_drop_ns": {"type": "integer"},
+        "last_drop_ns": {"type": "integer"},
+    },
+}
+
+GENERIC = {"title": "rob6.Record", "type": "object"}
+
+
+@dataclass(frozen=True)
+class SchemaSpec:
+    name: str
+    schema: dict
+
+    @property
+    def data(self) -> bytes:
+        return json.dumps(self.schema, separators=(",", ":")).encode()
+
+
+#: (regular expression on the topic, schema). First match wins.
+TOPIC_SCHEMAS: list[tuple[re.Pattern, SchemaSpec]] = [
+    (re.compile(r"^/session/[^/]+/client_in$"), SchemaSpec("rob6.ClientLine", CLIENT_LINE)),
+    (re.compile(r"^/session/[^/]+/client_out$"), SchemaSpec("rob6.ClientReply", CLIENT_REPLY)),
+    (re.compile(r"^/session/[^/]+/event$"), SchemaSpec("rob6.SessionEvent", SESSION_EVENT)),
+    (re.compile(r"^/bus/[^/]+/[^/]+/request$"), SchemaSpec("rob6.BusRequest", BUS_REQUEST)),
+    (re.compile(r"^/bus/[^/]+/[^/]+/reply$"), SchemaSpec("rob6.BusReply", BUS_REPLY)),
+    (re.compile(r"^/driver/joint_state$"), SchemaSpec("rob6.JointState", JOINT_STATE)),
+    (re.compile(r"^/gripper/state$"), SchemaSpec("rob6.GripperState", GRIPPER_STATE)),
+    (re.compile(r"^/log$"), SchemaSpec("foxglove.Log", FOXGLOVE_LOG)),
+    (re.compile(r"^/tf$"), SchemaSpec("foxglove.FrameTransforms", FOXGLOVE_FRAME_TRANSFORMS)),
+    (re.compile(r"^/flange$"), SchemaSpec("foxglove.PosesInFrame", FOXGLOVE_POSES_IN_FRAME)),
+    (re.compile(r"^/robot_description$"), SchemaSpec("std_msgs/String", STD_STRING)),
+    (re.compile(r"^/recorder/status$"), SchemaSpec("rob6.RecorderStatus", RECORDER_STATUS)),
+]
+GENERIC_SPEC = SchemaSpec("rob6.Record", GENERIC)
+
+
+def schema_for(topic: str) -> SchemaSpec:
+    """The schema of a topic (``rob6.Record``, a plain object, for unknown topics)."""
+    for pattern, spec in TOPIC_SCHEMAS:
+        if pattern.match(topic):
+            return spec
+    return GENERIC_SPEC
+
+
+# --------------------------------------------------------------------------- helpers
+LOG_LEVELS = {"NOTSET": 0, "TRACE": 1, "DEBUG": 1, "INFO": 2, "WARN": 3, "WARNING": 3,
+              "ERROR": 4, "CRITICAL": 5, "FATAL": 5}
+
+
+def stamp(ns: int) -> dict:
+    """A Foxglove ``time`` from nanoseconds."""
+    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+
+
+def to_foxglove_log(record: dict, log_time_ns: int) -> dict:
+    """Map a rob6 log record (``level, name, message, service, time|t``) to foxglove.Log.
+
+    Records that already look like foxglove.Log (``timestamp`` dict, int level) pass
+    through. ``name`` becomes ``<service>/<logger>`` so the Log panel can filter per
+    service; ``service`` and ``instance`` are kept as extra fields.
+    """
+    if isinstance(record.get("timestamp"), dict) and isinstance(record.get("level"), int):
+        out = dict(record)
+        out.setdefault("file", "")
+        out.setdefault("line", 0)
+        out.setdefault("name", "")
+        out.setdefault("message", "")
+        return out
+    level = record.get("level", 0)
+    if isinstance(level, str):
+        level = LOG_LEVELS.get(level.upper(), 0)
+    elif isinstance(level, int) and level > 5:  # a Python logging level number
+        level = {10: 1, 20: 2, 30: 3, 40: 4, 50: 5}.get(level - level % 10, 5 if level > 50 else 0)
+    t = record.get("time", record.get("t"))
+    ns = int(round(float(t) * 1e9)) if isinstance(t, (int, float)) else log_time_ns
+    service = str(record.get("service", "") or "")
+    name = str(record.get("name", "") or "")
+    out = {
+        "timestamp": stamp(ns),
+        "level": int(level),
+        "message": str(record.get("message", "")),
+        "name": f"{service}/{name}" if service and name else (service or name),
+        "file": str(record.get("file", "") or ""),
+        "line": int(record.get("line", 0) or 0),
+    }
+    if service:
+        out["service"] = service
+    if record.get("instance"):
+        out["instance"] = str(record["instance"])
+    return out
