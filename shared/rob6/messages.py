@@ -267,6 +267,16 @@ class ClientExchange(Struct):
     reply: str | None  # None: no reply (empty line, SetAllowedStatus)
 
 
+class SessionEvent(Struct):
+    """A client session opening or closing (``rob6/<id>/trace/gateway/event``)."""
+
+    session: int
+    event: str  # open | close
+    peer: str
+    t: float
+    greeting: str = ""
+
+
 class Op(NamedTuple):
     request: type
     reply: type

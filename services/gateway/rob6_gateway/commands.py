@@ -21,6 +21,7 @@ from rob6.bus import Bus, BusError
 from rob6.messages import (
     BackwardCalcRequest,
     ClientExchange,
+    SessionEvent,
     ConfigChange,
     Empty,
     FkRequest,
@@ -129,6 +130,11 @@ class Gateway:
             session=session.number, peer=session.peer, cid=session.cid, t_in=received,
             t_out=time.time(), line=line.text if not line.too_long else f"<{line.too_long} bytes>",
             reply=reply), reliable=True)
+
+    def record_event(self, session: Session, event: str, greeting: str = "") -> None:
+        self.bus.publish("trace/gateway/event", SessionEvent(
+            session=session.number, event=event, peer=session.peer, t=time.time(), greeting=greeting),
+            reliable=True)
 
     async def session_end(self, session: Session) -> None:
         """The client left: the planner stops any real-time motion (Alter mode)."""

@@ -55,6 +55,7 @@ class Server:
         session = Session(number=next(self._numbers), peer=peer_text)
         self.active = session
         log.info("session %d: client %s connected", session.number, peer_text)
+        self.gateway.record_event(session, "open", GREETING.decode())
         try:
             await self._run(session, reader, writer)
         except (ConnectionError, asyncio.IncompleteReadError):
@@ -63,6 +64,7 @@ class Server:
             self.active = None
             await _close(writer)
             log.info("session %d ended", session.number)
+            self.gateway.record_event(session, "close")
             asyncio.get_running_loop().create_task(self.gateway.session_end(session))
 
     async def _run(self, session: Session, reader, writer) -> None:

@@ -1,0 +1,35 @@
+"""rob6-recorder: every exchange of one robot into MCAP files (ROB6_LOG_DIR)."""
+
+from __future__ import annotations
+
+import click
+
+from rob6 import service
+from rob6.config import bus_options
+from rob6.robots import get_robot
+
+from .service import RecorderService
+
+
+@click.command()
+@bus_options
+@click.option("--log-dir", envvar="ROB6_LOG_DIR", default="./logs", show_default=True,
+              type=click.Path(file_okay=False), help="Where the MCAP files go [env ROB6_LOG_DIR].")
+@click.option("--rotate-mb", envvar="ROB6_ROTATE_MB", default=256, show_default=True, type=int,
+              help="Start a new system recording after this many MiB.")
+@click.option("--rotate-minutes", envvar="ROB6_ROTATE_MINUTES", default=60, show_default=True, type=int,
+              help="Start a new system recording after this many minutes.")
+def main(settings, log_level, log_dir, rotate_mb, rotate_minutes):
+    """Record the robot's bus, client sessions, joint states and logs."""
+
+    def setup(bus):
+        recorder = RecorderService(bus, get_robot(settings.robot), log_dir,
+                                   rotate_bytes=rotate_mb << 20, rotate_seconds=rotate_minutes * 60)
+        recorder.start()
+        return recorder.stop
+
+    service.run(settings, "recorder", log_level, setup)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,83 @@
+"""The recorder service: everything on the robot's bus into MCAP files.
+
+It subscribes to ``rob6/<id>/**``. Services publish a copy of each request/reply they
+served (``trace/<service>/<op>``), the gateway a copy of each client line and reply
+(``trace/gateway/session``) and of each session's start and end; states and logs are
+published anyway. ``Recorder.submit`` never blocks, so the Zenoh callback stays short.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import msgspec
+
+import rob6
+from rob6.bus import Bus
+from rob6.messages import ClientExchange, SessionEvent
+from rob6.robots import RobotModel
+
+from .adapters import bus_trace_records
+from .writer import Recorder
+
+log = logging.getLogger("rob6.recorder")
+
+URDF_DIR = Path(rob6.__file__).parent / "urdf"
+
+# bus key (after rob6/<id>/) -> recording topic, for the streams recorded as they are
+TOPICS = {"driver/state": "/driver/joint_state", "gripper/state": "/gripper/state"}
+
+
+class RecorderService:
+    def __init__(self, bus: Bus, robot: RobotModel, directory: str, **options):
+        self.bus = bus
+        self.recorder = Recorder(directory, robot.name, bus.settings.robot_id,
+                                 urdf=(URDF_DIR / f"{robot.geometry}.urdf").read_text(), **options)
+        self._prefix = len(bus.prefix) + 1
+        self._exchange = msgspec.json.Decoder(ClientExchange)
+        self._event = msgspec.json.Decoder(SessionEvent)
+
+    def start(self) -> None:
+        self.recorder.start()
+        self.bus.subscribe("**", self.on_sample)
+        self.bus.announce()
+
+    def stop(self) -> None:
+        self.recorder.close()
+
+    def on_sample(self, key: str, payload: bytes) -> None:
+        now = time.time_ns()
+        suffix = key[self._prefix:]
+        submit = self.recorder.submit
+        topic = TOPICS.get(suffix)
+        if topic:
+            submit(topic, now, payload)
+        elif suffix == "trace/gateway/session":
+            self._client_exchange(self._exchange.decode(payload))
+        elif suffix == "trace/gateway/event":
+            event = self._event.decode(payload)
+            t = int(event.t * 1e9)
+            submit(f"/session/{event.session}/event", t,
+                   {"session": event.session, "event": event.event, "peer": event.peer})
+            if event.greeting:
+                submit(f"/session/{event.session}/client_out", t,
+                       {"session": event.session, "cid": "", "text": event.greeting, "kind": "greeting"})
+        elif suffix.startswith("trace/"):
+            _, service, op = suffix.split("/", 2)
+            for topic, log_time, publish_time, data in bus_trace_records(service, op, payload, now):
+                submit(topic, log_time, data, publish_time)
+        elif suffix.startswith("log/"):
+            submit("/log", now, payload)
+        else:  # control messages, planner configuration, anything new: kept as it is
+            submit("/" + suffix, now, payload)
+
+    def _client_exchange(self, exchange: ClientExchange) -> None:
+        session = exchange.session
+        self.recorder.submit(f"/session/{session}/client_in", int(exchange.t_in * 1e9),
+                             {"session": session, "cid": exchange.cid, "text": exchange.line + "\n",
+                              "peer": exchange.peer})
+        self.recorder.submit(f"/session/{session}/client_out", int(exchange.t_out * 1e9),
+                             {"session": session, "cid": exchange.cid, "text": exchange.reply or "",
+                              "dt": exchange.t_out - exchange.t_in})
