@@ -21,7 +21,7 @@ def main(settings, log_level, dummy):
     def setup(bus):
         driver = DriverService(bus, get_robot(settings.robot), dummy)
         driver.start()
-        return driver.stop
+        return driver.shutdown
 
     service.run(settings, "driver", log_level, setup)
 

@@ -1,63 +1,107 @@
-"""The driver service: owns the robot, runs the controller cycle, publishes joint state."""
+"""The driver service: owns the robot, runs the controller cycle, publishes joint state.
+
+The robot here is the simulation (``sim.SimRobot``): it runs at the controller cycle
+of the robot type, executes the planner's sampled trajectories in real time, follows
+Alter targets with Ruckig, and checks every commanded sample against the limits on
+its own, whatever the planner sent.
+"""
 
 from __future__ import annotations
 
 import logging
-import threading
 import time
 
 from rob6.bus import Bus
-from rob6.messages import Empty, JointState, PingReply
+from rob6.messages import (
+    Ack,
+    AlterMode,
+    AlterTarget,
+    Empty,
+    ExecuteReply,
+    ExecuteRequest,
+    JointState,
+    LimitsUpdate,
+    PingReply,
+)
 from rob6.robots import RobotModel
+
+from .loop import CycleRunner
+from .sim import SimRobot, SimState
 
 log = logging.getLogger("rob6.driver")
 
+EXECUTE_MARGIN_S = 5.0  # beyond the trajectory's own duration
+
+
+def joint_state(state: SimState) -> JointState:
+    return JointState(t=state.t, cycle=state.cycle, q=state.q.tolist(), qd=state.qd.tolist(),
+                      moving=bool(state.moving), mode=state.mode)
+
 
 class DriverService:
-    def __init__(self, bus: Bus, robot: RobotModel, dummy: bool):
+    def __init__(self, bus: Bus, robot: RobotModel, dummy: bool, alter_timeout_s: float = 0.5):
         self.bus = bus
         self.robot = robot
-        self.dummy = dummy
-        self._epoch = time.monotonic()
-        self._lock = threading.Lock()
-        self._q = [0.0] * 6
-        self._qd = [0.0] * 6
-        self._cycle = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="driver-cycle", daemon=True)
+        self.sim = SimRobot(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
+        self.runner = CycleRunner(self.sim.step, robot.cycle_s, self._publish, name="driver-cycle")
 
-    def robot_time(self) -> float:
-        return time.monotonic() - self._epoch
+    def _publish(self, state: SimState) -> None:
+        self.bus.publish("driver/state", joint_state(state))
 
-    def state(self) -> JointState:
-        with self._lock:
-            return JointState(t=self.robot_time(), cycle=self._cycle, q=list(self._q), qd=list(self._qd))
-
-    def _run(self) -> None:
-        period = self.robot.cycle_s
-        deadline = time.monotonic()
-        while not self._stop.is_set():
-            deadline += period
-            with self._lock:
-                self._cycle += 1
-            self.bus.publish("driver/state", self.state())
-            delay = deadline - time.monotonic()
-            if delay > 0:
-                self._stop.wait(delay)
-            else:
-                deadline = time.monotonic()  # missed: start afresh rather than burst
+    def _on_event(self, event: dict) -> None:
+        if event.get("type") == "violation":
+            log.error("limit monitor: %s", event.get("message"))
+        else:
+            log.info("driver event: %s", event)
 
     # ---- operations ----------------------------------------------------------
     def ping(self, _req: Empty, _ctx) -> PingReply:
-        return PingReply(robot_time=self.robot_time(), wall_time=time.time())
+        return PingReply(robot_time=self.sim.t, wall_time=time.time())
 
-    def get_state(self, _req: Empty, _ctx) -> JointState:
-        return self.state()
+    def state(self, _req: Empty, _ctx) -> JointState:
+        return joint_state(self.sim.state())
+
+    def execute(self, req: ExecuteRequest, _ctx) -> ExecuteReply:
+        trajectory = req.trajectory
+        motion = self.sim.execute(trajectory.q, trajectory.dt, trajectory.qd, trajectory.qdd)
+        if not req.wait:
+            return ExecuteReply(ok=True)
+        duration = len(trajectory.q) * trajectory.dt
+        if not motion.wait(duration + EXECUTE_MARGIN_S):
+            self.sim.stop("the motion did not end in time")
+            return ExecuteReply(ok=False, reason="the motion did not end in time",
+                                state=joint_state(self.sim.state()))
+        final = motion.final or self.sim.state()
+        if not motion.ok:
+            log.warning("trajectory refused or stopped: %s", motion.reason)
+        return ExecuteReply(ok=bool(motion.ok), reason=motion.reason or "", state=joint_state(final))
+
+    def limits(self, req: LimitsUpdate, _ctx) -> Ack:
+        ok, reason = self.sim.set_limits(req.turn_min, req.turn_max, req.max_speed, req.max_accel)
+        return Ack(ok=ok, reason=reason)
+
+    def alter_mode(self, req: AlterMode, _ctx) -> Ack:
+        if req.enable:
+            ok, reason = self.sim.enable_alter(req.synchronized, req.timeout_s)
+            return Ack(ok=ok, reason=reason)
+        stopped = self.sim.disable_alter().wait(10.0)  # done once the robot is at rest
+        return Ack(ok=stopped, reason="" if stopped else "the robot did not come to rest in time")
+
+    def alter_target(self, req: AlterTarget, _ctx) -> Ack:
+        ok, reason = self.sim.set_target(req.q, req.synchronized)
+        return Ack(ok=ok, reason=reason)
+
+    def stop(self, _req: Empty, _ctx) -> Ack:
+        motion = self.sim.stop("stop requested")
+        return Ack(ok=motion.wait(4.0) and bool(motion.ok), reason=motion.reason or "")
 
     def start(self) -> None:
-        self._thread.start()
-        self.bus.serve({"ping": self.ping, "state": self.get_state})
+        self.runner.start()
+        self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,
+                        "limits": self.limits, "alter_mode": self.alter_mode,
+                        "alter_target": self.alter_target, "stop": self.stop}, workers=4)
 
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=1.0)
+    def shutdown(self) -> None:
+        self.sim.stop("driver shutting down").wait(2.0)
+        self.runner.stop()
+        log.info("driver: %d cycles, %d missed", self.runner.stats.cycles, self.runner.stats.missed)

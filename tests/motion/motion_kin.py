@@ -1,4 +1,4 @@
-"""Test-only kinematics for the LIN tests (robots.md DH chain and OPW closed-form IK).
+"""Test-only kinematics for the LIN tests (motion_kin) (robots.md DH chain and OPW closed-form IK).
 
 Not the kinematics service: just enough to give ``plan_lin`` an ``ik_fn`` and to check
 straightness. Degrees and millimetres.

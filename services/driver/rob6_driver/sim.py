@@ -1,0 +1,949 @@
+"""Simulated robot of the driver: state at the controller cycle, trajectory execution,
+Alter (real-time target) mode with Ruckig online generation, watchdog, and an
+independent limit monitor (defence in depth).
+
+Units: degrees, seconds (``qd`` deg/s, ``qdd`` deg/s^2). Limits are given in the
+protocol's units (deg per 12 ms cycle, deg per cycle^2) and converted like the
+planner does: ``v = speed / 0.012``, ``a = accel / 0.012**2``, ``j = a / 0.048``.
+
+Nothing here sleeps: ``step()`` advances exactly one controller cycle. ``loop.py``
+calls it in real time; tests call it in fast-forward.
+
+Limit monitor
+-------------
+Every commanded sample (from a trajectory or from the internal generator) is checked
+*before* it is applied, as a controller's monitor sees it cycle by cycle:
+
+* turn limits strict, ``min < q < max`` (a joint already outside -- limits changed
+  while it was there -- may only move back inwards, 1e-9 deg rounding tolerance);
+* speed ``|q_k - q_{k-1}| / dt <= v_max``;
+* acceleration ``|(q_k - 2 q_{k-1} + q_{k-2})| / dt^2 <= a_max``
+  (relative tolerance 1e-6, absolute 1e-9 deg/s and 1e-6 deg/s^2 for rounding).
+
+A sampled C2 motion that respects the limits everywhere always passes (the finite
+differences are averages of the true velocity/acceleration). A sample that fails is
+not applied: the violation is reported (``violations``, ``on_event``) and the robot
+makes a controlled, jerk-limited stop from its last good state. Samples the sim
+generates itself (Alter, stops) are planned from the exact state and checked too; if
+one ever failed it would be clamped to the largest admissible step instead (and
+reported), so the state itself never breaks the speed/acceleration limits.
+
+Generated motion (Ruckig, online): a new Alter target or a stop is planned from the
+exact current state (position, velocity, acceleration; from a trajectory without
+``qd``/``qdd`` a finite-difference estimate made consistent with the limits) and is
+adopted only if its whole future stays strictly inside the turn limits (exact
+extrema of the jerk segments); otherwise the robot keeps its current, already
+checked motion and retries next cycle. A stop that cannot stay inside (limits changed
+under the motion) becomes an acceleration-limited emergency brake (shortest stopping
+distance). Alter targets use target velocity 0: the robot never runs past the last
+target it received.
+
+Limit changes while moving: new speed/acceleration limits drive the generator at
+once; the monitor keeps ``max(old, new)`` until the robot has settled within the new
+ones (a running trajectory keeps its old limits until it ends). New turn limits that
+the current motion would cross cause a controlled stop; the monitor's turn bounds are
+widened just enough to contain that stop (reported), and close again at rest.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import ruckig
+
+from rob6.robots import UNIT_CYCLE_S, RobotModel, get_robot
+
+N_JOINTS = 6
+#: acceleration ramp time defining the jerk limit (same as the planner)
+JERK_RAMP_S = 0.048
+RTOL = 1e-6
+ATOL_V = 1e-9
+ATOL_A = 1e-6
+#: how close the current state must be to a trajectory's first sample (deg)
+START_TOL_DEG = 1e-6
+REST_EPS = 1e-9
+#: a joint already outside its turn limits (limits changed) may not move further out
+#: than this (deg; rounding at the end of a stop)
+OUTSIDE_TOL = 1e-9
+#: speed (deg/s) or acceleration (deg/s^2) limits below this freeze the joint
+MIN_LIMIT = 1e-9
+
+
+# ====================================================================== data
+@dataclass
+class SimLimits:
+    """Limits in deg, deg/s, deg/s^2, deg/s^3."""
+
+    turn_min: np.ndarray
+    turn_max: np.ndarray
+    vmax: np.ndarray
+    amax: np.ndarray
+    jmax: np.ndarray
+
+    @classmethod
+    def from_protocol(cls, turn_min, turn_max, max_speed, max_accel,
+                      jerk_ramp_s: float = JERK_RAMP_S) -> "SimLimits":
+        v = np.asarray(max_speed, float) / UNIT_CYCLE_S
+        a = np.asarray(max_accel, float) / UNIT_CYCLE_S**2
+        return cls(np.asarray(turn_min, float).copy(), np.asarray(turn_max, float).copy(),
+                   v, a, a / jerk_ramp_s)
+
+    @classmethod
+    def defaults(cls, robot: RobotModel) -> "SimLimits":
+        return cls.from_protocol(robot.turn_min, robot.turn_max, robot.default_speed,
+                                 robot.default_accel)
+
+    def copy(self) -> "SimLimits":
+        return SimLimits(self.turn_min.copy(), self.turn_max.copy(), self.vmax.copy(),
+                         self.amax.copy(), self.jmax.copy())
+
+
+@dataclass
+class SimState:
+    """One controller cycle. ``t`` = cycle * dt (simulated clock, seconds)."""
+
+    t: float
+    cycle: int
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    mode: str  # idle | trajectory | alter | stopping
+    moving: bool
+
+    def to_message(self) -> dict:
+        """Fields of ``rob6.messages.JointState``."""
+        return {"t": self.t, "cycle": self.cycle, "q": self.q.tolist(), "qd": self.qd.tolist(),
+                "moving": self.moving, "mode": self.mode}
+
+
+@dataclass
+class Violation:
+    t: float
+    cycle: int
+    kind: str  # turn | speed | acceleration | limits_changed | unavoidable
+    joint: int  # 1..6 (0: not joint specific)
+    value: float
+    limit: float
+    source: str  # trajectory | alter | stop | limits
+    message: str
+
+
+class Motion:
+    """Handle of a trajectory (or stop): completion is awaitable.
+
+    ``done`` is a threading.Event set when the robot has arrived (``ok`` True) or has
+    come to rest after a stop/violation (``ok`` False, ``reason``). Callbacks added
+    with ``add_done_callback(fn)`` run once with the motion, on the cycle thread (use
+    ``loop.call_soon_threadsafe`` to hand over to asyncio).
+    """
+
+    def __init__(self, kind: str):
+        self.kind = kind
+        self.done = threading.Event()
+        self.ok: bool | None = None
+        self.reason = ""
+        self.final: SimState | None = None
+        self._callbacks: list[Callable[["Motion"], None]] = []
+        self._lock = threading.Lock()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        return self.done.wait(timeout)
+
+    def add_done_callback(self, fn: Callable[["Motion"], None]) -> None:
+        with self._lock:
+            if not self.done.is_set():
+                self._callbacks.append(fn)
+                return
+        fn(self)
+
+    def _finish(self, ok: bool, reason: str, state: SimState | None) -> list[Callable[[], None]]:
+        """Mark finished; returns the callbacks to run (outside the simulator's lock)."""
+        with self._lock:
+            if self.done.is_set():
+                return []
+            self.ok, self.reason, self.final = ok, reason, state
+            self.done.set()
+            callbacks, self._callbacks = self._callbacks, []
+        return [lambda fn=fn: fn(self) for fn in callbacks]
+
+    def __repr__(self) -> str:
+        return f"Motion({self.kind}, done={self.done.is_set()}, ok={self.ok}, reason={self.reason!r})"
+
+
+# ====================================================================== simulator
+class SimRobot:
+    """The simulated robot. Thread-safe: commands from any thread, ``step()`` from one."""
+
+    def __init__(self, robot: RobotModel | str, dt: float | None = None, *, dummy: bool = False,
+                 q0: Sequence[float] | None = None, limits: SimLimits | None = None,
+                 alter_timeout_s: float = 0.5,
+                 on_event: Callable[[dict], None] | None = None, max_violations: int = 1000):
+        self.robot = get_robot(robot) if isinstance(robot, str) else robot
+        self.dt = float(dt if dt is not None else self.robot.cycle_s)
+        self.dummy = dummy
+        self.alter_timeout_s = float(alter_timeout_s)
+        self.on_event = on_event
+        self.violations: deque[Violation] = deque(maxlen=max_violations)
+        self.violation_count = 0
+        self._lock = threading.RLock()
+        self._lim = (limits or SimLimits.defaults(self.robot)).copy()
+        # monitor limits (may be wider than _lim during a transition)
+        self._mon = self._lim.copy()
+        self._settle = 0
+        self._cycle = 0
+        self._q = np.zeros(N_JOINTS) if q0 is None else np.asarray(q0, float).copy()
+        self._qd = np.zeros(N_JOINTS)
+        self._qdd = np.zeros(N_JOINTS)
+        self._v_fd = np.zeros(N_JOINTS)  # finite-difference velocity of the last cycle
+        self._mode = "idle"
+        # trajectory mode
+        self._samples: np.ndarray | None = None
+        self._samples_qd: np.ndarray | None = None
+        self._samples_qdd: np.ndarray | None = None
+        self._k = 0
+        self._motion: Motion | None = None
+        # internal generator (Alter, stops)
+        self._otg = ruckig.Ruckig(N_JOINTS, self.dt)
+        self._inp = ruckig.InputParameter(N_JOINTS)
+        self._gen: ruckig.Trajectory | None = None
+        self._gen_t = 0.0
+        self._gen_kind = ""  # alter | stop
+        self._resync = False
+        self._ebrake = False
+        self._lim_version = 0
+        self._gen_version = 0
+        # alter mode
+        self._alter = False
+        self._target: np.ndarray | None = None
+        self._target_pending = False
+        self._sync = False
+        self._last_heard = 0.0
+        self._watchdog_fired = False
+        self._stop_motion: Motion | None = None
+        self._deferred: list[Callable[[], None]] = []
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def t(self) -> float:
+        return self._cycle * self.dt
+
+    def state(self) -> SimState:
+        with self._lock:
+            return self._state()
+
+    def _state(self) -> SimState:
+        return SimState(self.t, self._cycle, self._q.copy(), self._qd.copy(), self._qdd.copy(),
+                        self._mode, self._moving())
+
+    def _moving(self) -> bool:
+        return self._mode in ("trajectory", "stopping") or self._gen is not None or self._ebrake or \
+            bool(np.any(np.abs(self._v_fd) > REST_EPS))
+
+    @property
+    def mode(self) -> str:
+        return self._mode
+
+    @property
+    def alter_enabled(self) -> bool:
+        return self._alter
+
+    def limits(self) -> SimLimits:
+        with self._lock:
+            return self._lim.copy()
+
+    def enforced_limits(self) -> SimLimits:
+        """The limits the monitor checks right now (wider than ``limits()`` only in a transition)."""
+        with self._lock:
+            return self._mon.copy()
+
+    # ------------------------------------------------------------------ events
+    def _event(self, **event) -> None:
+        if self.on_event is not None:
+            event.setdefault("t", self.t)
+            event.setdefault("cycle", self._cycle)
+            cb = self.on_event
+            self._deferred.append(lambda: cb(event))
+
+    def _violation(self, kind, joint, value, limit, source, message) -> None:
+        v = Violation(self.t, self._cycle, kind, joint, float(value), float(limit), source, message)
+        self.violations.append(v)
+        self.violation_count += 1
+        self._event(type="violation", kind=kind, joint=joint, value=float(value),
+                    limit=float(limit), source=source, message=message)
+
+    def _run_deferred(self) -> None:
+        with self._lock:
+            todo, self._deferred = self._deferred, []
+        for fn in todo:
+            try:
+                fn()
+            except Exception:  # a callback must never stop the controller
+                import logging
+                logging.getLogger(__name__).exception("sim callback failed")
+
+    # ------------------------------------------------------------------ limits
+    def set_limits(self, turn_min=None, turn_max=None, max_speed=None, max_accel=None) -> tuple[bool, str]:
+        """New limits (protocol units; None = unchanged). See the module doc for changes in motion."""
+        with self._lock:
+            new = self._lim.copy()
+            try:
+                if turn_min is not None:
+                    new.turn_min = _six(turn_min)
+                if turn_max is not None:
+                    new.turn_max = _six(turn_max)
+                if max_speed is not None:
+                    new.vmax = _six(max_speed) / UNIT_CYCLE_S
+                if max_accel is not None:
+                    new.amax = _six(max_accel) / UNIT_CYCLE_S**2
+                    new.jmax = new.amax / JERK_RAMP_S
+            except ValueError as exc:
+                return False, str(exc)
+            if np.any(new.vmax < 0) or np.any(new.amax < 0):
+                return False, "negative speed or acceleration limit"
+            self._apply_limits(new)
+        self._run_deferred()
+        return True, ""
+
+    def _apply_limits(self, new: SimLimits) -> None:
+        self._lim = new
+        self._lim_version += 1
+        if not self._moving():
+            self._mon = new.copy()
+            self._settle = 0
+            return
+        self._mon.vmax = np.maximum(self._mon.vmax, new.vmax)
+        self._mon.amax = np.maximum(self._mon.amax, new.amax)
+        self._mon.jmax = np.maximum(self._mon.jmax, new.jmax)
+        self._settle = -1  # wait until within the new limits
+        self._on_turn_change_in_motion(new)
+        if self._gen is not None and self._gen_kind == "alter":
+            self._target_pending = True  # replan with the new limits
+        elif self._mode == "stopping":
+            self._resync = True  # re-plan the stop with the new limits
+
+    def _on_turn_change_in_motion(self, new: SimLimits) -> None:
+        lo, hi = new.turn_min, new.turn_max
+        future = self._future_extrema()
+        if future is None:
+            self._mon.turn_min, self._mon.turn_max = lo.copy(), hi.copy()
+            return
+        fmin, fmax = future
+        if _within(fmin, fmax, lo, hi, self._q):
+            self._mon.turn_min, self._mon.turn_max = lo.copy(), hi.copy()
+            return
+        # the current motion would cross the new limits: stop, widened just enough
+        self._begin_stop("turn limits changed while moving", force=True)
+        future = self._future_extrema() or (self._q, self._q)
+        fmin, fmax = future
+        eps = 1e-6
+        self._mon.turn_min = np.where(_within_lo(fmin, lo, self._q), lo, np.minimum(lo, fmin - eps))
+        self._mon.turn_max = np.where(_within_hi(fmax, hi, self._q), hi, np.maximum(hi, fmax + eps))
+        joint = int(np.argmax(~(_within_lo(fmin, lo, self._q) & _within_hi(fmax, hi, self._q)))) + 1
+        self._violation("limits_changed", joint, float(self._q[joint - 1]),
+                        float(hi[joint - 1]), "limits",
+                        "turn limits changed under a motion that crosses them: stopping; "
+                        "monitor bounds widened to contain the stop")
+
+    def _future_extrema(self):
+        """(min, max) per joint of the rest of the current motion, or None at rest."""
+        if self._mode == "trajectory" and self._samples is not None:
+            rest = self._samples[self._k:]
+            if len(rest) == 0:
+                return None
+            rest = np.vstack([self._q, rest])
+            return rest.min(axis=0), rest.max(axis=0)
+        if self._gen is not None:
+            lo, hi = trajectory_extrema(self._gen, self._gen_t)
+            return np.minimum(self._q, lo), np.maximum(self._q, hi)
+        if self._ebrake:
+            v = self._v_fd
+            amax = np.maximum(self._mon.amax, MIN_LIMIT)
+            reach = v * v / (2 * amax) + np.abs(v) * self.dt
+            end = self._q + np.sign(v) * reach
+            return np.minimum(self._q, end), np.maximum(self._q, end)
+        return None
+
+    # ------------------------------------------------------------------ trajectory mode
+    def execute(self, q, dt: float | None = None, qd=None, qdd=None, *, check: bool = True) -> Motion:
+        """Run a sampled trajectory (rows = cycles, row 0 = the current position).
+
+        Returns a Motion at once; it completes when the last sample is reached, or with
+        ``ok=False`` if refused (reason) or stopped. ``qd``/``qdd`` (deg/s, deg/s^2) are
+        optional: with them a stop starts from the exact state, without them from
+        finite-difference estimates. The whole trajectory is checked against the
+        monitor's limits before the first cycle (and again sample by sample).
+        In dummy mode the robot jumps to the last sample at once. ``check=False`` skips
+        the up-front limit check (the per-cycle monitor still applies; for tests of the
+        monitor and for streamed trajectories).
+        """
+        motion = Motion("trajectory")
+        with self._lock:
+            reason = self._check_execute(q, dt, qd, qdd, check)
+            if reason:
+                self._deferred += motion._finish(False, reason, self._state())
+            elif self.dummy:
+                self._q = np.asarray(q, float)[-1].copy()
+                self._qd[:] = 0.0
+                self._qdd[:] = 0.0
+                self._v_fd[:] = 0.0
+                self._deferred += motion._finish(True, "", self._state())
+            else:
+                arr = np.asarray(q, float)
+                self._samples = arr
+                self._samples_qd = None if qd is None else np.asarray(qd, float)
+                self._samples_qdd = None if qdd is None else np.asarray(qdd, float)
+                self._k = 1
+                self._motion = motion
+                self._mode = "trajectory"
+                if len(arr) <= 1:
+                    self._finish_trajectory(True, "")
+        self._run_deferred()
+        return motion
+
+    def _check_execute(self, q, dt, qd, qdd, check: bool = True) -> str:
+        if self._mode != "idle" or self._alter or self._gen is not None:
+            return f"robot busy ({'alter mode' if self._alter else self._mode})"
+        if dt is not None and abs(float(dt) - self.dt) > 1e-12:
+            return f"trajectory sample time {dt} differs from the controller cycle {self.dt}"
+        try:
+            arr = np.asarray(q, float)
+        except (TypeError, ValueError):
+            return "malformed trajectory"
+        if arr.ndim != 2 or arr.shape[1] != N_JOINTS or len(arr) == 0:
+            return "malformed trajectory (expected N x 6 positions)"
+        if not np.all(np.isfinite(arr)):
+            return "trajectory contains non-finite values"
+        for extra, name in ((qd, "qd"), (qdd, "qdd")):
+            if extra is not None and np.shape(extra) != arr.shape:
+                return f"{name} does not match the positions"
+        if np.abs(arr[0] - self._q).max() > START_TOL_DEG:
+            return "trajectory does not start at the current position"
+        if not check:
+            return ""
+        mon = self._mon
+        bad = _turn_bad(arr[1:] if len(arr) > 1 else arr, mon.turn_min, mon.turn_max, self._q)
+        if bad is not None:
+            k, j = bad
+            return f"joint {j + 1} sample {k + 1} at {arr[k + 1 if len(arr) > 1 else 0, j]:.6f} breaks its turn limits"
+        if self.dummy or len(arr) < 2:
+            return ""
+        held = np.vstack([arr, arr[-1:]])  # the robot holds the last sample afterwards
+        v = np.diff(held, axis=0) / self.dt
+        a = np.diff(np.vstack([self._v_fd[None], v]), axis=0) / self.dt
+        for kind, val, lim, atol in (("speed", v, mon.vmax, ATOL_V), ("acceleration", a, mon.amax, ATOL_A)):
+            bad = np.abs(val) > lim * (1 + RTOL) + atol
+            if bad.any():
+                k, j = np.argwhere(bad)[0]
+                return f"joint {j + 1} {kind} {abs(val[k, j]):.6g} > {lim[j]:.6g} at sample {k + 1}"
+        return ""
+
+    def _finish_trajectory(self, ok: bool, reason: str) -> None:
+        motion, self._motion = self._motion, None
+        self._samples = self._samples_qd = self._samples_qdd = None
+        self._mode = "alter" if self._alter else "idle"
+        if motion is not None:
+            self._deferred += motion._finish(ok, reason, self._state())
+
+    # ------------------------------------------------------------------ alter mode
+    def enable_alter(self, synchronized: bool | None = None, timeout_s: float | None = None) -> tuple[bool, str]:
+        """Enter Alter (real-time target) mode; only at rest (idempotent when enabled)."""
+        with self._lock:
+            if self._alter and self._mode == "alter":
+                if timeout_s is not None:
+                    self.alter_timeout_s = float(timeout_s)
+                if synchronized is not None:
+                    self._sync = bool(synchronized)
+                return True, ""
+            if self._mode != "idle" or self._gen is not None:
+                return False, f"robot busy ({self._mode})"
+            if timeout_s is not None:
+                self.alter_timeout_s = float(timeout_s)
+            if synchronized is not None:
+                self._sync = bool(synchronized)
+            self._alter = True
+            self._mode = "alter"
+            self._target = self._q.copy()
+            self._target_pending = False
+            self._last_heard = self.t
+            self._watchdog_fired = False
+            return True, ""
+
+    def disable_alter(self) -> Motion:
+        """Leave Alter mode; a moving robot first stops (the returned Motion completes at rest)."""
+        with self._lock:
+            self._alter = False
+            motion = self._begin_stop("alter mode disabled")
+            if self._mode == "alter":
+                self._mode = "idle"
+        self._run_deferred()
+        return motion
+
+    def set_target(self, q, synchronized: bool | None = None) -> tuple[bool, str]:
+        """New Alter target (deg), any time; refused outside strict turn limits.
+
+        ``synchronized``: RTSpeedControl 0 -> True (axes arrive together), 1 -> False
+        (every axis ramps on its own as fast as its limits allow). Any call counts as a
+        heartbeat for the watchdog.
+        """
+        with self._lock:
+            if not self._alter:
+                return False, "alter mode is not enabled"
+            self._last_heard = self.t
+            try:
+                target = _six(q)
+            except ValueError as exc:
+                return False, str(exc)
+            lo, hi = self._lim.turn_min, self._lim.turn_max
+            bad = ~((target > lo) & (target < hi))
+            if bad.any():
+                j = int(np.argmax(bad))
+                return False, f"joint {j + 1} target {target[j]:.6f} outside turn limits ({lo[j]:g}, {hi[j]:g})"
+            if synchronized is not None:
+                self._sync = bool(synchronized)
+            self._watchdog_fired = False
+            if self.dummy:
+                self._q = target.copy()
+                self._target = target
+                return True, ""
+            self._target = target
+            self._target_pending = True  # planned by the next step()
+            return True, ""
+
+    def heartbeat(self) -> None:
+        """The client is alive (keeps the Alter watchdog quiet without a new target)."""
+        with self._lock:
+            self._last_heard = self.t
+
+    # ------------------------------------------------------------------ stop
+    def stop(self, reason: str = "stopped") -> Motion:
+        """Controlled stop of whatever runs (client gone): ramps to rest within the limits,
+        leaves Alter mode. The returned Motion completes at rest (``ok=False``, reason)."""
+        with self._lock:
+            self._alter = False
+            motion = self._begin_stop(reason)
+            if self._mode == "alter":
+                self._mode = "idle"
+        self._run_deferred()
+        return motion
+
+    def _begin_stop(self, reason: str, force: bool = False) -> Motion:
+        """Start a controlled stop (lock held). Returns a Motion completing at rest.
+
+        Jerk-limited Ruckig brake from the current state when its future stays inside
+        the turn limits; otherwise (rare: limits changed under the motion) an
+        acceleration-limited emergency brake, which has the shortest stopping distance.
+        """
+        if self._stop_motion is not None and not force:
+            return self._stop_motion
+        motion = self._stop_motion or Motion("stop")
+        self._stop_reason = reason
+        self._target_pending = False
+        if not self._moving():
+            self._target = self._q.copy()
+            self._gen = None
+            self._ebrake = False
+            if self._mode in ("trajectory", "stopping"):
+                self._mode = "alter" if self._alter else "idle"
+            self._stop_motion = motion
+            self._finish_stop_if_any()
+            return motion
+        self._samples = None  # a trajectory in progress is abandoned
+        brake = self._plan_stop()
+        if brake is None:
+            self._gen = None
+            self._ebrake = True
+            self._event(type="emergency_brake", reason=reason)
+        else:
+            self._gen, self._gen_t, self._gen_kind = brake, 0.0, "stop"
+            self._ebrake = False
+        self._mode = "stopping"
+        self._stop_motion = motion
+        return motion
+
+    # ------------------------------------------------------------------ generator
+    def _gen_input(self, lim: SimLimits, target: np.ndarray | None):
+        """Ruckig input from the exact current state; axes that may not move are held."""
+        inp = self._inp
+        q, v, a = self._q, self._qd, self._qdd
+        vmax, amax = lim.vmax.copy(), lim.amax.copy()
+        # while the monitor still allows the old limits (transition), keep the old (higher)
+        # jerk: a state from the old limits may need it to get within the new ones
+        jmax = np.maximum(lim.jmax, self._mon.jmax)
+        frozen = ~((vmax > MIN_LIMIT) & (amax > MIN_LIMIT))
+        if frozen.any():
+            # an axis with a zero limit may not move: held exactly if at rest, else braked
+            # with the monitor's (old) limits
+            held = frozen & (np.abs(v) <= 1e-9) & (np.abs(a) <= 1e-6)
+            v = np.where(held, 0.0, v)
+            a = np.where(held, 0.0, a)
+            vmax = np.where(held, 1.0, np.where(frozen, np.maximum(self._mon.vmax, 1e-6), vmax))
+            amax = np.where(held, 1.0, np.where(frozen, np.maximum(self._mon.amax, 1e-6), amax))
+            jmax = np.where(held, 1.0, np.where(frozen, np.maximum(self._mon.jmax, 1e-6), jmax))
+            if target is not None:
+                target = np.where(frozen, q, target)
+        # an estimated state may be inconsistent; the monitor's limits are the reachable ones
+        mon = self._mon
+        v, a = _consistent_state(v, a, np.maximum(mon.vmax, vmax), np.maximum(mon.amax, amax),
+                                 np.maximum(mon.jmax, jmax))
+        inp.current_position = q.tolist()
+        inp.current_velocity = v.tolist()
+        inp.current_acceleration = a.tolist()
+        inp.max_velocity = vmax.tolist()
+        inp.max_acceleration = amax.tolist()
+        inp.max_jerk = jmax.tolist()
+        inp.target_velocity = [0.0] * N_JOINTS
+        inp.target_acceleration = [0.0] * N_JOINTS
+        if target is None:
+            inp.control_interface = ruckig.ControlInterface.Velocity
+            inp.target_position = q.tolist()
+        else:
+            inp.control_interface = ruckig.ControlInterface.Position
+            inp.target_position = target.tolist()
+        return inp
+
+    def _calculate(self, inp) -> ruckig.Trajectory | None:
+        traj = ruckig.Trajectory(N_JOINTS)
+        try:
+            result = self._otg.calculate(inp, traj)
+        except Exception:
+            return None
+        if result not in (ruckig.Result.Working, ruckig.Result.Finished):
+            return None
+        return traj
+
+    def _safe(self, traj: ruckig.Trajectory, *lims: SimLimits) -> bool:
+        """Does the whole future of ``traj`` stay inside the turn limits of ``lims``?"""
+        # cheap bound first: no joint can get further than (max speed x duration)
+        reach = 1.01 * np.maximum(self._mon.vmax, np.abs(self._qd)) * traj.duration + 1e-9
+        lo, hi = self._q - reach, self._q + reach
+        if all(_within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims):
+            return True
+        lo, hi = trajectory_extrema(traj, 0.0)
+        return all(_within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims)
+
+    def _plan_stop(self) -> ruckig.Trajectory | None:
+        # a stop may use everything the monitor allows (the old limits during a
+        # transition): the shortest stop is the safest
+        for sync in (ruckig.Synchronization.Phase, ruckig.Synchronization.No):
+            inp = self._gen_input(self._mon, None)
+            inp.synchronization = sync
+            traj = self._calculate(inp)
+            if traj is not None and self._safe(traj, self._mon):
+                return traj
+        return None
+
+    def _plan_target(self) -> ruckig.Trajectory | None:
+        inp = self._gen_input(self._lim, self._target)
+        inp.synchronization = ruckig.Synchronization.Time if self._sync else ruckig.Synchronization.No
+        traj = self._calculate(inp)
+        if traj is not None and self._safe(traj, self._lim, self._mon):
+            self._gen_version = self._lim_version
+            return traj
+        return None
+
+    # ------------------------------------------------------------------ the cycle
+    def step(self) -> SimState:
+        """Advance one controller cycle; returns the new state."""
+        with self._lock:
+            self._cycle += 1
+            if self._mode == "trajectory":
+                self._step_trajectory()
+            else:
+                self._step_generator()
+            self._update_monitor()
+            state = self._state()
+        self._run_deferred()
+        return state
+
+    def _apply(self, qn: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None) -> None:
+        v = (qn - self._q) / self.dt
+        a = (v - self._v_fd) / self.dt
+        self._q = qn.copy()
+        self._v_fd = v
+        self._qd = v.copy() if qd is None else np.asarray(qd, float).copy()
+        self._qdd = a if qdd is None else np.asarray(qdd, float).copy()
+
+    def _hold(self) -> None:
+        self._apply(self._q.copy(), np.zeros(N_JOINTS), np.zeros(N_JOINTS))
+
+    def _check(self, qn: np.ndarray):
+        """None if the sample is admissible, else (kind, joint0, value, limit)."""
+        mon = self._mon
+        bad = _turn_bad(qn[None], mon.turn_min, mon.turn_max, self._q)
+        if bad is not None:
+            j = bad[1]
+            lim = mon.turn_max[j] if qn[j] >= mon.turn_max[j] else mon.turn_min[j]
+            return "turn", j, qn[j], lim
+        v = (qn - self._q) / self.dt
+        over = np.abs(v) - (mon.vmax * (1 + RTOL) + ATOL_V)
+        if (over > 0).any():
+            j = int(np.argmax(over))
+            return "speed", j, v[j], mon.vmax[j]
+        a = (v - self._v_fd) / self.dt
+        over = np.abs(a) - (mon.amax * (1 + RTOL) + ATOL_A)
+        if (over > 0).any():
+            j = int(np.argmax(over))
+            return "acceleration", j, a[j], mon.amax[j]
+        return None
+
+    def _step_trajectory(self) -> None:
+        k = self._k
+        qn = self._samples[k]
+        bad = self._check(qn)
+        if bad is not None:
+            kind, j, value, limit = bad
+            self._violation(kind, j + 1, value, limit, "trajectory",
+                            f"trajectory sample {k}: joint {j + 1} {kind} {value:.6g} beyond {limit:.6g}; stopping")
+            self._begin_stop(f"limit violation ({kind}, joint {j + 1})", force=True)
+            self._step_generator()
+            return
+        qd = None if self._samples_qd is None else self._samples_qd[k]
+        qdd = None if self._samples_qdd is None else self._samples_qdd[k]
+        self._apply(qn, qd, qdd)
+        self._k = k + 1
+        if self._k >= len(self._samples):
+            self._finish_trajectory(True, "")
+            self._finish_stop_if_any()
+
+    def _step_generator(self) -> None:
+        if self._alter and self._mode == "alter":
+            # watchdog
+            if (not self._watchdog_fired and self.t - self._last_heard > self.alter_timeout_s
+                    and (self._gen is not None or self._target_pending)):
+                self._watchdog_fired = True
+                self._event(type="watchdog", timeout_s=self.alter_timeout_s)
+                self._begin_stop("alter watchdog: no target within timeout")
+                self._stop_motion = None  # nobody waits for a watchdog stop
+            elif self._target_pending:
+                traj = self._plan_target()
+                if traj is not None:
+                    self._gen, self._gen_t, self._gen_kind = traj, 0.0, "alter"
+                    self._target_pending = False
+                # else: keep the current (checked) motion; retry next cycle
+        elif self._resync and self._mode == "stopping" and not self._ebrake:
+            brake = self._plan_stop()
+            if brake is not None:
+                self._gen, self._gen_t, self._gen_kind = brake, 0.0, "stop"
+            else:
+                self._gen, self._ebrake = None, True
+        self._resync = False
+        if self._ebrake:
+            self._step_ebrake()
+            return
+        if self._gen is None:
+            self._hold()
+            if self._mode == "stopping":
+                self._mode = "alter" if self._alter else "idle"
+                self._finish_stop_if_any()
+            return
+        self._gen_t += self.dt
+        pos, vel, acc = self._gen.at_time(self._gen_t)
+        qn = np.asarray(pos, float)
+        if self._check(qn) is None:
+            self._apply(qn, np.asarray(vel, float), np.asarray(acc, float))
+        else:
+            self._apply_clamped(qn, self._gen_kind or "alter")
+        if self._gen is not None and self._gen_t >= self._gen.duration - 1e-12:
+            self._gen = None
+            if self._mode == "stopping":
+                self._mode = "alter" if self._alter else "idle"
+                if self._alter and not self._target_pending:
+                    self._target = self._q.copy()
+            self._finish_stop_if_any()
+
+    def _apply_clamped(self, qn: np.ndarray, source: str) -> None:
+        """Apply the admissible sample closest to qn (the monitor's last resort), then stop."""
+        kind, j, value, limit = self._check(qn)
+        self._violation(kind, j + 1, value, limit, source,
+                        f"generated sample clamped: joint {j + 1} {kind} {value:.6g} beyond {limit:.6g}")
+        v_lo, v_hi = self._admissible_velocity()
+        v = np.clip((qn - self._q) / self.dt, v_lo, v_hi)
+        q_new = self._q + v * self.dt
+        if _turn_bad(q_new[None], self._mon.turn_min, self._mon.turn_max, self._q) is not None:
+            v = np.clip(np.zeros(N_JOINTS), v_lo, v_hi)  # brake as hard as allowed
+            q_new = self._q + v * self.dt
+        self._apply(q_new, None, None)
+        if self._mode != "stopping":
+            self._begin_stop(f"limit violation ({kind}, joint {j + 1})", force=True)
+        self._resync = True
+
+    def _admissible_velocity(self):
+        """Per-joint velocity interval the monitor admits for the next cycle."""
+        mon = self._mon
+        vmax = mon.vmax * (1 - 1e-9)
+        dv = mon.amax * (1 - 1e-9) * self.dt
+        v_lo = np.maximum(-vmax, self._v_fd - dv)
+        v_hi = np.minimum(vmax, self._v_fd + dv)
+        return v_lo, np.maximum(v_hi, v_lo)
+
+    def _step_ebrake(self) -> None:
+        """Emergency brake: every joint decelerates at the monitor's max acceleration."""
+        v_lo, v_hi = self._admissible_velocity()
+        v = np.clip(np.zeros(N_JOINTS), v_lo, v_hi)
+        q_new = self._q + v * self.dt
+        if _turn_bad(q_new[None], self._mon.turn_min, self._mon.turn_max, self._q) is not None:
+            bad = _turn_bad(q_new[None], self._mon.turn_min, self._mon.turn_max, self._q)
+            self._violation("unavoidable", bad[1] + 1, q_new[bad[1]], 0.0, "stop",
+                            "emergency brake cannot stay inside the turn limits")
+        a = (v - self._v_fd) / self.dt
+        self._apply(q_new, v, a)
+        if not np.any(v):
+            self._ebrake = False
+            self._mode = "alter" if self._alter else "idle"
+            if self._alter:
+                self._target = self._q.copy()
+            self._finish_stop_if_any()
+
+    def _finish_stop_if_any(self) -> None:
+        if self._gen is not None:
+            return
+        motion, self._stop_motion = self._stop_motion, None
+        reason = getattr(self, "_stop_reason", "stopped")
+        if self._motion is not None:  # a trajectory was stopped
+            m, self._motion = self._motion, None
+            self._deferred += m._finish(False, reason, self._state())
+        if motion is not None:
+            self._deferred += motion._finish(False, reason, self._state())
+
+    def _update_monitor(self) -> None:
+        """Close transitional monitor limits once the robot is within the new ones.
+
+        At rest: everything closes. In Alter motion: speed/acceleration close 3 cycles
+        after the state got within the new limits on a trajectory planned with them.
+        Trajectories and stops keep the wider limits until rest.
+        """
+        if self._settle == 0 and np.array_equal(self._mon.turn_min, self._lim.turn_min) \
+                and np.array_equal(self._mon.turn_max, self._lim.turn_max):
+            return
+        lim = self._lim
+        if not self._moving():
+            self._mon = lim.copy()
+            self._settle = 0
+            return
+        if self._settle == 0:
+            return  # only the turn bounds are widened: they close at rest
+        within = (self._mode == "alter" and self._gen is not None and self._gen_kind == "alter"
+                  and self._gen_version == self._lim_version and not self._target_pending
+                  and np.all(np.abs(self._v_fd) <= lim.vmax * (1 + RTOL) + ATOL_V)
+                  and np.all(np.abs(self._qd) <= lim.vmax * (1 + RTOL) + ATOL_V)
+                  and np.all(np.abs(self._qdd) <= lim.amax * (1 + RTOL) + ATOL_A))
+        if within:
+            # a joint frozen by a zero limit must be exactly at rest before the monitor
+            # takes the zero limit
+            frozen = ~((lim.vmax > MIN_LIMIT) & (lim.amax > MIN_LIMIT))
+            still = (self._v_fd == 0) & (self._qd == 0) & (self._qdd == 0)
+            within = bool(np.all(~frozen | still))
+        self._settle = self._settle + 1 if (within and self._settle > 0) else (1 if within else -1)
+        if self._settle >= 3:
+            self._mon.vmax = lim.vmax.copy()
+            self._mon.amax = lim.amax.copy()
+            self._mon.jmax = lim.jmax.copy()
+            self._settle = 0
+
+    # ------------------------------------------------------------------ fast-forward helpers
+    def run(self, cycles: int) -> list[SimState]:
+        return [self.step() for _ in range(cycles)]
+
+    def run_until_idle(self, max_cycles: int = 1_000_000) -> list[SimState]:
+        """Step until nothing moves (fast-forward; for tests and dummy use)."""
+        states = []
+        for _ in range(max_cycles):
+            states.append(self.step())
+            with self._lock:
+                if not self._moving() and not self._target_pending:
+                    break
+        return states
+
+
+# ====================================================================== helpers
+def _six(values) -> np.ndarray:
+    arr = np.asarray(values, float).reshape(-1)
+    if arr.shape != (N_JOINTS,) or not np.all(np.isfinite(arr)):
+        raise ValueError("expected 6 finite values")
+    return arr
+
+
+def _turn_bad(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, start: np.ndarray):
+    """First (row, joint) of q breaking the strict turn limits (start rule), or None."""
+    lo_ok = np.where(start <= lo, q >= start - OUTSIDE_TOL, q > lo)
+    hi_ok = np.where(start >= hi, q <= start + OUTSIDE_TOL, q < hi)
+    ok = lo_ok & hi_ok
+    if ok.all():
+        return None
+    k, j = np.argwhere(~ok)[0]
+    return int(k), int(j)
+
+
+def _consistent_state(v, a, vmax, amax, jmax):
+    """Velocity/acceleration made reachable within the limits (for estimated states).
+
+    |v| <= vmax, |a| <= amax, and ramping the acceleration to 0 at max jerk must not
+    carry the velocity beyond vmax (otherwise Ruckig would start with a brake phase
+    that overshoots the limits). A no-op (to rounding) for states of a valid trajectory.
+    """
+    v = np.clip(v, -vmax, vmax)
+    a = np.clip(a, -amax, amax)
+    room = np.maximum(vmax - v * np.sign(a), 0.0)
+    a_lim = np.sqrt(2.0 * jmax * room)
+    a = np.sign(a) * np.minimum(np.abs(a), a_lim)
+    return v, a
+
+
+def _within_lo(qmin, lo, start):
+    return np.where(start <= lo, qmin >= start - OUTSIDE_TOL, qmin > lo)
+
+
+def _within_hi(qmax, hi, start):
+    return np.where(start >= hi, qmax <= start + OUTSIDE_TOL, qmax < hi)
+
+
+def _within(qmin, qmax, lo, hi, start) -> bool:
+    return bool(np.all(_within_lo(np.asarray(qmin), lo, start) & _within_hi(np.asarray(qmax), hi, start)))
+
+
+def trajectory_extrema(traj: ruckig.Trajectory, t_from: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Exact (min, max) per joint of a Ruckig trajectory's positions from ``t_from`` on.
+
+    Evaluates every constant-jerk segment (brake phase included) at its ends and at its
+    velocity zeros; after the end the joint holds its final position. (Ruckig's own
+    ``position_extrema`` is not reliable for our inputs: zero-duration trajectories and
+    brake phases.)
+    """
+    profiles = traj.profiles[0]
+    dofs = len(profiles)
+    rows = []  # per DoF: 9 segments (2 brake + 7 profile) x (duration, p, v, a, j)
+    for prof in profiles:
+        brake = prof.brake
+        if brake.duration > 0.0:
+            head = (brake.t, brake.p[:2], brake.v[:2], brake.a[:2], brake.j[:2])
+        else:
+            head = ([0.0, 0.0],) * 5
+        body = (prof.t, prof.p[:7], prof.v[:7], prof.a[:7], prof.j)
+        rows.append([list(h) + list(b) for h, b in zip(head, body)])
+    seg = np.array(rows)  # (dofs, 5, 9)
+    dur, p, v, a, j = np.moveaxis(seg, 1, 0)
+    ts = np.zeros_like(dur)
+    np.cumsum(dur[:, :-1], axis=1, out=ts[:, 1:])
+    valid = (dur > 0) & (ts + dur >= t_from)
+    tau0 = np.clip(t_from - ts, 0.0, dur)
+
+    def pos(tau):
+        return p + tau * (v + tau * (a * 0.5 + tau * j / 6.0))
+
+    cands = [np.where(valid, pos(tau0), np.nan), np.where(valid, pos(dur), np.nan)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disc = a * a - 2.0 * j * v
+        sq = np.sqrt(np.maximum(disc, 0.0))
+        r1 = np.where(j != 0, (-a + sq) / j, np.where(a != 0, -v / a, np.nan))
+        r2 = np.where(j != 0, (-a - sq) / j, np.nan)
+    for r in (r1, r2):
+        ok = valid & (disc >= 0) & np.isfinite(r) & (r >= tau0) & (r <= dur)
+        cands.append(np.where(ok, pos(np.where(ok, r, 0.0)), np.nan))
+    now = np.asarray(traj.at_time(t_from)[0], float)
+    end = np.asarray(traj.at_time(max(traj.duration, t_from))[0], float)
+    allc = np.concatenate([np.stack(cands, axis=1).reshape(dofs, -1), now[:, None], end[:, None]], axis=1)
+    return np.nanmin(allc, axis=1), np.nanmax(allc, axis=1)

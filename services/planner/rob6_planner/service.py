@@ -1,0 +1,284 @@
+"""The motion planner service: owns the motion configuration, validates and plans every
+motion with Ruckig, and hands sampled trajectories (or Alter targets) to the driver.
+
+Configuration choice for Cartesian targets is the kinematics service's ``select``
+(the original's rule); this service never computes kinematics itself, so it needs
+neither pinocchio nor a kinematics replica on its machine.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+import numpy as np
+
+from rob6.bus import Bus, BusError
+from rob6.messages import (
+    Ack,
+    AlterMode,
+    AlterTarget,
+    ConfigChange,
+    ConfigReply,
+    Empty,
+    ExecuteRequest,
+    FkRequest,
+    IkBatchRequest,
+    LimitsUpdate,
+    ModeRequest,
+    MotionConfig as ConfigMessage,
+    MoveReply,
+    MoveRequest,
+    SelectRequest,
+    Trajectory,
+)
+from rob6.robots import RobotModel
+from rob6.state import JointStateMirror
+
+from .config import MotionConfig
+from .trajectory import TrajectoryPlanner, plan_lin
+
+log = logging.getLogger("rob6.planner")
+
+#: MovePTPHomRowWise chooses among these (the transcripts: it never picks righty)
+PTP_HOM_PATTERN = ["toggleHand", "toggleElbow", "lefty"]
+KEEP_CONFIGURATION = ["noToggleHand", "noToggleElbow", "noToggleArm"]
+POSE_MOVES = {"MovePTPHomRowWise", "MovePTPHomRowWiseStatusTurn", "MoveMinChangeRowWiseStatus",
+              "RoutetestRowWiseStatus"}
+JOINT_MOVES = {"MovePTPJoints", "MovePTPJointsStatus"}
+ALTER_MOVES = {"MoveRTJoints", "MoveRTHomRowWise", "MoveRTHomRowWiseStatus", "DoAlterJoint", "DoAlterCart"}
+ADEPT_SETTINGS = {"SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoarse"}
+LIMIT_FIELDS = ("speed", "accel", "turn_min", "turn_max")
+
+
+class Refused(Exception):
+    """A motion refused before it started (the client gets ``false``)."""
+
+
+class PlannerService:
+    def __init__(self, bus: Bus, robot: RobotModel, alter_timeout_s: float = 0.5):
+        self.bus = bus
+        self.robot = robot
+        self.config = MotionConfig(robot)
+        self.planner = TrajectoryPlanner(robot)
+        self.joints = JointStateMirror(bus)
+        self.alter = False
+        self.lin = False
+        self.alter_timeout_s = alter_timeout_s
+        # Adept V+ settings (ad850): speed and accelerations in percent of the maximum
+        self.adept = {"speed": 100.0, "accel": 100.0, "decel": 100.0, "fine": 100.0, "coarse": 100.0}
+        self._lock = threading.Lock()  # one motion at a time; the planner reuses its Ruckig buffers
+        bus.on_liveliness(self._on_liveliness)
+
+    # ------------------------------------------------------------------ configuration
+    def _message(self) -> ConfigMessage:
+        return ConfigMessage(**self.config.to_dict())
+
+    def get_config(self, _req: Empty, _ctx) -> ConfigMessage:
+        return self._message()
+
+    def config_change(self, req: ConfigChange, ctx) -> ConfigReply:
+        if req.command in ADEPT_SETTINGS:
+            return ConfigReply(ok=self._adept_setting(req.command, req.args), config=self._message())
+        before = self.config.to_dict()
+        ok = self.config.apply(req.command, req.args, req.words)
+        after = self.config.to_dict()
+        if after != before:
+            self.bus.publish("planner/config", self._message(), reliable=True)
+            if any(before[f] != after[f] for f in LIMIT_FIELDS):
+                self._push_limits(ctx.cid)
+        return ConfigReply(ok=ok, config=self._message())
+
+    def _adept_setting(self, command: str, values: list[float]) -> bool:
+        """The original answers true to these on every type; only the Adept uses them."""
+        if not self.robot.is_adept or not values:
+            return True
+        if command == "SetAdeptSpeed":
+            self.adept["speed"] = min(max(values[0], 0.0), 120.0)
+        elif command == "SetAdeptAccel":
+            self.adept["accel"] = min(max(values[0], 0.0), 120.0)
+            self.adept["decel"] = min(max(values[1] if len(values) > 1 else values[0], 0.0), 120.0)
+        else:  # fine/coarse positioning tolerance: the simulated robot is exact
+            self.adept["fine" if command == "SetAdeptFine" else "coarse"] = values[0]
+        return True
+
+    def _push_limits(self, cid: str | None = None) -> None:
+        """The driver enforces the limits on its own; keep its copy current."""
+        c = self.config
+        try:
+            self.bus.request("driver", "limits", LimitsUpdate(
+                turn_min=list(c.turn_min), turn_max=list(c.turn_max), max_speed=list(c.speed),
+                max_accel=list(c.accel)), cid=cid)
+        except BusError as exc:
+            log.warning("could not update the driver's limits: %s", exc.message)
+
+    def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:
+        if service == "driver" and alive:  # a (re)started driver gets the current limits
+            threading.Thread(target=self._push_limits, daemon=True).start()
+        if service == "gateway" and alive:
+            self.bus.publish("planner/config", self._message(), reliable=True)
+
+    def _planning_config(self) -> MotionConfig:
+        """The configuration with the Adept's speed/acceleration percentages applied."""
+        if not self.robot.is_adept:
+            return self.config
+        scaled = self.config.copy()
+        scaled.speed = [v * self.adept["speed"] / 100.0 for v in scaled.speed]
+        scaled.accel = [a * min(self.adept["accel"], self.adept["decel"]) / 100.0 for a in scaled.accel]
+        return scaled
+
+    # ------------------------------------------------------------------ modes
+    def mode(self, req: ModeRequest, ctx) -> Ack:
+        command = req.command
+        if command == "EnableAdeptAlter" and not self.robot.is_adept:
+            return Ack(ok=False, reason="EnableAdeptAlter is for the Adept only")
+        if command in ("EnableAlter", "EnableAdeptAlter"):
+            reply = self.bus.request("driver", "alter_mode", AlterMode(
+                enable=True, synchronized=self.config.rt_speed_control == 0,
+                timeout_s=self.alter_timeout_s), cid=ctx.cid)
+            self.alter = reply.ok
+            return reply
+        if command == "DisableAlter":
+            if not self.alter:
+                return Ack(ok=True)  # already off: the original answers true as well
+            self.alter = False
+            return self.bus.request("driver", "alter_mode", AlterMode(enable=False), cid=ctx.cid, timeout=12.0)
+        if command in ("EnableLin", "DisableLin"):
+            self.lin = command == "EnableLin"
+            return Ack(ok=True)
+        return Ack(ok=False, reason=f"unknown mode command {command}")
+
+    def session_end(self, _req: Empty, ctx) -> Ack:
+        """The client left: real-time motion must not go on without it."""
+        if self.alter:
+            self.alter = False
+            return self.bus.request("driver", "alter_mode", AlterMode(enable=False), cid=ctx.cid, timeout=12.0)
+        return Ack(ok=True)
+
+    # ------------------------------------------------------------------ motion
+    def move(self, req: MoveRequest, ctx) -> MoveReply:
+        try:
+            if req.kind in ALTER_MOVES:
+                return self._alter_move(req, ctx.cid)
+            with self._lock:
+                return self._move(req, ctx.cid)
+        except Refused as exc:
+            log.info("%s refused: %s", req.kind, exc)
+            return MoveReply(ok=False, reason=str(exc))
+
+    def _current(self) -> list[float]:
+        state = self.joints.get() or self.bus.request("driver", "state", Empty())
+        return list(state.q)
+
+    def _move(self, req: MoveRequest, cid: str) -> MoveReply:
+        start = list(req.start) if req.dry_run and req.start is not None else self._current()
+        if self.alter and not req.dry_run:
+            raise Refused("Alter mode is on (DisableAlter first)")
+        if req.kind == "MoveLINHomRowWise":
+            return self._lin(req, start, cid)
+        if self.lin and not req.dry_run:
+            raise Refused("LIN mode is on: point-to-point moves are refused (DisableLin first)")
+        if req.kind in JOINT_MOVES:
+            target = list(req.joints)
+        elif req.kind in POSE_MOVES:
+            pattern = PTP_HOM_PATTERN if req.kind == "MovePTPHomRowWise" else req.pattern
+            target = self._select(req.pose, pattern, start, cid)
+        else:
+            raise Refused(f"unknown motion {req.kind}")
+        pattern = req.pattern if req.kind == "MovePTPJointsStatus" else None
+        plan = self.planner.plan_ptp(start, target, self._planning_config(), pattern=pattern,
+                                     sample=not req.dry_run)
+        if not plan.ok:
+            raise Refused(plan.reason)
+        if req.dry_run:
+            return MoveReply(ok=True, joints=target)
+        return self._execute(plan.trajectory, cid)
+
+    def _select(self, pose, pattern, current, cid) -> list[float]:
+        c = self.config
+        reply = self.bus.request("kinematics", "select", SelectRequest(
+            pose=list(pose), pattern=list(pattern), current=current, turn_min=list(c.turn_min),
+            turn_max=list(c.turn_max), max_change=list(c.max_change), weights=list(c.weights),
+            allowed=list(c.allowed)), cid=cid)
+        if reply.joints is None:
+            raise Refused("no admissible solution for that pose and status")
+        return reply.joints
+
+    def _execute(self, trajectory, cid) -> MoveReply:
+        duration = trajectory.duration
+        reply = self.bus.request("driver", "execute", ExecuteRequest(trajectory=Trajectory(
+            dt=trajectory.dt, q=trajectory.q.tolist(), qd=trajectory.qd.tolist(), qdd=trajectory.qdd.tolist())),
+            cid=cid, timeout=duration + 10.0)
+        joints = None
+        if reply.state is not None:  # newer than any state the driver published before
+            self.joints.update(reply.state)
+            joints = reply.state.q
+        return MoveReply(ok=reply.ok, joints=joints, reason=reply.reason, state=reply.state)
+
+    def _lin(self, req: MoveRequest, start: list[float], cid: str) -> MoveReply:
+        if not self.lin:
+            raise Refused("LIN mode is off (EnableLin first)")
+        if req.dry_run:
+            raise Refused("route test of LIN moves is not supported")
+        fk = self.bus.request("kinematics", "fk", FkRequest(joints=[start]), cid=cid)
+        branch = " ".join(self.robot.status(start))
+        pose0 = np.asarray(fk.poses[0], float).reshape(3, 4)
+
+        def ik_fn(poses: np.ndarray) -> np.ndarray:
+            reply = self.bus.request("kinematics", "ik_batch", IkBatchRequest(
+                poses=np.asarray(poses, float).reshape(-1, 12).tolist()), cid=cid, timeout=5.0)
+            index = reply.branches.index(branch)
+            return np.array([[np.nan] * 6 if s[index] is None else s[index] for s in reply.solutions])
+
+        plan = plan_lin(self.planner, start, pose0, np.asarray(req.pose, float).reshape(3, 4),
+                        self._planning_config(), ik_fn)
+        if not plan.ok:
+            raise Refused(plan.reason)
+        return self._execute(plan.trajectory, cid)
+
+    def _alter_move(self, req: MoveRequest, cid: str) -> MoveReply:
+        if not self.alter:
+            raise Refused("Alter mode is off (EnableAlter first)")
+        current = self._current()
+        if req.kind == "MoveRTJoints":
+            target = list(req.joints)
+        elif req.kind == "DoAlterJoint":
+            target = [q + d for q, d in zip(current, req.joints)]
+        elif req.kind == "DoAlterCart":
+            target = self._select(_shifted_pose(self._pose(current, cid), req.pose), KEEP_CONFIGURATION,
+                                  current, cid)
+        else:  # MoveRTHomRowWise keeps the configuration, ...Status chooses by its pattern
+            pattern = req.pattern if req.kind == "MoveRTHomRowWiseStatus" else KEEP_CONFIGURATION
+            target = self._select(req.pose, pattern, current, cid)
+        c = self.config
+        if not all(lo < q < hi for lo, q, hi in zip(c.turn_min, target, c.turn_max)):
+            raise Refused("Alter target outside the turn limits")
+        if any(abs(q - s) > m for q, s, m in zip(target, current, c.max_change)):
+            raise Refused("Alter target beyond the max change")
+        reply = self.bus.request("driver", "alter_target", AlterTarget(
+            q=target, synchronized=c.rt_speed_control == 0), cid=cid)
+        return MoveReply(ok=reply.ok, joints=target, reason=reply.reason)
+
+    def _pose(self, joints, cid) -> list[float]:
+        return self.bus.request("kinematics", "fk", FkRequest(joints=[joints]), cid=cid).poses[0]
+
+    def serve(self) -> None:
+        self.bus.serve({"config": self.get_config, "config_change": self.config_change, "move": self.move,
+                        "mode": self.mode, "session_end": self.session_end}, workers=4)
+        self.bus.publish("planner/config", self._message(), reliable=True)
+        if self.bus.instances("driver"):  # otherwise the driver's token arriving triggers it
+            threading.Thread(target=self._push_limits, daemon=True).start()
+
+
+def _shifted_pose(pose12, step) -> list[float]:
+    """DoAlterCart: translate by (dx, dy, dz) mm and rotate by (rx, ry, rz) deg about the
+    base axes (applied in x, y, z order), both in the robot's base frame."""
+    T = np.asarray(pose12, float).reshape(3, 4)
+    rx, ry, rz = np.radians(step[3:6])
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    R = Rz @ Ry @ Rx @ T[:, :3]
+    p = T[:, 3] + np.asarray(step[:3], float)
+    return np.hstack([R, p[:, None]]).reshape(12).tolist()
