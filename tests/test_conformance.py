@@ -8,18 +8,13 @@ from system import CONFORMANCE, running
 
 ROBOTS = ("kr16", "ad850", "kaw_fs", "kr3rt", "kr16rt", "kr3")
 
-#: transcript files rob6 replays (the rest is covered by the issue that implements it)
-FILES = ("framing", "framing_wait", "management", "session", "misc", "adept_grippergohome",
-         "adept_grippermove", "adept_grippermove_noarg", "adept_grippermovetopos", "adept_directcmd",
-         "adept_directcmd_noarg", "debug_grippergohome")
 
 
 def cases():
+    """Every transcript of every robot type, each against a freshly started system."""
     for robot in ROBOTS:
-        for name in FILES:
-            path = CONFORMANCE / robot / f"{name}.jsonl"
-            if path.exists():
-                yield pytest.param(robot, path, id=f"{robot}-{name}")
+        for path in sorted((CONFORMANCE / robot).glob("*.jsonl")):
+            yield pytest.param(robot, path, id=f"{robot}-{path.stem}")
 
 
 @pytest.mark.parametrize("robot, path", list(cases()))

@@ -88,6 +88,9 @@ def zenoh_config(settings: BusSettings, *, mode: str | None = None,
     """
     config = zenoh.Config.from_file(settings.zenoh_config) if settings.zenoh_config else zenoh.Config()
     defaults = zenoh.Config()
+    file_mode = msgspec.json.decode(config.get_json("mode"))
+    if file_mode != msgspec.json.decode(defaults.get_json("mode")):
+        mode = file_mode  # the file decides (a secure profile runs every service as a TLS client)
     mode = mode or settings.mode
     listen = settings.listen if listen is None else listen
     if mode == "peer" and not listen:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import sys
 
 import click
@@ -51,25 +50,19 @@ def router(settings, log_level):
 @main.command()
 @bus_options
 @click.argument("service")
-@click.option("--port", envvar="ROB6_PORT", default=5005, show_default=True, type=int)
 @click.option("--timeout", default=3.0, show_default=True, type=float)
-def health(settings, log_level, service, port, timeout):
-    """Exit 0 when SERVICE is up: its liveliness token is on the bus (gateway: it accepts TCP)."""
-    if service == "gateway":
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=timeout) as sock:
-                sock.settimeout(timeout)
-                # a busy server (another client connected) is up too
-                ok = sock.recv(64).startswith((b"welcome to rob6server", b"ERROR: server busy"))
-        except OSError:
-            ok = False
-    else:
-        from .bus import Bus
-        bus = Bus(settings, "health", mode="client")
-        try:
-            ok = not bus.wait_for([service], timeout)
-        finally:
-            bus.close()
+def health(settings, log_level, service, timeout):
+    """Exit 0 when SERVICE is up: its liveliness token is on the bus.
+
+    The gateway declares its token once it listens, so this also covers the gateway
+    without opening a client session (which would take the single client slot).
+    """
+    from .bus import Bus
+    bus = Bus(settings, "health", mode="client")
+    try:
+        ok = not bus.wait_for([service], timeout)
+    finally:
+        bus.close()
     click.echo(f"{service}: {'up' if ok else 'DOWN'}")
     sys.exit(0 if ok else 1)
 

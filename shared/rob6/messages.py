@@ -81,10 +81,12 @@ class JointState(Struct):
 
 
 class Trajectory(Struct):
-    """Positions sampled at the driver cycle (the planner's output)."""
+    """Positions sampled at the driver cycle (the planner's output); row 0 = the start."""
 
     dt: float  # sample period, seconds
     q: list[Joints]
+    qd: list[Joints] | None = None  # deg/s: lets the driver stop from the exact state
+    qdd: list[Joints] | None = None  # deg/s^2
 
 
 class ExecuteRequest(Struct):
@@ -114,6 +116,7 @@ class AlterTarget(Struct):
 
 class AlterMode(Struct):
     enable: bool
+    synchronized: bool = False  # RTSpeedControl 0: axes arrive together
     timeout_s: float = 0.5  # stop if no target arrives for this long
 
 

@@ -115,13 +115,15 @@ class Gateway:
     async def call(self, session: Session, service: str, op: str, body, **kwargs):
         return await self.bus.arequest(service, op, body, cid=session.cid, **kwargs)
 
-    def current(self, session: Session) -> list[float]:
-        """Where the robot is (or the virtual robot, while route testing)."""
+    async def current(self, session: Session) -> list[float]:
+        """Where the robot is (or the virtual robot, while route testing).
+
+        Normally the driver's latest published state; right after a (re)start, before
+        the first one arrived, one round trip asks the driver.
+        """
         if session.routetest is not None:
             return session.routetest
-        state = self.joints.get()
-        if state is None:
-            raise BusError("unavailable", "driver unavailable")
+        state = self.joints.get() or await self.call(session, "driver", "state", Empty())
         return state.q
 
     def record(self, session: Session, received: float, line, reply: str | None) -> None:
@@ -219,18 +221,20 @@ async def shutdown(gw, session, args):
 
 @command("PingRobot")
 async def ping_robot(gw, session, args):
-    """n round trips gateway -> driver, ``wait`` ms apart.
+    """n round trips gateway -> driver, ``wait`` ms apart (default 10, 0).
 
-    Reply: mean round trip (s), robot time zero, server time zero, and the two
-    coefficients c1, c2 of the fit (server - server0) - (robot - robot0) =
-    c1 (robot - robot0) + c2 (robot - robot0)^2 (clock drift model).
+    Reply (one line, like the original): mean round trip (s), robot time zero, server
+    time zero, and the coefficients c1, c2 of the fit (server - server0) -
+    (robot - robot0) = c1 (robot - robot0) + c2 (robot - robot0)^2 (clock drift).
+    Arguments that cannot be measured get the original's ``-1``.
     """
     count = args.integer() if not args.at_end() else 10
     wait_ms = args.double() if not args.at_end() else 0.0
-    if count is None or wait_ms is None:
-        raise ParseError("value")
-    if not 1 <= count <= gw.options.ping_max_count or not 0 <= wait_ms <= gw.options.ping_max_wait_ms:
-        return FALSE
+    if (count is None or wait_ms is None or not 1 <= count <= gw.options.ping_max_count
+            or not 0 <= wait_ms <= gw.options.ping_max_wait_ms):
+        log.warning("PingRobot: n must be 1..%d and wait 0..%d ms", gw.options.ping_max_count,
+                    gw.options.ping_max_wait_ms)
+        return "-1\n"
     samples = []
     for i in range(count):
         if i and wait_ms:
@@ -261,18 +265,18 @@ def _drift_fit(points: list[tuple[float, float]]) -> tuple[float, float]:
 # ====================================================================== position
 @command("GetPositionJoints")
 async def get_position_joints(gw, session, args):
-    return fmt(gw.current(session)) + "\n"
+    return fmt(await gw.current(session)) + "\n"
 
 
 @command("GetPositionHomRowWise")
 async def get_position_hom(gw, session, args):
-    reply = await gw.call(session, "kinematics", "fk", FkRequest(joints=[gw.current(session)]))
+    reply = await gw.call(session, "kinematics", "fk", FkRequest(joints=[await gw.current(session)]))
     return fmt(reply.poses[0]) + "\n"
 
 
 @command("GetStatus")
 async def get_status(gw, session, args):
-    return " ".join(gw.robot.status(gw.current(session))) + "\n"
+    return " ".join(gw.robot.status(await gw.current(session))) + "\n"
 
 
 # ====================================================================== limits and configuration
@@ -395,7 +399,7 @@ async def _backward(gw, session, args) -> list[float] | None:
     pattern = args.status()
     config = gw.limits.config
     reply = await gw.call(session, "kinematics", "backward_calc", BackwardCalcRequest(
-        pose=pose, pattern=pattern, current=gw.current(session), turn_min=config.turn_min,
+        pose=pose, pattern=pattern, current=await gw.current(session), turn_min=config.turn_min,
         turn_max=config.turn_max, max_change=config.max_change, weights=config.weights))
     return reply.joints
 
@@ -455,7 +459,7 @@ for _name in ("MovePTPHomRowWiseStatusTurn", "MoveMinChangeRowWiseStatus"):
 async def enable_routetest(gw, session, args):
     if session.routetest is not None:
         return FALSE
-    session.routetest = list(gw.current(session))
+    session.routetest = list(await gw.current(session))
     return TRUE
 
 

@@ -1,0 +1,484 @@
+"""End-to-end test of the containerized lab deployment (docker-compose.yml, deploy/).
+
+    .venv/bin/python -m pytest tests/deploy/test_compose_e2e.py -s     # -s shows timings and sizes
+
+Builds offline (deploy/build-base.sh: reused when rob6/base:bookworm exists; deploy/wheelhouse.sh;
+`compose build` with the build network off), starts the stack under a unique project name,
+replays a conformance subset through the gateway port, kills kinematics mid-session, scales
+it, stops everything and reads the MCAP recordings from the volume; then the secure profile:
+the router container's TLS and ACL are probed with zenoh-python (tests/deploy/zenoh_probe.py)
+and the system must still work through it. Every project is removed (`down -v`) at the end.
+
+Marked ``docker`` (skip with ``-m 'not docker'`` or ROB6_SKIP_DOCKER=1); skipped when no
+Docker engine answers. Env: ROB6_E2E_KEEP=1 keeps the stacks up for inspection.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+import zenoh_probe
+from conformance import load, same
+from system import CONFORMANCE, Client
+
+pytestmark = pytest.mark.docker
+
+REPO = Path(__file__).resolve().parents[2]
+DEPLOY = REPO / "deploy"
+SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder")
+TAG = "e2e"
+BASE_IMAGE = os.environ.get("ROB6_BASE_IMAGE", "rob6/base:bookworm")
+ROBOT = "kr16"
+FK = "ForwardCalc 10 -60 80 20 40 30"  # first record of conformance/kr16/fk.jsonl
+SUBSET = {"GetRobot", "CM_PING", "GetVersion"}  # + each session's handshake line
+REPORT: dict[str, object] = {}  # timings and sizes, printed at the end (pytest -s)
+
+
+# ---------------------------------------------------------------------- docker helpers
+def _run(cmd: list[str], *, timeout: float = 900, check: bool = True, env=None, **kw) -> subprocess.CompletedProcess:
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, **kw)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"{' '.join(cmd)} -> {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return proc
+
+
+def _compose_cmd() -> list[str] | None:
+    for cmd in (["docker", "compose"], ["docker-compose"]):
+        if shutil.which(cmd[0]) and subprocess.run([*cmd, "version"], capture_output=True).returncode == 0:
+            return cmd
+    return None
+
+
+def _docker_ok() -> bool:
+    return bool(shutil.which("docker")) and subprocess.run(
+        ["docker", "info"], capture_output=True, timeout=30).returncode == 0
+
+
+if not _docker_ok() or _compose_cmd() is None:
+    pytest.skip("no Docker engine or docker compose here", allow_module_level=True)
+COMPOSE = _compose_cmd()
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@dataclass
+class Stack:
+    """One compose project: `docker compose -p NAME -f ... --env-file <empty>` with its own ports."""
+
+    project: str
+    files: tuple[str, ...] = ("docker-compose.yml",)
+    settings: dict[str, str] = field(default_factory=dict)
+    port: int = field(default_factory=free_port)
+    zenoh_port: int = field(default_factory=free_port)
+
+    def __post_init__(self):
+        # an empty env file: a developer's .env must not change the test
+        self.env_file = Path(os.environ.get("TMPDIR", "/tmp")) / f"{self.project}.env"
+        self.env_file.write_text("")
+        self.env = {**os.environ, "ROB6_TAG": TAG, "ROB6_BASE_IMAGE": BASE_IMAGE, "ROB6_ROBOT": ROBOT,
+                    "ROB6_DUMMY": "1", "ROB6_PORT": str(self.port), "ROB6_PUBLISH_ADDR": "127.0.0.1",
+                    "ROB6_ZENOH_PORT": str(self.zenoh_port), "ROB6_HEALTH_INTERVAL": "3s",
+                    **self.settings}
+
+    def compose(self, *args: str, timeout: float = 900, check: bool = True) -> subprocess.CompletedProcess:
+        files = [a for f in self.files for a in ("-f", str(REPO / f))]
+        return _run([*COMPOSE, "-p", self.project, *files, "--env-file", str(self.env_file), *args],
+                    timeout=timeout, check=check, env=self.env, cwd=REPO)
+
+    def containers(self, service: str | None = None) -> list[str]:
+        filters = ["--filter", f"label=com.docker.compose.project={self.project}"]
+        if service:
+            filters += ["--filter", f"label=com.docker.compose.service={service}"]
+        return _run(["docker", "ps", "-a", "-q", *filters]).stdout.split()
+
+    def state(self, container: str) -> dict:
+        return json.loads(_run(["docker", "inspect", "-f", "{{json .State}}", container]).stdout)
+
+    def wait_healthy(self, services: tuple[str, ...], timeout: float = 180) -> float:
+        """Seconds until every container of ``services`` is healthy; fails with the logs otherwise."""
+        start = time.monotonic()
+        while True:
+            pending = []
+            for service in services:
+                ids = self.containers(service)
+                if not ids:
+                    pending.append(f"{service}: no container")
+                for cid in ids:
+                    st = self.state(cid)
+                    health = (st.get("Health") or {}).get("Status", "none")
+                    if health != "healthy":
+                        pending.append(f"{service} {cid[:12]}: {st['Status']}/{health}")
+            if not pending:
+                return time.monotonic() - start
+            if time.monotonic() - start > timeout:
+                logs = self.compose("logs", "--tail", "30", check=False).stdout
+                raise AssertionError(f"not healthy after {timeout:.0f} s: {pending}\n{logs[-6000:]}")
+            time.sleep(1)
+
+    def down(self) -> None:
+        if os.environ.get("ROB6_E2E_KEEP") == "1":
+            print(f"\nROB6_E2E_KEEP=1: project {self.project} left running")
+            return
+        self.compose("down", "-v", "--remove-orphans", "-t", "5", check=False, timeout=180)
+        self.env_file.unlink(missing_ok=True)
+
+
+def connect(port: int, *, handshake: bool = True, attempts: int = 50) -> Client:
+    """A gateway client; retries while the gateway is busy (a health check holds the slot for
+    a few ms) or not yet listening."""
+    for _ in range(attempts):
+        try:
+            client = Client(port, handshake=False, timeout=10)
+        except OSError:
+            time.sleep(0.2)
+            continue
+        if client.greeting.startswith("ERROR: server busy"):
+            client.close()
+            time.sleep(0.1)
+            continue
+        assert client.greeting == "welcome to rob6server 0.1.01 !\n", client.greeting
+        if handshake:
+            assert client.ask("Hello Robot") == "accepted\n"
+        return client
+    raise AssertionError(f"cannot connect to the gateway on port {port}")
+
+
+def fk_expected() -> str:
+    for record in load(CONFORMANCE / ROBOT / "fk.jsonl"):
+        if record.get("send", "").strip() == FK:
+            return record["reply"]
+    raise AssertionError(f"{FK} not in fk.jsonl")
+
+
+def conformance_subset(port: int) -> int:
+    """Replay the sessions of management.jsonl made only of a handshake and SUBSET commands."""
+    records = load(CONFORMANCE / ROBOT / "management.jsonl")
+    sessions, current = [], None
+    for record in records:
+        if "connect" in record:
+            current = [record]
+            sessions.append(current)
+        elif current is not None:
+            current.append(record)
+    chosen = [s for s in sessions
+              if all(r["send"].split()[:1][0] in SUBSET for r in s[2:] if "send" in r and r["send"].split())]
+    assert len(chosen) >= 5, "management.jsonl changed: no subset to replay"
+    checked = 0
+    for session in chosen:
+        client = connect(port, handshake=False)
+        try:
+            assert client.greeting == session[0]["greeting"]
+            for record in session[1:]:
+                if "send" not in record:
+                    continue
+                client.send(record["send"])
+                got = client.read_lines(record["reply"].count("\n"))
+                assert same(record["send"], got, record["reply"]), (record["send"], got, record["reply"])
+                checked += 1
+                if record.get("then_closed"):
+                    assert client.closed(), f"not closed after {record['send']!r}"
+        finally:
+            client.close()
+    return checked
+
+
+def image_report() -> dict[str, str]:
+    sizes = {}
+    for name in ("base", *SERVICES, "router"):
+        ref = BASE_IMAGE if name == "base" else f"rob6/{name}:{TAG}"
+        size = int(_run(["docker", "image", "inspect", "-f", "{{.Size}}", ref]).stdout)
+        sizes[ref] = f"{size / 1e6:.0f} MB"
+    return sizes
+
+
+# ---------------------------------------------------------------------- fixtures
+@pytest.fixture(scope="module")
+def built():
+    """Base image (reused if present), wheelhouse, `compose build`; all timed."""
+    start = time.monotonic()
+    have_base = _run(["docker", "image", "inspect", BASE_IMAGE], check=False).returncode == 0
+    if not have_base:
+        if BASE_IMAGE != "rob6/base:bookworm" or os.geteuid() != 0:
+            pytest.skip(f"{BASE_IMAGE} missing and cannot be made here (deploy/build-base.sh needs root)")
+        _run(["bash", str(DEPLOY / "build-base.sh")], timeout=1200)
+    REPORT["base image"] = f"{time.monotonic() - start:.0f} s ({'reused' if have_base else 'built'})"
+    t = time.monotonic()
+    # offline when the wheelhouse is complete (only the rob6 wheels are rebuilt), else download
+    if _run(["bash", str(DEPLOY / "wheelhouse.sh"), "--offline"], check=False).returncode != 0:
+        _run(["bash", str(DEPLOY / "wheelhouse.sh")], timeout=1200)
+    REPORT["wheelhouse"] = f"{time.monotonic() - t:.0f} s"
+    t = time.monotonic()
+    builder = Stack("rob6e2ebuild")
+    builder.compose("build", timeout=1800)
+    builder.env_file.unlink(missing_ok=True)
+    REPORT["compose build (network none)"] = f"{time.monotonic() - t:.0f} s"
+    REPORT["images"] = image_report()
+    yield
+    print("\n--- rob6 deploy e2e report ---\n" + json.dumps(REPORT, indent=2))
+
+
+@pytest.fixture(scope="module")
+def entry_points(built) -> dict[str, bool]:
+    """Which services' images can import their entry point (the lead writes them)."""
+    found = {}
+    for service in SERVICES:
+        proc = _run(["docker", "run", "--rm", "--network", "none", f"rob6/{service}:{TAG}", "python", "-c",
+                     f"import rob6_{service}.__main__"], check=False, timeout=120)
+        found[service] = proc.returncode == 0
+    return found
+
+
+def require(entry_points, *services):
+    missing = [s for s in services if not entry_points[s]]
+    if missing:
+        pytest.skip(f"no entry point yet in the image(s) of {missing} (rob6_<service>/__main__.py)")
+
+
+@pytest.fixture(scope="module")
+def plain(built, entry_points):
+    require(entry_points, *SERVICES)
+    stack = Stack(f"rob6e2e{os.getpid()}")
+    try:
+        t = time.monotonic()
+        stack.compose("up", "-d", "--no-build")
+        REPORT["plain: up until all healthy"] = f"{stack.wait_healthy(('router', *SERVICES)) + time.monotonic() - t:.0f} s"
+        yield stack
+    finally:
+        stack.down()
+
+
+@pytest.fixture(scope="module")
+def certs(tmp_path_factory):
+    out = tmp_path_factory.mktemp("certs")
+    make = DEPLOY / "certs" / "make-certs.sh"
+    _run(["bash", str(make), "--out", str(out), "router", *SERVICES, "intruder"])
+    foreign = tmp_path_factory.mktemp("foreign")
+    _run(["bash", str(make), "--out", str(foreign), "intruder"])
+    return out, foreign
+
+
+# ---------------------------------------------------------------------- tests: images
+def test_images_offline_minimal_non_root(built):
+    heavy = {"numpy", "pinocchio", "ruckig", "mcap", "serial"}
+    needs = {"router": set(), "gateway": set(), "kinematics": {"numpy", "pinocchio"},
+             "planner": {"numpy", "ruckig"}, "driver": {"numpy", "ruckig"},
+             "gripper": {"serial"}, "recorder": {"mcap", "zstandard"}}
+    for name, mods in needs.items():
+        image = f"rob6/{name}:{TAG}"
+        config = json.loads(_run(["docker", "image", "inspect", "-f", "{{json .Config}}", image]).stdout)
+        assert config["User"] == "rob6", (image, config["User"])
+        assert config["Healthcheck"]["Test"][0] == "CMD", image
+        absent = sorted(heavy - mods)
+        script = (f"import importlib.util as u, zenoh, rob6; [__import__(m) for m in {sorted(mods)!r}]; "
+                  f"extra = [m for m in {absent!r} if u.find_spec(m)]; assert not extra, extra; "
+                  f"import os; assert os.getuid() != 0")
+        _run(["docker", "run", "--rm", "--network", "none", image, "python", "-c", script], timeout=120)
+
+
+def test_router_container_tls_and_acl(built, certs):
+    """Infrastructure on its own: the router image with the secure profile, probed from here."""
+    certs_dir, foreign = certs
+    stack = Stack(f"rob6e2erouter{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
+                  {"ROB6_CERTS_DIR": str(certs_dir)})
+    try:
+        stack.compose("up", "-d", "--no-build", "router")
+        stack.wait_healthy(("router",), timeout=60)
+        endpoint = f"tls/127.0.0.1:{stack.zenoh_port}"
+        checks = zenoh_probe.secure_profile_checks(endpoint, certs_dir, foreign_certs=foreign)
+        REPORT["secure router probes"] = [str(c) for c in checks]
+        failed = [str(c) for c in checks if not c.ok]
+        assert not failed, "\n".join(failed)
+    finally:
+        stack.down()
+
+
+# ---------------------------------------------------------------------- tests: the running system
+def test_conformance_subset(plain):
+    checked = conformance_subset(plain.port)
+    REPORT["conformance subset (management.jsonl)"] = f"{checked} replies identical"
+    with connect(plain.port) as client:  # the whole chain: gateway -> planner -> driver, kinematics
+        assert same(FK, client.ask(FK, lines=2), fk_expected())
+        assert client.ask("MovePTPJoints 10 -60 80 20 40 30") == "true\n"
+        assert client.ask("GetPositionJoints") == "10.000000 -60.000000 80.000000 20.000000 40.000000 30.000000\n"
+
+
+def test_kinematics_killed_mid_session(plain):
+    """The client gets `ERROR: ...` at once while kinematics is gone, and the same session
+    works again when it is back; then a crash (SIGKILL inside) is restarted by the policy."""
+    expected = fk_expected()
+    with connect(plain.port) as client:
+        assert same(FK, client.ask(FK, lines=2), expected)
+        kinematics = plain.containers("kinematics")
+        _run(["docker", "kill", *kinematics])
+        t = time.monotonic()
+        reply = client.ask(FK, lines=1, timeout=10)
+        REPORT["reply without kinematics"] = f"{reply.strip()!r} after {(time.monotonic() - t) * 1000:.0f} ms"
+        assert reply.startswith("ERROR"), reply
+        assert time.monotonic() - t < 5, "the client waited instead of getting an error"
+        assert client.ask("CM_PING") == "PONG\n"  # the gateway itself is fine
+        _run(["docker", "start", *kinematics])
+        t = time.monotonic()
+        while True:  # back as soon as its liveliness token is on the bus
+            reply = client.ask(FK, lines=1, timeout=10)
+            if not reply.startswith("ERROR"):
+                reply += client.read_lines(1)
+                break
+            assert time.monotonic() - t < 60, "kinematics did not come back"
+            time.sleep(0.2)
+        REPORT["kinematics back after docker start"] = f"{time.monotonic() - t:.1f} s"
+        assert same(FK, reply, expected)
+
+        # a crash, not a stop: the restart policy brings it back
+        cid = kinematics[0]
+        before = int(_run(["docker", "inspect", "-f", "{{.RestartCount}}", cid]).stdout)
+        _run(["docker", "exec", cid, "sh", "-c", "kill -KILL -1"], check=False)  # all but docker-init
+        t = time.monotonic()
+        while int(_run(["docker", "inspect", "-f", "{{.RestartCount}}", cid]).stdout) == before:
+            assert time.monotonic() - t < 30, "kinematics was not restarted after a crash"
+            time.sleep(0.2)
+        plain.wait_healthy(("kinematics",), timeout=90)
+        REPORT["kinematics crash -> healthy again"] = f"{time.monotonic() - t:.1f} s"
+        assert same(FK, client.ask(FK, lines=2), expected)
+
+
+def test_two_kinematics_replicas_both_serve(plain):
+    plain.compose("up", "-d", "--no-build", "--no-recreate", "--scale", "kinematics=2", "kinematics")
+    plain.wait_healthy(("kinematics",), timeout=120)
+    assert len(plain.containers("kinematics")) == 2
+    with ExitStack() as stack:
+        session = zenoh_probe.open_session(zenoh_probe.client_config(f"tcp/127.0.0.1:{plain.zenoh_port}"))
+        stack.callback(session.close)
+        inbox = zenoh_probe.Inbox(session, "rob6/robot1/trace/kinematics/**")
+        deadline = time.monotonic() + 30
+        while len(zenoh_probe.alive(session, "rob6/robot1/alive/kinematics/*")) < 2:
+            assert time.monotonic() < deadline, "second kinematics instance not on the bus"
+            time.sleep(0.5)
+        client = stack.enter_context(connect(plain.port))
+        expected = fk_expected()
+        for _ in range(20):
+            assert same(FK, client.ask(FK, lines=2), expected)
+        time.sleep(0.5)
+        served: dict[str, int] = {}
+        for _key, payload in inbox.samples:
+            instance = json.loads(payload)["instance"]
+            served[instance] = served.get(instance, 0) + 1
+    REPORT["ForwardCalc x20 over 2 replicas"] = served
+    assert len(served) == 2 and min(served.values()) >= 3, served
+
+
+def test_replicas_from_outside_the_stack(plain, tmp_path):
+    """What deploy/MULTI_HOST.md describes, with this machine standing in for the other host:
+    a kinematics container outside the compose network (docker run, env settings) and a
+    plain process (deploy/zenoh/remote-client.json5), both reaching the router through its
+    published port, join the running system and get requests."""
+    endpoint = f"tcp/127.0.0.1:{plain.zenoh_port}"
+    name = f"{plain.project}-remote-kinematics"
+    config = tmp_path / "remote-client.json5"
+    config.write_text((DEPLOY / "zenoh" / "remote-client.json5").read_text().replace("tcp/robot-pc:7447", endpoint))
+    process = None
+    with ExitStack() as stack:
+        _run(["docker", "run", "-d", "--name", name, "--network", "host", "--init",
+              "-e", "ROB6_ZENOH_MODE=client", "-e", f"ROB6_ZENOH_CONNECT={endpoint}", "-e", f"ROB6_ROBOT={ROBOT}",
+              f"rob6/kinematics:{TAG}"])
+        stack.callback(_run, ["docker", "rm", "-f", name], check=False)
+        process = subprocess.Popen([str(Path(sys.executable).with_name("rob6-kinematics"))],
+                                   env={**os.environ, "ROB6_ZENOH_CONFIG": str(config), "ROB6_ROBOT": ROBOT},
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        stack.callback(process.wait, 10)
+        stack.callback(process.terminate)
+        session = zenoh_probe.open_session(zenoh_probe.client_config(endpoint))
+        stack.callback(session.close)
+        inbox = zenoh_probe.Inbox(session, "rob6/robot1/trace/kinematics/**")
+        deadline = time.monotonic() + 60
+        while len(zenoh_probe.alive(session, "rob6/robot1/alive/kinematics/*")) < 4:
+            assert process.poll() is None, "the remote kinematics process died"
+            assert time.monotonic() < deadline, zenoh_probe.alive(session, "rob6/robot1/alive/kinematics/*")
+            time.sleep(0.5)
+        client = stack.enter_context(connect(plain.port))
+        for _ in range(24):
+            assert same(FK, client.ask(FK, lines=2), fk_expected())
+        time.sleep(0.5)
+        served = {json.loads(p)["instance"] for _k, p in inbox.samples}
+        hostname = socket.gethostname()
+        remote_container = _run(["docker", "inspect", "-f", "{{.Config.Hostname}}", name]).stdout.strip()
+    REPORT["ForwardCalc x24 over 2 compose + 2 outside replicas"] = sorted(served)
+    assert len(served) == 4, served
+    assert any(i.startswith(remote_container) or i.startswith(hostname) for i in served), served
+
+
+def test_recordings_readable_after_down(plain):
+    """Stop the stack (the recorder closes its files on SIGTERM); the MCAP files stay on the
+    named volume and read back completely (summary, messages, kinematics traces)."""
+    plain.compose("down", "-t", "10")  # keeps the volume
+    volume = f"{plain.project}_recordings"
+    script = r"""
+import glob, json
+from mcap.reader import make_reader
+files = sorted(glob.glob("/data/logs/**/*.mcap", recursive=True))
+out = {"files": len(files), "messages": 0, "topics": set(), "unclosed": []}
+for path in files:
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        if reader.get_summary() is None:
+            out["unclosed"].append(path)
+        for _schema, channel, _message in reader.iter_messages():
+            out["messages"] += 1
+            out["topics"].add(channel.topic)
+out["topics"] = sorted(out["topics"])
+print(json.dumps(out))
+"""
+    proc = _run(["docker", "run", "--rm", "--network", "none", "-v", f"{volume}:/data/logs:ro",
+                 f"rob6/recorder:{TAG}", "python", "-c", script], timeout=120)
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    REPORT["recordings"] = {k: (v if k != "topics" else v[:12]) for k, v in result.items()}
+    assert result["files"] >= 1 and result["messages"] > 0, result
+    assert not result["unclosed"], result
+    assert any("kinematics" in topic for topic in result["topics"]), result["topics"]
+
+
+# ---------------------------------------------------------------------- tests: secure profile
+def test_secure_profile_end_to_end(built, entry_points, certs):
+    require(entry_points, *SERVICES)
+    certs_dir, foreign = certs
+    stack = Stack(f"rob6e2esec{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
+                  {"ROB6_CERTS_DIR": str(certs_dir)})
+    try:
+        t = time.monotonic()
+        stack.compose("up", "-d", "--no-build")
+        REPORT["secure: up until all healthy"] = f"{stack.wait_healthy(('router', *SERVICES)) + time.monotonic() - t:.0f} s"
+        # the system works through TLS + ACL ...
+        assert conformance_subset(stack.port) > 0
+        with connect(stack.port) as client:
+            assert same(FK, client.ask(FK, lines=2), fk_expected())
+            assert client.ask("MovePTPJoints 10 -60 80 20 40 30") == "true\n"
+        # ... and nobody else gets in
+        endpoint = f"tls/127.0.0.1:{stack.zenoh_port}"
+        assert zenoh_probe.refused(zenoh_probe.client_config(endpoint, certs_dir)), "no certificate got in"
+        assert zenoh_probe.refused(zenoh_probe.client_config(f"tcp/127.0.0.1:{stack.zenoh_port}"))
+        with ExitStack() as es:
+            intruder = zenoh_probe.open_session(zenoh_probe.client_config(endpoint, certs_dir, "intruder"))
+            es.callback(intruder.close)
+            inbox = zenoh_probe.Inbox(intruder, "**")
+            assert not zenoh_probe.alive(intruder, "rob6/**"), "the intruder sees the services"
+            assert not zenoh_probe.ask(intruder, "rob6/robot1/driver/*/state"), "the intruder reads the driver"
+            with connect(stack.port) as client:  # traffic the intruder must not see
+                client.ask("GetPositionJoints")
+            time.sleep(1)
+            assert not inbox.samples, inbox.keys()[:5]
+    finally:
+        stack.down()
