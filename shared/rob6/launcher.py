@@ -102,6 +102,7 @@ class Launcher:
         child.process = None
         self.echo(f"rob6: {child.name} exited with code {code}", err=True)
         if not self.restart:
+            child.next_start = float("inf")  # reported; stays down
             return
         child.restarts += 1
         child.next_start = now + min(10.0, 0.5 * 2 ** min(child.restarts - 1, 5))

@@ -29,8 +29,9 @@ class JointStateMirror:
     def _on_state(self, _key: str, payload: bytes) -> None:
         state = self._decoder.decode(payload)
         with self._lock:
-            # newer cycle, or a restarted driver (its clock started again)
-            if self._state is None or state.cycle >= self._state.cycle or state.t < self._state.t:
+            # a later cycle, or a restarted driver (its clock started again); the same cycle
+            # again may be a publication from before a move that a reply already reported
+            if self._state is None or state.cycle > self._state.cycle or state.t < self._state.t:
                 self._state, self._seen = state, time.monotonic()
 
     def update(self, state: JointState) -> None:
