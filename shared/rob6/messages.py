@@ -78,6 +78,7 @@ class JointState(Struct):
     qd: Joints  # degrees per second
     moving: bool = False
     mode: str = "idle"  # idle | trajectory | alter | stopping | fault
+    missed: int = 0  # controller cycles missed so far (the cycle came too late to run)
 
 
 class Trajectory(Struct):

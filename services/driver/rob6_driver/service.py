@@ -33,9 +33,9 @@ log = logging.getLogger("rob6.driver")
 EXECUTE_MARGIN_S = 5.0  # beyond the trajectory's own duration
 
 
-def joint_state(state: SimState) -> JointState:
+def joint_state(state: SimState, missed: int = 0) -> JointState:
     return JointState(t=state.t, cycle=state.cycle, q=state.q.tolist(), qd=state.qd.tolist(),
-                      moving=bool(state.moving), mode=state.mode)
+                      moving=bool(state.moving), mode=state.mode, missed=missed)
 
 
 class DriverService:
@@ -46,7 +46,7 @@ class DriverService:
         self.runner = CycleRunner(self.sim.step, robot.cycle_s, self._publish, name="driver-cycle")
 
     def _publish(self, state: SimState) -> None:
-        self.bus.publish("driver/state", joint_state(state))
+        self.bus.publish("driver/state", joint_state(state, self.runner.stats.missed))
 
     def _on_event(self, event: dict) -> None:
         if event.get("type") == "violation":
@@ -59,7 +59,7 @@ class DriverService:
         return PingReply(robot_time=self.sim.t, wall_time=time.time())
 
     def state(self, _req: Empty, _ctx) -> JointState:
-        return joint_state(self.sim.state())
+        return joint_state(self.sim.state(), self.runner.stats.missed)
 
     def execute(self, req: ExecuteRequest, _ctx) -> ExecuteReply:
         trajectory = req.trajectory
