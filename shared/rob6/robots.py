@@ -23,6 +23,20 @@ DH_OFFSETS_DEG = (0.0, 0.0, -90.0, 0.0, 0.0, 0.0)
 DH_ALPHA_DEG = (-90.0, 0.0, -90.0, 90.0, -90.0, 0.0)
 
 
+#: Status words per category (hand, elbow, arm): the two explicit words, then the
+#: word for "may change" and the word for "keep the current one".
+STATUS_WORDS = (
+    ("flip", "noflip", "toggleHand", "noToggleHand"),
+    ("up", "down", "toggleElbow", "noToggleElbow"),
+    ("lefty", "righty", "toggleArm", "noToggleArm"),
+)
+TOGGLE_ALL = ("toggleHand", "toggleElbow", "toggleArm")
+NO_TOGGLE_ALL = ("noToggleHand", "noToggleElbow", "noToggleArm")
+#: MovePTPHomRowWise takes no status: it chooses among these (the transcripts show it
+#: never picks righty)
+PTP_HOM_PATTERN = ("toggleHand", "toggleElbow", "lefty")
+
+
 @dataclass(frozen=True)
 class RobotModel:
     """One robot type as the original knew it."""

@@ -16,15 +16,12 @@ from __future__ import annotations
 import math
 import re
 
+from rob6.robots import STATUS_WORDS, TOGGLE_ALL
+
 WHITESPACE = " \t\r\n\v\f"
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?)")
 _INTEGER = re.compile(r"[+-]?\d+")
 
-HAND = ("flip", "noflip", "toggleHand", "noToggleHand")
-ELBOW = ("up", "down", "toggleElbow", "noToggleElbow")
-ARM = ("lefty", "righty", "toggleArm", "noToggleArm")
-CATEGORIES = (HAND, ELBOW, ARM)
-ALL_TOGGLE = ["toggleHand", "toggleElbow", "toggleArm"]
 
 
 class ParseError(Exception):
@@ -130,7 +127,7 @@ class Args:
         count = 0
         while count < 3 and not self.at_end():
             word = self.word()
-            for slot, category in enumerate(CATEGORIES):
+            for slot, category in enumerate(STATUS_WORDS):
                 if word in category:
                     if chosen[slot] is not None:
                         raise ParseError("status")
@@ -141,4 +138,4 @@ class Args:
             count += 1
         if count == 0:
             raise ParseError("status")
-        return [word or ALL_TOGGLE[slot] for slot, word in enumerate(chosen)]
+        return [word or TOGGLE_ALL[slot] for slot, word in enumerate(chosen)]

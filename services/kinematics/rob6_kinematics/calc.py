@@ -21,13 +21,13 @@ from functools import cached_property
 
 import numpy as np
 
+from rob6.robots import STATUS_WORDS
+
 from . import opw
 from .opw import BRANCH_INDEX, BRANCHES, DEG, Geometry
 
-HAND_WORDS = {"flip": "flip", "noflip": "noflip", "toggleHand": "toggle", "noToggleHand": "keep"}
-ELBOW_WORDS = {"up": "up", "down": "down", "toggleElbow": "toggle", "noToggleElbow": "keep"}
-ARM_WORDS = {"lefty": "lefty", "righty": "righty", "toggleArm": "toggle", "noToggleArm": "keep"}
-_CATEGORY = [HAND_WORDS, ELBOW_WORDS, ARM_WORDS]
+#: per category: word -> the explicit status it asks for, "toggle" (any) or "keep" (current)
+_CATEGORY = [{a: a, b: b, toggle: "toggle", keep: "keep"} for a, b, toggle, keep in STATUS_WORDS]
 #: Min-change weights the original starts with (GetMinChangeWeights).
 DEFAULT_WEIGHTS = np.array([4.0, 1.0, 1.0, 1.0, 1.0, 1.0])
 #: Tie-break order of the branches (indices into BRANCHES): flip before noflip, up

@@ -24,12 +24,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rob6 import robots
+
 DEG = np.pi / 180.0
 RAD = 180.0 / np.pi
 
-DH_SIGNS = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
-DH_OFFSETS = np.array([0.0, 0.0, -90.0, 0.0, 0.0, 0.0]) * DEG
-DH_ALPHA = np.array([-90.0, 0.0, -90.0, 90.0, -90.0, 0.0]) * DEG
+DH_SIGNS = np.array(robots.DH_SIGNS)
+DH_OFFSETS = np.array(robots.DH_OFFSETS_DEG) * DEG
+DH_ALPHA = np.array(robots.DH_ALPHA_DEG) * DEG
 
 HANDS = ("noflip", "flip")
 ELBOWS = ("up", "down")

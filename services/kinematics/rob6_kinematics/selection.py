@@ -73,6 +73,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 
+from rob6.robots import NO_TOGGLE_ALL, PTP_HOM_PATTERN, TOGGLE_ALL  # noqa: F401 (re-exported)
+
 Status = tuple[str, str, str]
 
 HANDS = ("flip", "noflip")
@@ -82,10 +84,6 @@ ARMS = ("lefty", "righty")
 #: Tie-break order of the IK branches (earlier wins on equal cost).
 STATUS_ORDER: tuple[Status, ...] = tuple((h, e, a) for h in HANDS for e in ELBOWS for a in ARMS)
 
-TOGGLE_ALL: tuple[str, str, str] = ("toggleHand", "toggleElbow", "toggleArm")
-NO_TOGGLE_ALL: tuple[str, str, str] = ("noToggleHand", "noToggleElbow", "noToggleArm")
-#: The pattern ``MovePTPHomRowWise`` uses (no status argument; a given one is ignored).
-PTP_HOM_PATTERN: tuple[str, str, str] = ("toggleHand", "toggleElbow", "lefty")
 
 _CATEGORY = {
     "flip": 0, "noflip": 0, "toggleHand": 0, "noToggleHand": 0,

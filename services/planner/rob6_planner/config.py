@@ -30,17 +30,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 
-from rob6.robots import RobotModel, get_robot
+from rob6.robots import STATUS_WORDS, TOGGLE_ALL, RobotModel, get_robot
 
 N_JOINTS = 6
 MAX_ACCEL_BOUND = 0.02
 DEFAULT_WEIGHTS = (4.0, 1.0, 1.0, 1.0, 1.0, 1.0)
 
-HAND = ("flip", "noflip", "toggleHand", "noToggleHand")
-ELBOW = ("up", "down", "toggleElbow", "noToggleElbow")
-ARM = ("lefty", "righty", "toggleArm", "noToggleArm")
-CATEGORIES = (HAND, ELBOW, ARM)
-ALL_TOGGLE = ("toggleHand", "toggleElbow", "toggleArm")
 
 FIELDS = ("speed", "accel", "max_change", "turn_max", "turn_min", "weights",
           "allowed", "rt_speed_control")
@@ -89,7 +84,7 @@ def normalise_status(words: Iterable[str]) -> list[str] | None:
     for word in words:
         if count == 3:
             break
-        for slot, category in enumerate(CATEGORIES):
+        for slot, category in enumerate(STATUS_WORDS):
             if word in category:
                 if chosen[slot] is not None:
                     return None
@@ -100,7 +95,7 @@ def normalise_status(words: Iterable[str]) -> list[str] | None:
         count += 1
     if count == 0:
         return None
-    return [w or ALL_TOGGLE[slot] for slot, w in enumerate(chosen)]
+    return [w or TOGGLE_ALL[slot] for slot, w in enumerate(chosen)]
 
 
 def status_matches(pattern: Sequence[str], target: Sequence[str], current: Sequence[str]) -> bool:
@@ -172,7 +167,7 @@ class MotionConfig:
         return True
 
     def reset_allowed(self) -> bool:
-        self.allowed = list(ALL_TOGGLE)
+        self.allowed = list(TOGGLE_ALL)
         return True
 
     # ------------------------------------------------------------------ checks

@@ -32,7 +32,7 @@ from rob6.messages import (
     SelectRequest,
     Trajectory,
 )
-from rob6.robots import RobotModel
+from rob6.robots import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN, RobotModel
 from rob6.state import JointStateMirror
 
 from .config import MotionConfig
@@ -40,9 +40,6 @@ from .trajectory import TrajectoryPlanner, plan_lin
 
 log = logging.getLogger("rob6.planner")
 
-#: MovePTPHomRowWise chooses among these (the transcripts: it never picks righty)
-PTP_HOM_PATTERN = ["toggleHand", "toggleElbow", "lefty"]
-KEEP_CONFIGURATION = ["noToggleHand", "noToggleElbow", "noToggleArm"]
 POSE_MOVES = {"MovePTPHomRowWise", "MovePTPHomRowWiseStatusTurn", "MoveMinChangeRowWiseStatus",
               "RoutetestRowWiseStatus"}
 JOINT_MOVES = {"MovePTPJoints", "MovePTPJointsStatus"}
