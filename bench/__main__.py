@@ -46,7 +46,7 @@ def gateway_latency(services: tuple[str, ...] = (), log_dir: str | None = None) 
             results["CM_PING"] = measure(client, "CM_PING", 1, COUNT)
             results["GetPositionJoints"] = measure(client, "GetPositionJoints", 1, COUNT)
             results["PingRobot"] = measure(client, "PingRobot 1 0", 1, COUNT)
-            results["ForwardCalc"] = measure(client, "ForwardCalc 10 20 30 40 50 60", 2, COUNT)
+            results["ForwardCalc"] = measure(client, "ForwardCalc 10 -20 30 40 50 60", 2, COUNT)
     return results
 
 

@@ -304,7 +304,13 @@ class Bus:
             if reply.ok is not None:
                 _resolve(fut, reply.ok.payload.to_bytes())
             else:
-                _fail(fut, BusError("internal", reply.err.payload.to_string()))
+                message = reply.err.payload.to_string()
+                if message == "Timeout":  # Zenoh's own error reply: the query timed out
+                    # (a stopped/hung instance); report it like any lost instance, not as
+                    # a bare "ERROR: Timeout" that names no service
+                    _fail(fut, _InstanceLost(f"no reply from {service} instance {instance} in time"))
+                else:
+                    _fail(fut, BusError("internal", message))
 
         def on_done() -> None:
             _fail(fut, _InstanceLost(f"no reply from {service} instance {instance}"))
@@ -347,6 +353,8 @@ class Bus:
         ``reliable`` blocks rather than drops under congestion (logs, traces); state
         streams drop, because only the latest sample matters to a controller.
         """
+        if self._closed.is_set():  # shutting down: nothing is listening any more
+            return
         publisher = self._publishers.get(suffix)
         if publisher is None:
             congestion = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
