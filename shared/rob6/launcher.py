@@ -1,8 +1,9 @@
 """``rob6 run``: the whole system on one machine (router, services, gateway).
 
-Each service is its own OS process. The launcher reports a service that dies (and
-restarts it unless told not to), stops everything on Ctrl-C/SIGTERM within about
-two seconds, and stops everything after a client's ``Shutdown``.
+Each service is its own OS process. The launcher reports a service (or the Zenoh
+router) that dies and restarts it unless told not to, stops everything on
+Ctrl-C/SIGTERM within about two seconds, and stops everything after a client's
+``Shutdown``.
 """
 
 from __future__ import annotations
@@ -79,12 +80,12 @@ class Launcher:
     def supervise(self) -> int:
         """Watch the children until stopped; returns the exit code for ``rob6 run``."""
         while not self.stopping.wait(0.1):
-            if self.router.process.poll() is not None:
-                self.echo(f"rob6: the Zenoh router exited with code {self.router.process.returncode}; "
-                          "stopping", err=True)
-                return 1
-            for child in self.children:
+            # the router too: Zenoh sessions reconnect to it by themselves once it is back
+            for child in (self.router, *self.children):
                 self._check(child)
+            if self.router.process is None and not self.restart:
+                self.echo("rob6: without the Zenoh router nothing can talk; stopping", err=True)
+                return 1
         return 0
 
     def _check(self, child: Child) -> None:
