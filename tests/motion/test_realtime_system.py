@@ -113,3 +113,19 @@ def test_alter_mode_stops_when_targets_stop_coming():
             time.sleep(0.3)
             assert [float(x) for x in client.ask("GetPositionJoints").split()] == first
             assert 0.5 < first[0] < 30.0
+
+
+def test_robot_stops_when_the_planner_goes_away_mid_motion():
+    import os
+    import signal
+    with running("kr16", dummy=False) as system:
+        with system.client() as client:
+            client.send("MovePTPJoints 60 0 0 0 30 0\n")  # ~5 s of motion
+            time.sleep(1.0)
+            os.kill(system.pids()["planner"], signal.SIGKILL)
+            assert client.read_lines(1, timeout=10).startswith("ERROR: planner")
+            time.sleep(2.5)
+            first = [float(x) for x in client.ask("GetPositionJoints").split()]
+            time.sleep(0.3)
+            assert [float(x) for x in client.ask("GetPositionJoints").split()] == first  # at rest
+            assert 5.0 < first[0] < 50.0, f"A1 at {first[0]}: it did not stop short of 60"

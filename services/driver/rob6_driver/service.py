@@ -95,7 +95,15 @@ class DriverService:
         motion = self.sim.stop("stop requested")
         return Ack(ok=motion.wait(4.0) and bool(motion.ok), reason=motion.reason or "")
 
+    def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:
+        """The planner supervises every motion: without one, the robot stops (ramped)."""
+        if service == "planner" and not alive and not self.bus.instances("planner"):
+            if self.sim.state().moving:
+                log.warning("the planner went away during a motion: stopping")
+                self.sim.stop("planner went away")
+
     def start(self) -> None:
+        self.bus.on_liveliness(self._on_liveliness)
         self.runner.start()
         self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,
                         "limits": self.limits, "alter_mode": self.alter_mode,
