@@ -17,10 +17,14 @@ from __future__ import annotations
 import argparse
 import asyncio
 import shutil
+import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
+
+# the replay target is the test suite's fake rob6 server (tests/recording/rec_helpers.py)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "recording"))
+from rec_helpers import FakeServer  # noqa: E402
 
 from rob6_recorder.replay import load_script, replay
 from rob6_recorder.writer import Recorder
@@ -93,59 +97,6 @@ def bench_sustained(rate: int = 50_000, seconds: float = 3.0, session: bool = Tr
         shutil.rmtree(d, ignore_errors=True)
 
 
-class _EchoServer:
-    """Answers ``GetRobot`` with ``kr16`` and ``Move...`` with ``true``, after a greeting."""
-
-    def __init__(self) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.ready = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.port = 0
-
-    def _run(self) -> None:
-        asyncio.set_event_loop(self.loop)
-        self.server = self.loop.run_until_complete(asyncio.start_server(self._client, "127.0.0.1", 0))
-        self.port = self.server.sockets[0].getsockname()[1]
-        self.ready.set()
-        self.loop.run_forever()
-
-    async def _client(self, reader, writer) -> None:
-        try:
-            writer.write(b"welcome to rob6server 0.1.01 !\n")
-            while line := await reader.readline():
-                if line.startswith(b"Hello Robot"):
-                    writer.write(b"accepted\n")
-                elif line.startswith(b"ForwardCalc"):
-                    writer.write(b"0.000000 -0.173648 -0.984808 1741.140107 0.000000 -0.984808 "
-                                 b"0.173648 -307.009978 -1.000000 -0.000000 -0.000000 640.000000\n"
-                                 b"noflip up lefty\n")
-                else:
-                    writer.write(b"kr16\n")
-                await writer.drain()
-        except (asyncio.CancelledError, ConnectionError):
-            pass
-        finally:
-            writer.close()
-
-    def __enter__(self):
-        self.thread.start()
-        self.ready.wait(5)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        async def stop() -> None:
-            self.server.close()
-            await self.server.wait_closed()
-            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
-            for task in tasks:
-                task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
-            self.loop.stop()
-        asyncio.run_coroutine_threadsafe(stop(), self.loop)
-        self.thread.join(5)
-        self.loop.close()
-
-
 def bench_replay(lines: int = 2000) -> dict:
     d = Path(tempfile.mkdtemp(prefix="rob6-bench-"))
     try:
@@ -164,7 +115,12 @@ def bench_replay(lines: int = 2000) -> dict:
         load_start = time.perf_counter()
         scripts = load_script(path)
         load_s = time.perf_counter() - load_start
-        with _EchoServer() as server:
+        def answer(_connection: int, line: bytes) -> tuple[bytes, bool]:
+            if line.startswith(b"Hello Robot"):
+                return b"accepted\n", False
+            return (fc if line.startswith(b"ForwardCalc") else "kr16\n").encode(), False
+
+        with FakeServer(answer) as server:
             result = asyncio.run(replay(scripts, "127.0.0.1", server.port, speed=None))
         return {"case": f"replay {lines} lines, as fast as possible",
                 "lines_per_s": result.exchanges / result.elapsed, "differences": len(result.differences),
