@@ -1,6 +1,6 @@
 # rob6 — the two commands: `make run` and `make test` (see README.md).
 # Everything installs into ./.venv from uv.lock; a fresh machine needs only
-# Python 3.11, pip, gcc and make (and Docker for the e2e tests).
+# Python 3.11-3.13, pip, gcc and make (and Docker for the e2e tests).
 
 PYTHON ?= python3
 UV_VERSION := 0.13.9
@@ -13,18 +13,26 @@ SHARED_TRUTH ?= ../shared
 # `make test PYTEST_ARGS="-m 'not docker'"` skips the slow Docker end-to-end tests
 PYTEST_ARGS ?=
 
-.PHONY: help install run test test-fast bench lock clean
+.PHONY: help install run test test-fast bench lock clean transcripts python-version
 
 help:
 	@echo "make run    start router, services and gateway (simulated KR16 on port 5005)"
 	@echo "make test   run every test (set ROB6_SKIP_DOCKER=1 to skip the Docker e2e tests)"
 	@echo "make bench  run the benchmarks and print the tables"
 
-$(UV):
+# rob6 runs on CPython 3.11-3.13 (uv.lock resolves for all three; every dependency has wheels)
+python-version:
+	@$(PYTHON) -c 'import sys; ok = (3, 11) <= sys.version_info[:2] <= (3, 13); \
+		ok or print(f"rob6 needs Python 3.11, 3.12 or 3.13; $(PYTHON) is {sys.version.split()[0]}: " \
+		"choose one with make PYTHON=python3.12 ...", file=sys.stderr); sys.exit(not ok)' \
+		|| { command -v $(PYTHON) >/dev/null || echo "rob6: no $(PYTHON) here; choose one with make PYTHON=..." >&2; exit 1; }
+
+$(UV): | python-version
 	$(PYTHON) -m venv $(TOOLS)
 	$(TOOLS)/bin/pip install --quiet uv==$(UV_VERSION)
 
-$(VENV)/.installed: $(UV) uv.lock pyproject.toml shared/pyproject.toml services/*/pyproject.toml
+$(VENV)/.installed: $(UV) | python-version
+$(VENV)/.installed: uv.lock pyproject.toml $(wildcard shared/pyproject.toml services/*/pyproject.toml controllers/*/pyproject.toml clients/*/pyproject.toml)
 	$(UV) sync --frozen --all-packages --python $(PYTHON)
 	@touch $@
 
@@ -43,7 +51,12 @@ test-fast: install
 	ROB6_SKIP_DOCKER=1 ROB6_SHARED=$(SHARED_TRUTH) $(BIN)/pytest -x -q $(PYTEST_ARGS)
 
 bench: install
-	ROB6_SHARED=$(SHARED_TRUTH) $(BIN)/python -m bench
+	$(BIN)/python -m bench
+
+# the original's transcripts travel with the tests: refresh the copy from the ground truth
+transcripts:
+	find tests/transcripts -mindepth 1 ! -name ORIGIN.md -delete
+	cp -r $(SHARED_TRUTH)/conformance/. tests/transcripts/
 
 clean:
 	rm -rf $(VENV) $(TOOLS) .pytest_cache .hypothesis

@@ -9,6 +9,8 @@
 #   wheelhouse/req/<svc>.txt     all third-party requirements of a service
 #   wheelhouse/req/numeric.txt   what kinematics, planner and driver share beyond common (numpy)
 #   wheelhouse/req/<svc>-extra.txt  the rest of <svc>.txt (the service's own image layer)
+#   wheelhouse/req/<ctl>.txt     third-party requirements of a stand-in controller (controllers/*:
+#                                kuka-rsi-sim), installed on the bare runtime, without rob6-shared
 #   wheelhouse/debs/*.deb        Debian packages some wheels expect from the system (libgomp1)
 #   wheelhouse/SHA256SUMS        checksums of all wheels and debs
 #
@@ -32,12 +34,13 @@ for arg in "$@"; do
     case "$arg" in
         --clean) clean=1 ;;
         --offline) offline=1 ;;
-        -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,22p' "$0"; exit 0 ;;
         *) echo "unknown argument: $arg" >&2; exit 2 ;;
     esac
 done
 
 services="gateway kinematics planner driver gripper recorder"
+controllers="kuka-rsi-sim"  # stand-in robot controllers with an image (profile rsi)
 system_debs="libgomp1"
 start=$(date +%s)
 [ "$clean" = 1 ] && rm -rf "$out"
@@ -53,6 +56,9 @@ export_req rob6-shared "$out/req/common.txt"
 for svc in $services; do
     export_req "rob6-$svc" "$out/req/$svc.txt"
 done
+for ctl in $controllers; do
+    export_req "rob6-$ctl" "$out/req/$ctl.txt"
+done
 # image layers: common (every image) < numeric (what kinematics, planner and driver share:
 # numpy) < <svc>-extra (the rest of that service's closure)
 comm -12 "$out/req/kinematics.txt" "$out/req/planner.txt" | comm -12 - "$out/req/driver.txt" \
@@ -61,7 +67,7 @@ for svc in $services; do
     case "$svc" in kinematics|planner|driver) base_layers="$out/req/numeric.txt" ;; *) base_layers=/dev/null ;; esac
     comm -23 "$out/req/$svc.txt" "$out/req/common.txt" | comm -23 - <(sort "$base_layers") >"$out/req/$svc-extra.txt"
 done
-sort -u "$out"/req/common.txt $(for s in $services; do echo "$out/req/$s.txt"; done) >"$out/req/all.txt"
+sort -u "$out"/req/common.txt $(for s in $services $controllers; do echo "$out/req/$s.txt"; done) >"$out/req/all.txt"
 echo "pip==$pip_version" >"$out/req/pip.txt"
 
 # 2. third-party wheels for the target platform (not the build host's): binary only,
