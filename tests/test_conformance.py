@@ -1,13 +1,12 @@
-"""Replay the original's transcripts (../shared/conformance) against a fresh rob6 per file."""
+"""Replay the original's transcripts (tests/transcripts) against a fresh rob6 per file."""
 
 from __future__ import annotations
 
 import pytest
 from conformance import replay
-from system import CONFORMANCE, running
+from system import CONFORMANCE, SHARED, running
 
 ROBOTS = ("kr16", "ad850", "kaw_fs", "kr3rt", "kr16rt", "kr3")
-
 
 
 def cases():
@@ -15,6 +14,23 @@ def cases():
     for robot in ROBOTS:
         for path in sorted((CONFORMANCE / robot).glob("*.jsonl")):
             yield pytest.param(robot, path, id=f"{robot}-{path.stem}")
+
+
+def test_every_robot_has_transcripts():
+    """A missing or emptied transcript set is a failure, never a silently shorter suite."""
+    counts = {robot: len(list((CONFORMANCE / robot).glob("*.jsonl"))) for robot in ROBOTS}
+    assert all(counts.values()) and sum(counts.values()) >= 150, counts  # 150 when copied
+
+
+def test_transcripts_match_the_ground_truth():
+    """The copy kept with the tests is the ground truth's (when it is beside the project)."""
+    truth = SHARED / "conformance"
+    if not truth.is_dir():
+        pytest.skip(f"no ground truth at {truth} to compare the copy with")
+    ours = {p.relative_to(CONFORMANCE): p.read_bytes() for p in CONFORMANCE.rglob("*")
+            if p.is_file() and p.name != "ORIGIN.md"}
+    theirs = {p.relative_to(truth): p.read_bytes() for p in truth.rglob("*") if p.is_file()}
+    assert ours == theirs, "tests/transcripts differs from ../shared/conformance: run `make transcripts`"
 
 
 @pytest.mark.parametrize("robot, path", list(cases()))

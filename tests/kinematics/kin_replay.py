@@ -19,7 +19,6 @@ import numpy as np
 
 from rob6_kinematics.calc import Kinematics, parse_pattern
 
-CONFORMANCE = Path("/work/shared/conformance")
 _NUM = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 
 JOINT_TOL = 1e-5

@@ -22,7 +22,6 @@ from __future__ import annotations
 import json
 import math
 from functools import lru_cache
-from pathlib import Path
 
 import pytest
 from rob6.robots import get_robot
@@ -40,7 +39,9 @@ from rob6_kinematics.selection import (
     select_from_solutions,
 )
 
-CONFORMANCE = Path("/work/shared/conformance")
+from system import CONFORMANCE
+
+
 FILES = ("motion_minchange", "motion_ptp", "motion_routetest", "session")
 CART_MOVES = (
     "MoveMinChangeRowWiseStatus",

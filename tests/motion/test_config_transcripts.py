@@ -19,7 +19,9 @@ import pytest
 
 from rob6_planner.config import MotionConfig, normalise_status
 
-CONFORMANCE = Path("/work/shared/conformance")
+from system import CONFORMANCE
+
+
 ROBOTS = ("kr16", "kr16rt", "kr3rt", "ad850", "kaw_fs")
 SCRIPTS = ("limits", "limits_bounds", "misc")
 
