@@ -12,7 +12,12 @@ Key expressions (``<id>`` is the robot id, so several robots share one network):
     rob6/<id>/trace/gateway/session        each client line in / reply out (recorder)
 
 Requests go to one *instance*: the bus watches the liveliness tokens and spreads the
-calls of a service over its live instances (least in flight, then round robin).
+calls of a replicated service (kinematics) over its live instances (least in flight,
+then round robin). A robot has one driver, planner, gripper and gateway
+(``OWNER_SERVICES``, claimed in ``rob6.ownership``): calls to those go to the one
+instance this process follows (the first it saw alive), and subscriptions made with
+``owner=`` drop samples any other instance publishes (every publication carries its
+instance id as the Zenoh attachment), so a stray second driver is never mixed in.
 Zenoh itself would send every query to one complete queryable, so replicas would sit
 idle without this. When an instance vanishes mid-request (its token disappears) or
 does not answer in time, a request to an idempotent service is retried once on
@@ -27,7 +32,6 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import functools
 import itertools
 import logging
 import threading
@@ -43,6 +47,7 @@ from .config import BusSettings
 from .messages import (
     IDEMPOTENT_SERVICES,
     OPS,
+    OWNER_SERVICES,
     SCHEMA_VERSION,
     ErrorBody,
     ReplyEnvelope,
@@ -126,15 +131,16 @@ class Bus:
         self._lock = threading.Lock()
         self._live: dict[str, list[str]] = {}
         self._inflight: dict[str, int] = {}
-        self._pending: dict[str, set[concurrent.futures.Future]] = {}
+        self._pending: dict[str, set[_Waiter]] = {}
         self._rotation = itertools.count()
         self._listeners: list[Callable[[str, str, bool], None]] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._declared: list = []
         self._workers: list[threading.Thread] = []
         self._closed = threading.Event()
-        self._executor = concurrent.futures.ThreadPoolExecutor(8, thread_name_prefix=f"{service}-req")
         self._decoders: dict[type, msgspec.json.Decoder] = {}
+        self._attachment = self.instance.encode()
+        self._foreign_warned: set[tuple[str, str]] = set()
         self._live_sub = self.session.liveliness().declare_subscriber(
             self.key("alive", "**"), zenoh.handlers.Callback(self._on_liveliness), history=True)
 
@@ -156,8 +162,8 @@ class Bus:
             elif not alive and instance in instances:
                 instances.remove(instance)
             lost = self._pending.pop(instance, set()) if not alive else set()
-        for fut in lost:
-            _fail(fut, _InstanceLost(f"{service} instance {instance} went away"))
+        for waiter in lost:
+            waiter.fail(_InstanceLost(f"{service} instance {instance} went away"))
         for listener in list(self._listeners):
             try:
                 listener(service, instance, alive)
@@ -172,6 +178,12 @@ class Bus:
         with self._lock:
             return list(self._live.get(service, ()))
 
+    def owner(self, service: str) -> str | None:
+        """The instance of an owner service this process follows: the first it saw alive."""
+        with self._lock:
+            live = self._live.get(service)
+            return live[0] if live else None
+
     def wait_for(self, services: tuple[str, ...] | list[str], timeout: float) -> list[str]:
         """Wait until every service has a live instance; returns the ones still missing."""
         deadline = time.monotonic() + timeout
@@ -183,7 +195,10 @@ class Bus:
 
     def _pick(self, service: str, exclude: set[str]) -> str | None:
         with self._lock:
-            candidates = [i for i in self._live.get(service, ()) if i not in exclude]
+            live = self._live.get(service, ())
+            if service in OWNER_SERVICES:  # the followed one, never a second owner
+                return live[0] if live and live[0] not in exclude else None
+            candidates = [i for i in live if i not in exclude]
             if not candidates:
                 return None
             start = next(self._rotation) % len(candidates)
@@ -243,13 +258,13 @@ class Bus:
             if envelope.v != SCHEMA_VERSION:
                 raise BusError("schema", f"schema version {envelope.v}, expected {SCHEMA_VERSION}")
             body = handlers[op](envelope.body, Context(cid=cid, op=op))
-            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=True, body=body)
+            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=True, instance=self.instance, body=body)
         except BusError as exc:
-            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False,
+            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance,
                                   error=ErrorBody(code=exc.code, message=exc.message))
         except Exception as exc:  # never a traceback on the wire; the log has it
             log.exception("%s.%s failed (cid %s)", self.service, op, cid)
-            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, error=ErrorBody(
+            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance, error=ErrorBody(
                 code="internal", message=f"{self.service}.{op}: {type(exc).__name__}: {exc}"))
         payload = _encoder.encode(reply)
         query.reply(query.key_expr, payload)
@@ -274,77 +289,63 @@ class Bus:
         Raises ``BusError`` with code ``unavailable`` (no live instance), ``timeout``,
         or whatever the service answered (``rejected``, ``invalid``, ``internal``...).
         """
-        spec = OPS[(service, op)]
-        timeout = spec.timeout if timeout is None else timeout
-        deadline = time.monotonic() + timeout
-        cid = cid or new_cid()
-        payload = _encoder.encode(RequestEnvelope(v=SCHEMA_VERSION, cid=cid, body=body))
-        retry = instance is None and service in IDEMPOTENT_SERVICES
-        tried: set[str] = set()
+        call = _Request(self, service, op, body, timeout, cid, instance)
         while True:
-            target = instance or self._pick(service, tried)
-            if target is None:
-                if tried:
-                    raise BusError("timeout", f"{service} did not answer {op} in time")
-                raise BusError("unavailable", f"{service} unavailable")
+            target = call.next_target()
+            waiter = self._send(call, target, _Waiter())
             try:
-                return self._call(service, target, op, spec, payload, deadline)
+                return call.decode(waiter.result(call.remaining() + 0.05), target)
             except _InstanceLost as exc:
-                tried.add(target)
-                remaining = deadline - time.monotonic()
-                if not retry or len(tried) >= 2 or remaining <= 0:
-                    code = "timeout" if remaining <= 0 else "unavailable"
-                    raise BusError(code, f"{service} unavailable ({exc})") from None
-                log.warning("retrying %s.%s on another instance: %s", service, op, exc)
+                call.lost(target, exc)
+            finally:
+                self._done(target, waiter)
 
-    def _call(self, service, instance, op, spec, payload, deadline):
-        fut: concurrent.futures.Future = concurrent.futures.Future()
+    async def arequest(self, service: str, op: str, body, *, timeout: float | None = None,
+                       cid: str | None = None, instance: str | None = None):
+        """``request`` for asyncio code: the reply wakes the event loop straight from
+        Zenoh's callback thread (no executor thread in between)."""
+        call = _Request(self, service, op, body, timeout, cid, instance)
+        loop = asyncio.get_running_loop()
+        while True:
+            target = call.next_target()
+            waiter = self._send(call, target, _Waiter(loop))
+            try:
+                return call.decode(await waiter.aresult(call.remaining() + 0.05), target)
+            except _InstanceLost as exc:
+                call.lost(target, exc)
+            finally:
+                self._done(target, waiter)
+
+    def _send(self, call: "_Request", instance: str, waiter: "_Waiter") -> "_Waiter":
+        """Send the query; its reply, or the loss of the instance, completes ``waiter``."""
+        service = call.service
 
         def on_reply(reply: zenoh.Reply) -> None:
             if reply.ok is not None:
-                _resolve(fut, reply.ok.payload.to_bytes())
+                waiter.resolve(reply.ok.payload.to_bytes())
             else:
                 message = reply.err.payload.to_string()
                 if message == "Timeout":  # Zenoh's own error reply: the query timed out
                     # (a stopped/hung instance); report it like any lost instance, not as
                     # a bare "ERROR: Timeout" that names no service
-                    _fail(fut, _InstanceLost(f"no reply from {service} instance {instance} in time"))
+                    waiter.fail(_InstanceLost(f"no reply from {service} instance {instance} in time"))
                 else:
-                    _fail(fut, BusError("internal", message))
+                    waiter.fail(BusError("internal", message))
 
         def on_done() -> None:
-            _fail(fut, _InstanceLost(f"no reply from {service} instance {instance}"))
+            waiter.fail(_InstanceLost(f"no reply from {service} instance {instance}"))
 
         with self._lock:
-            self._pending.setdefault(instance, set()).add(fut)
+            self._pending.setdefault(instance, set()).add(waiter)
             self._inflight[instance] = self._inflight.get(instance, 0) + 1
-        try:
-            remaining = max(deadline - time.monotonic(), 0.001)
-            self.session.get(self.key(service, instance, op),
-                             zenoh.handlers.Callback(on_reply, on_done),
-                             payload=payload, timeout=remaining)
-            try:
-                raw = fut.result(timeout=remaining + 0.05)
-            except concurrent.futures.TimeoutError:
-                raise _InstanceLost(f"no reply from {service} instance {instance}") from None
-        finally:
-            with self._lock:
-                self._pending.get(instance, set()).discard(fut)
-                self._inflight[instance] = self._inflight.get(instance, 1) - 1
-        try:
-            envelope = self._decoder(ReplyEnvelope[spec.reply]).decode(raw)
-        except msgspec.DecodeError as exc:
-            raise BusError("schema", f"malformed {service}.{op} reply: {exc}") from None
-        if not envelope.ok:
-            error = envelope.error or ErrorBody(code="internal", message="error without detail")
-            raise BusError(error.code, error.message)
-        return envelope.body
+        self.session.get(self.key(service, instance, call.op), zenoh.handlers.Callback(on_reply, on_done),
+                         payload=call.payload, timeout=max(call.remaining(), 0.001))
+        return waiter
 
-    async def arequest(self, service: str, op: str, body, **kwargs):
-        """``request`` for asyncio code (runs on the bus's request threads)."""
-        loop = asyncio.get_running_loop()
-        return await loop.run_in_executor(
-            self._executor, functools.partial(self.request, service, op, body, **kwargs))
+    def _done(self, instance: str, waiter: "_Waiter") -> None:
+        with self._lock:
+            self._pending.get(instance, set()).discard(waiter)
+            self._inflight[instance] = self._inflight.get(instance, 1) - 1
 
     # ------------------------------------------------------------------ pub/sub
     def publish(self, suffix: str, data, *, reliable: bool = False) -> None:
@@ -360,12 +361,18 @@ class Bus:
             congestion = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
             publisher = self._publishers[suffix] = self.session.declare_publisher(
                 self.key(suffix), congestion_control=congestion)
-        publisher.put(data if isinstance(data, bytes) else _encoder.encode(data))
+        publisher.put(data if isinstance(data, bytes) else _encoder.encode(data), attachment=self._attachment)
 
-    def subscribe(self, suffix: str, on_message: Callable[[str, bytes], None]):
-        """Call ``on_message(key, payload)`` for every sample; it must not block."""
+    def subscribe(self, suffix: str, on_message: Callable[[str, bytes], None], *, owner: str | None = None):
+        """Call ``on_message(key, payload)`` for every sample; it must not block.
+
+        ``owner``: an owner service; only what its followed instance publishes is passed
+        on, anything else is logged (once per publisher) and dropped.
+        """
         def callback(sample: zenoh.Sample) -> None:
             try:
+                if owner is not None and not self._from_owner(owner, suffix, sample):
+                    return
                 on_message(str(sample.key_expr), sample.payload.to_bytes())
             except Exception:
                 log.exception("subscriber of %s failed", suffix)
@@ -374,30 +381,121 @@ class Bus:
         self._declared.append(subscriber)
         return subscriber
 
+    def _from_owner(self, service: str, suffix: str, sample: zenoh.Sample) -> bool:
+        attachment = sample.attachment
+        sender = attachment.to_bytes().decode(errors="replace") if attachment is not None else "?"
+        followed = self.owner(service)
+        if sender == followed:
+            return True
+        if followed is None:  # its liveliness token has not arrived yet (start-up)
+            return False
+        if (suffix, sender) not in self._foreign_warned and len(self._foreign_warned) < 100:
+            self._foreign_warned.add((suffix, sender))
+            log.warning("ignoring %s from %s: this %s follows the %s %s", self.key(suffix), sender,
+                        self.service, service, followed)
+        return False
+
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
         if self._closed.is_set():
             return
         self._closed.set()
-        self._executor.shutdown(wait=False, cancel_futures=True)
         try:
             self.session.close()
         except Exception:
             log.debug("closing the zenoh session failed", exc_info=True)
 
 
-def _resolve(fut: concurrent.futures.Future, value) -> None:
-    try:
-        fut.set_result(value)
-    except concurrent.futures.InvalidStateError:
-        pass
+class _Request:
+    """One request: its encoded payload, deadline and the instances tried so far."""
+
+    def __init__(self, bus: Bus, service: str, op: str, body, timeout: float | None,
+                 cid: str | None, instance: str | None):
+        self.bus, self.service, self.op, self.instance = bus, service, op, instance
+        self.spec = OPS[(service, op)]
+        self.deadline = time.monotonic() + (self.spec.timeout if timeout is None else timeout)
+        self.payload = _encoder.encode(RequestEnvelope(v=SCHEMA_VERSION, cid=cid or new_cid(), body=body))
+        self.retry = instance is None and service in IDEMPOTENT_SERVICES
+        self.tried: set[str] = set()
+
+    def remaining(self) -> float:
+        return self.deadline - time.monotonic()
+
+    def next_target(self) -> str:
+        target = self.instance or self.bus._pick(self.service, self.tried)
+        if target is None:
+            if self.tried:
+                raise BusError("timeout", f"{self.service} did not answer {self.op} in time")
+            raise BusError("unavailable", f"{self.service} unavailable")
+        return target
+
+    def lost(self, target: str, exc: Exception) -> None:
+        """The target vanished or did not answer: raise, or return to try another replica."""
+        self.tried.add(target)
+        remaining = self.remaining()
+        if not self.retry or len(self.tried) >= 2 or remaining <= 0:
+            code = "timeout" if remaining <= 0 else "unavailable"
+            raise BusError(code, f"{self.service} unavailable ({exc})") from None
+        log.warning("retrying %s.%s on another instance: %s", self.service, self.op, exc)
+
+    def decode(self, raw: bytes, target: str):
+        try:
+            envelope = self.bus._decoder(ReplyEnvelope[self.spec.reply]).decode(raw)
+        except msgspec.DecodeError as exc:
+            raise BusError("schema", f"malformed {self.service}.{self.op} reply: {exc}") from None
+        if envelope.instance != target:  # never a second owner's answer, whatever the network did
+            raise BusError("foreign", f"{self.service}.{self.op} answered by {envelope.instance!r}, "
+                                      f"asked {target!r}")
+        if not envelope.ok:
+            error = envelope.error or ErrorBody(code="internal", message="error without detail")
+            raise BusError(error.code, error.message)
+        return envelope.body
 
 
-def _fail(fut: concurrent.futures.Future, exc: BaseException) -> None:
-    try:
-        fut.set_exception(exc)
-    except concurrent.futures.InvalidStateError:
-        pass
+class _Waiter:
+    """Where a reply goes: completed from any thread (Zenoh's), first outcome wins.
+
+    With an event loop the future is an asyncio one, completed through the loop's
+    thread-safe call; otherwise a concurrent.futures one a thread can block on.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop | None = None):
+        self.loop = loop
+        self.future = loop.create_future() if loop is not None else concurrent.futures.Future()
+
+    def result(self, timeout: float) -> bytes:
+        try:
+            return self.future.result(timeout=timeout)
+        except concurrent.futures.TimeoutError:
+            raise _InstanceLost("no reply in time") from None
+
+    async def aresult(self, timeout: float) -> bytes:
+        try:
+            return await asyncio.wait_for(self.future, timeout)
+        except TimeoutError:
+            raise _InstanceLost("no reply in time") from None
+
+    def resolve(self, value: bytes) -> None:
+        self._complete(self.future.set_result, value)
+
+    def fail(self, exc: BaseException) -> None:
+        self._complete(self.future.set_exception, exc)
+
+    def _complete(self, setter, value) -> None:
+        if self.loop is None:
+            try:
+                setter(value)
+            except concurrent.futures.InvalidStateError:
+                pass
+        else:
+            try:
+                self.loop.call_soon_threadsafe(self._complete_in_loop, setter, value)
+            except RuntimeError:  # the loop is closed: nobody waits any more
+                pass
+
+    def _complete_in_loop(self, setter, value) -> None:
+        if not self.future.done():
+            setter(value)
 
 
 def decode(typ: type, payload: bytes):

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 import click
 
 from . import logs
-from .config import bus_options
+from .config import LINKS, bus_options
+from .messages import SERVICES
 from .robots import ROBOT_TYPES
 
 
@@ -28,11 +30,17 @@ def main():
               show_default=True, help="Let a client's Shutdown stop the system.")
 @click.option("--restart/--no-restart", default=True, show_default=True,
               help="Restart a service that died (it is reported either way).")
-@click.option("--service", "services", multiple=True, help="Start only these services (repeat).")
-@click.option("--log-level", envvar="ROB6_LOG_LEVEL", default="WARNING", show_default=True)
-def run(robot, robot_id, port, router_port, log_dir, dummy, allow_shutdown, restart, services, log_level):
+@click.option("--link", envvar="ROB6_LINK", default="sim", show_default=True, type=click.Choice(LINKS),
+              help="How the driver reaches the robot: the simulation, or a KUKA over RSI [env ROB6_LINK].")
+@click.option("--service", "services", multiple=True, type=click.Choice(SERVICES),
+              help="Start only these services (repeat).")
+@click.option("--log-level", envvar="ROB6_LOG_LEVEL", default="WARNING", show_default=True,
+              type=click.Choice(["DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"], case_sensitive=False))
+def run(robot, robot_id, port, router_port, log_dir, dummy, allow_shutdown, restart, link, services,
+        log_level):
     """Start everything on this machine: router, services and gateway."""
-    from .launcher import SERVICES, run as run_system
+    from .launcher import run as run_system
+    os.environ["ROB6_LINK"] = link  # the driver reads it
     sys.exit(run_system(robot=robot, robot_id=robot_id, port=port, router_port=router_port,
                         log_dir=log_dir, dummy=dummy, allow_shutdown=allow_shutdown, restart=restart,
                         services=tuple(services) or SERVICES, log_level=log_level.upper()))

@@ -19,6 +19,8 @@ import click
 from .robots import ROBOT_TYPES
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+#: how the driver reaches the robot: the simulation, or a KUKA KR C4 over RSI
+LINKS = ("sim", "rsi")
 
 
 @dataclass(frozen=True)

@@ -1,13 +1,20 @@
 """``rob6 run``: the whole system on one machine (router, services, gateway).
 
-Each service is its own OS process. The launcher reports a service (or the Zenoh
-router) that dies and restarts it unless told not to, stops everything on
-Ctrl-C/SIGTERM within about two seconds, and stops everything after a client's
-``Shutdown``.
+Each service is its own OS process. Before starting anything the launcher checks that
+its ports are free, so a second ``rob6 run`` (an everyday slip) ends at once with one
+line naming the cause and the fix. ``ready`` is printed only when every service is
+alive and the gateway listens. A child that fails to start ends the whole start (no
+restart loop for what a restart cannot fix); a child that crashes at run time is
+reported and restarted (unless ``--no-restart``), except one that exits with
+``EXIT_REFUSED`` (another owner of the robot, a bad setting). Ctrl-C, SIGTERM or a
+client's ``Shutdown`` stop everything in order: the gateway first (no new commands),
+then the services, the recorder last (so the end of every session is in its file),
+then the router.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import socket
@@ -21,9 +28,11 @@ import click
 
 from .bus import Bus
 from .config import BusSettings
+from .ownership import EXIT_REFUSED
 
-SERVICES = ("driver", "kinematics", "planner", "gripper", "recorder", "gateway")
-STOP_GRACE_S = 1.5
+#: stop order, and how long each group may take before it is killed
+STOP_ORDER = ((("gateway",), 0.5), (("planner", "driver", "gripper", "kinematics"), 0.8),
+              (("recorder",), 1.5), (("router",), 0.3))
 
 
 @dataclass
@@ -34,6 +43,10 @@ class Child:
     restarts: int = 0
     next_start: float = 0.0
     exits: list[int] = field(default_factory=list)
+
+
+class StartFailed(Exception):
+    """One line for the user: why the system could not start and what to do."""
 
 
 class Launcher:
@@ -47,7 +60,8 @@ class Launcher:
         self.env = dict(os.environ, ROB6_ROBOT=robot, ROB6_ROBOT_ID=robot_id, ROB6_PORT=str(port),
                         ROB6_LOG_DIR=log_dir, ROB6_DUMMY="1" if dummy else "0",
                         ROB6_ZENOH_CONNECT=self.endpoint, ROB6_LOG_LEVEL=log_level,
-                        ROB6_ALLOW_SHUTDOWN="1" if allow_shutdown else "0")
+                        ROB6_ALLOW_SHUTDOWN="1" if allow_shutdown else "0",
+                        ROB6_SERVICES=",".join(services))
         self.env.pop("ROB6_ZENOH_LISTEN", None)
         self.settings = BusSettings(robot=robot, robot_id=robot_id, connect=(self.endpoint,))
         self.router = Child("router", [sys.executable, "-m", "rob6.cli", "router",
@@ -60,68 +74,123 @@ class Launcher:
     def _spawn(self, child: Child) -> None:
         child.process = subprocess.Popen(child.argv, env=self.env, stdin=subprocess.DEVNULL)
 
-    def start(self, ready_timeout: float = 30.0) -> bool:
+    def preflight(self) -> None:
+        """Everything a start can be refused for, checked before anything starts."""
+        names = {c.name for c in self.children}
+        if "gateway" in names:
+            bind = self.env.get("ROB6_BIND", "0.0.0.0")
+            _check_free(socket.SOCK_STREAM, bind, self.port,
+                        f"the client port {bind}:{self.port} is in use: is rob6 (or rob6server) already "
+                        f"running? Stop it, or choose another port with ROB6_PORT")
+        _check_free(socket.SOCK_STREAM, "127.0.0.1", self.router_port,
+                    f"the Zenoh router port 127.0.0.1:{self.router_port} is in use: is rob6 already running? "
+                    f"Stop it, or choose another port with ROB6_ROUTER_PORT")
+        if "driver" in names and self.env.get("ROB6_LINK", "sim") == "rsi":
+            listen = self.env.get("ROB6_RSI_LISTEN", "0.0.0.0:49152")
+            host, _, port = listen.rpartition(":")
+            if not host or not port.isdigit():
+                raise StartFailed(f"ROB6_RSI_LISTEN={listen!r}: expected HOST:PORT, e.g. 0.0.0.0:49152")
+            _check_free(socket.SOCK_DGRAM, host.strip("[]"), int(port),
+                        f"the RSI port udp/{listen} is in use: is another rob6 driving the robot? "
+                        f"Stop it, or set ROB6_RSI_LISTEN")
+
+    def start(self, ready_timeout: float = 60.0) -> None:
+        """Start the router and every service; returns once all are alive, else raises StartFailed."""
+        self.preflight()
         self._spawn(self.router)
         if not _wait_port(self.router_port, 10.0, self.router):
-            self.echo(f"rob6: the Zenoh router did not start on port {self.router_port}", err=True)
-            return False
+            raise StartFailed(f"the Zenoh router did not start on port {self.router_port} (see above)")
         self.bus = Bus(self.settings, "launcher")
         self.bus.subscribe("control/shutdown", lambda *_: self.stopping.set())
         for child in self.children:
             self._spawn(child)
-        services = [c.name for c in self.children]
-        # the gateway announces itself once it listens, so its token means the port is open
-        missing = self.bus.wait_for(services, ready_timeout)
-        if missing:
-            self.echo(f"rob6: not ready after {ready_timeout:.0f} s, missing: {', '.join(missing)}", err=True)
-            return False
-        return True
+        # the gateway announces itself once it listens (after the services it needs), so
+        # its token means a client gets real answers
+        deadline = time.monotonic() + ready_timeout
+        waiting = [c.name for c in self.children]
+        while waiting:
+            for child in (self.router, *self.children):
+                code = child.process.poll()
+                if code is not None:
+                    raise StartFailed(f"{child.name} failed to start (exit code {code}, see above)")
+            if self.stopping.is_set():
+                raise StartFailed("stopped before the system was ready")
+            if time.monotonic() > deadline:
+                raise StartFailed(f"not ready after {ready_timeout:.0f} s, still waiting for {', '.join(waiting)}")
+            waiting = [name for name in waiting if not self.bus.instances(name)]
+            time.sleep(0.02)
 
     def supervise(self) -> int:
         """Watch the children until stopped; returns the exit code for ``rob6 run``."""
         while not self.stopping.wait(0.1):
             # the router too: Zenoh sessions reconnect to it by themselves once it is back
             for child in (self.router, *self.children):
-                self._check(child)
+                if not self._check(child):
+                    return 1
             if self.router.process is None and not self.restart:
                 self.echo("rob6: without the Zenoh router nothing can talk; stopping", err=True)
                 return 1
         return 0
 
-    def _check(self, child: Child) -> None:
+    def _check(self, child: Child) -> bool:
+        """False when the system cannot go on (a child refused to run)."""
         process = child.process
         now = time.monotonic()
         if process is None:
             if now >= child.next_start:
                 self.echo(f"rob6: restarting {child.name}", err=True)
                 self._spawn(child)
-            return
+            return True
         code = process.poll()
         if code is None:
-            return
+            return True
         child.exits.append(code)
         child.process = None
+        if code == EXIT_REFUSED:
+            self.echo(f"rob6: {child.name} refused to run (see above); a restart cannot fix that: stopping",
+                      err=True)
+            return False
         self.echo(f"rob6: {child.name} exited with code {code}", err=True)
         if not self.restart:
             child.next_start = float("inf")  # reported; stays down
-            return
+            return True
         child.restarts += 1
         child.next_start = now + min(10.0, 0.5 * 2 ** min(child.restarts - 1, 5))
+        return True
 
     def stop(self) -> None:
         self.stopping.set()
-        running = [c.process for c in (*self.children, self.router) if c.process and c.process.poll() is None]
-        for process in running:
-            process.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + STOP_GRACE_S
-        for process in running:
-            try:
-                process.wait(max(0.0, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+        by_name = {c.name: c for c in (*self.children, self.router)}
+        for names, grace in STOP_ORDER:
+            group = [by_name[n].process for n in names if n in by_name and by_name[n].process]
+            _terminate([p for p in group if p.poll() is None], grace)
         if self.bus is not None:
             self.bus.close()
+
+
+def _terminate(processes: list[subprocess.Popen], grace: float) -> None:
+    for process in processes:
+        process.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + grace
+    for process in processes:
+        try:
+            process.wait(max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def _check_free(kind: int, host: str, port: int, message: str) -> None:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, kind) as sock:
+        if kind == socket.SOCK_STREAM:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the servers bind
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            if exc.errno in (errno.EADDRINUSE, errno.EACCES):
+                raise StartFailed(message) from None
+            raise StartFailed(f"cannot use {host}:{port}: {exc.strerror}") from None
 
 
 def _wait_port(port: int, timeout: float, child: Child | None = None) -> bool:
@@ -142,10 +211,12 @@ def run(**options) -> int:
     signal.signal(signal.SIGTERM, lambda *_: launcher.stopping.set())
     signal.signal(signal.SIGINT, lambda *_: launcher.stopping.set())
     try:
-        if not launcher.start():
-            return 1
+        launcher.start()
         click.echo(f"rob6 ready: robot {launcher.robot} on 127.0.0.1:{launcher.port} "
                    f"(Zenoh router {launcher.endpoint}); Ctrl-C stops everything", err=True)
         return launcher.supervise()
+    except StartFailed as exc:
+        click.echo(f"rob6: {exc}", err=True)
+        return 1
     finally:
         launcher.stop()

@@ -15,6 +15,8 @@ import zenoh
 
 from .bus import zenoh_config
 from .config import BusSettings
+from .ownership import EXIT_REFUSED
+from .service import fail
 
 log = logging.getLogger("rob6.router")
 
@@ -23,7 +25,14 @@ def run(settings: BusSettings, listen: tuple[str, ...]) -> None:
     stop = threading.Event()
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda *_: stop.set())
-    session = zenoh.open(zenoh_config(settings, mode="router", listen=listen))
+    try:
+        session = zenoh.open(zenoh_config(settings, mode="router", listen=listen))
+    except zenoh.ZError as exc:  # almost always: the port is taken
+        log.debug("the router could not start", exc_info=True)
+        in_use = "in use" in str(exc).lower()
+        fail("router", f"cannot listen on {', '.join(listen)}: "
+                       f"{'address already in use' if in_use else exc}; is another rob6 running? "
+                       f"Stop it or choose another ROB6_ROUTER_PORT / ROB6_ZENOH_LISTEN", EXIT_REFUSED)
     log.warning("zenoh router %s listening on %s", session.zid(), ", ".join(listen) or "(config file)")
     stop.wait()
     session.close()

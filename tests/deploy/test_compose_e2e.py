@@ -421,6 +421,38 @@ def test_replicas_from_outside_the_stack(plain, tmp_path):
     assert any(i.startswith(remote_container) or i.startswith(hostname) for i in served), served
 
 
+def test_second_project_for_the_same_robot_is_refused(plain, tmp_path):
+    """One robot, one owner, in containers: a second compose project with the same robot id
+    on the first one's Zenoh network (its network joined as external) gets a one-line
+    refusal and exit 78 from each owner service; the first system is not disturbed."""
+    override = tmp_path / "same-network.yml"
+    override.write_text(f"networks:\n  default:\n    name: {plain.project}_default\n    external: true\n")
+    owners = ("driver", "planner", "gripper", "gateway")
+    second = Stack(f"{plain.project}dup", ("docker-compose.yml", str(override)),
+                   {"ROB6_RESTART": "no", "ROB6_ZENOH_CONNECT": "tcp/router:7447"})
+    try:
+        with connect(plain.port) as client:
+            second.compose("up", "-d", "--no-build", "--no-deps", *owners)
+            deadline = time.monotonic() + 90
+            states = {}
+            while time.monotonic() < deadline:
+                states = {s: second.state(second.containers(s)[0]) for s in owners}
+                if all(not st["Running"] for st in states.values()):
+                    break
+                assert client.ask("MovePTPJoints 12 -60 80 0 40 0") == "true\n"
+                assert client.ask("GetPositionJoints") == "12.000000 -60.000000 80.000000 0.000000 40.000000 0.000000\n"
+                time.sleep(0.5)
+            assert {s: st["ExitCode"] for s, st in states.items()} == dict.fromkeys(owners, 78), states
+            for service in owners:
+                logs = _run(["docker", "logs", second.containers(service)[0]]).stderr.strip().splitlines()
+                assert len(logs) == 1 and logs[0].startswith(f"rob6: a {service} for robot1 is already running on "), logs
+            REPORT["second project, same robot id"] = "driver, planner, gripper, gateway refused (exit 78)"
+            assert client.ask("MovePTPJoints 13 -60 80 0 40 0") == "true\n"
+            assert same(FK, client.ask(FK, lines=2), fk_expected())
+    finally:
+        second.compose("down", "-t", "5", check=False)
+
+
 def test_recordings_readable_after_down(plain):
     """Stop the stack (the recorder closes its files on SIGTERM); the MCAP files stay on the
     named volume and read back completely (summary, messages, kinematics traces)."""

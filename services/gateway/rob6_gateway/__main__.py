@@ -5,10 +5,11 @@ from __future__ import annotations
 import asyncio
 import logging
 import signal
+import sys
 
 import click
 
-from rob6 import logs
+from rob6 import logs, service
 from rob6.bus import Bus
 from rob6.config import bus_options
 from rob6.robots import get_robot
@@ -49,14 +50,35 @@ def main(settings, log_level, port, bind, allow_shutdown, allow_direct_adept_cmd
 
 async def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) -> None:
     bus = Bus(settings, "gateway")
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    stood_down: list[str] = []  # an earlier gateway of this robot appeared (see rob6.ownership)
+    ownership = service.claim(bus, lambda message: (stood_down.append(message),
+                                                    loop.call_soon_threadsafe(stop.set)))
     logging.getLogger().addHandler(logs.BusLogHandler(bus))
     gateway = Gateway(bus, get_robot(settings.robot), options)
     server = Server(gateway, pause_s=pause_s, idle_timeout_s=idle_timeout, allow=allow)
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
     for signum in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(signum, stop.set)
-    tcp = await asyncio.start_server(server.handle, bind, port, reuse_address=True)
+    # clients only once the services their commands reach are alive in this process'
+    # own view: a client connecting the instant the port opens gets real answers
+    deadline = loop.time() + service.NEEDS_WAIT_S
+    while (missing := service.missing_needs(bus, "gateway")) and not stop.is_set():
+        if loop.time() > deadline:
+            log.warning("gateway: %s not alive after %.0f s; accepting clients without",
+                        ", ".join(missing), service.NEEDS_WAIT_S)
+            break
+        await asyncio.sleep(0.02)
+    if stop.is_set():
+        bus.close()
+        return
+    try:
+        tcp = await asyncio.start_server(server.handle, bind, port, reuse_address=True)
+    except OSError as exc:
+        bus.close()
+        service.fail("gateway", f"cannot listen on {bind}:{port}: {exc.strerror or exc}; is another "
+                                f"rob6 or rob6server running? Stop it or choose another ROB6_PORT",
+                     service.EXIT_REFUSED)
     bus.announce()  # tells tools and the launcher the gateway is up
     log.warning("gateway listening on %s:%d (robot %s)", bind, port, settings.robot)
     done = asyncio.create_task(stop.wait())
@@ -66,7 +88,11 @@ async def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) ->
         log.warning("shutting down rob6server.")
         bus.publish("control/shutdown", b"{}", reliable=True)
     tcp.close()
+    if ownership is not None:
+        ownership.release()
     bus.close()
+    if stood_down:
+        sys.exit(service.EXIT_REFUSED)
 
 
 if __name__ == "__main__":

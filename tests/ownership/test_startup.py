@@ -1,0 +1,109 @@
+"""Plain start-up failures, ready that means ready, and a shutdown that loses nothing."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+from system import Client, System, free_port
+
+from rob6_recorder.reader import read_records
+
+pytestmark = pytest.mark.slow
+
+
+def _rob6_run(*args: str, **env) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rob6.cli", "run", "--dummy", *args],
+                          env=dict(os.environ, **env), capture_output=True, text=True, timeout=30)
+
+
+def _one_line(result: subprocess.CompletedProcess) -> str:
+    lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stdout + result.stderr
+    return lines[0]
+
+
+@pytest.mark.parametrize("taken", ["client", "router"])
+def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken):
+    port, router_port = free_port(), free_port()
+    with socket.socket() as squatter:
+        squatter.bind(("127.0.0.1" if taken == "router" else "0.0.0.0", port if taken == "client" else router_port))
+        squatter.listen()
+        started = time.monotonic()
+        result = _rob6_run("--port", str(port), "--router-port", str(router_port))
+        assert time.monotonic() - started < 5
+    assert result.returncode != 0
+    line = _one_line(result)
+    if taken == "client":
+        assert line.startswith(f"rob6: the client port 0.0.0.0:{port} is in use") and "ROB6_PORT" in line
+    else:
+        assert line.startswith(f"rob6: the Zenoh router port 127.0.0.1:{router_port} is in use")
+        assert "ROB6_ROUTER_PORT" in line
+
+
+def test_an_unknown_setting_is_refused_before_anything_starts():
+    result = _rob6_run("--port", str(free_port()), ROB6_LINK="serial")
+    assert result.returncode != 0
+    assert "Invalid value for '--link'" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_a_router_that_cannot_bind_says_so_in_one_line():
+    with socket.socket() as squatter:
+        squatter.bind(("127.0.0.1", 0))
+        squatter.listen()
+        port = squatter.getsockname()[1]
+        result = subprocess.run([sys.executable, "-m", "rob6.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"],
+                                capture_output=True, text=True, timeout=30)
+    assert result.returncode == 78
+    assert _one_line(result).startswith(f"rob6-router: cannot listen on tcp/127.0.0.1:{port}: address already in use")
+
+
+def test_a_client_connecting_the_instant_the_port_opens_gets_real_answers():
+    """20 cold starts in a row: the first motion command of a client that connected as
+    soon as the port accepted is executed, never 'planner unavailable'."""
+    for attempt in range(20):
+        system = System("kr16", dummy=True)
+        try:
+            deadline = time.monotonic() + 60
+            while True:
+                assert system.process.poll() is None, "\n".join(system.output)
+                assert time.monotonic() < deadline, "the gateway never opened its port"
+                try:
+                    client = Client(system.port, timeout=10)
+                    break
+                except OSError:
+                    time.sleep(0.002)
+            with client:
+                assert client.ask("MovePTPJoints 10 -60 80 0 40 0") == "true\n", f"cold start {attempt}"
+                assert client.ask("ForwardCalc 0 0 0 0 0 0", 2).endswith("noflip up lefty\n")
+        finally:
+            system.stop()
+
+
+def test_ctrl_c_after_a_session_loses_no_record(tmp_path):
+    system = System("kr16", dummy=False, log_dir=str(tmp_path))
+    try:
+        system.wait_ready()
+        with system.client() as client:
+            for k in range(20):
+                assert client.ask(f"MovePTPJoints {k % 3} -60 80 0 40 0") in ("true\n",)
+            assert client.ask("GetRobot") == "kr16\n"
+            client.send("Quit\n")
+            assert client.read_lines(1) == "bye!\n"
+        system.process.send_signal(signal.SIGINT)
+        assert system.process.wait(10) == 0
+    finally:
+        system.stop()
+    assert not [line for line in system.output if "dropping" in line or "dropped" in line], system.output
+    session = sorted(tmp_path.glob("*_session*.mcap"))
+    assert session
+    records = list(read_records(session[0]))
+    assert [r.data["event"] for r in records if r.topic.endswith("/event")] == ["open", "close"]
+    assert [r.data["text"] for r in records if r.topic.endswith("/client_out")][-1] == "bye!\n"
+    system_files = [p for p in tmp_path.glob("*.mcap") if "_session" not in p.name]
+    assert system_files and all(any(True for _ in read_records(p)) for p in system_files)
