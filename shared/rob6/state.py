@@ -24,7 +24,7 @@ class JointStateMirror:
         self._state: JointState | None = None
         self._seen = 0.0
         self._decoder = msgspec.json.Decoder(JointState)
-        bus.subscribe("driver/state", self._on_state)
+        bus.subscribe("driver/state", self._on_state, owner="driver")  # one robot, one driver
 
     def _on_state(self, _key: str, payload: bytes) -> None:
         state = self._decoder.decode(payload)

@@ -152,3 +152,25 @@ def test_ctrl_c_stops_everything_within_two_seconds():
         for pid in pids.values():
             with pytest.raises(ProcessLookupError):
                 os.kill(pid, 0)
+
+
+def test_configuration_reads_follow_every_set_and_a_restarted_planner():
+    """Configuration reads are answered from the gateway's mirror of the planner's state:
+    a read right after a Set shows it, and after a planner restart the reads show the new
+    planner's (default) configuration, never the dead one's."""
+    with running("kr16", dummy=True, restart=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system, \
+            system.client() as client:
+        default = client.ask("GetJointsMaxSpeed")
+        for k in range(1, 41):
+            values = " ".join(f"{0.1 + k * 0.001 + j * 1e-4:f}" for j in range(6))
+            assert client.ask(f"SetJointsMaxSpeed {values}") == "true\n"
+            assert client.ask("GetJointsMaxSpeed") == values + "\n"
+            assert client.ask(f"SetRTSpeedControl {k % 2}") == "true\n"
+            assert client.ask("GetRTSpeedControl") == f"{k % 2}\n"
+        os.kill(system.pids()["planner"], signal.SIGKILL)
+        deadline = time.monotonic() + 30
+        while (reply := client.ask("GetJointsMaxSpeed")) != default:
+            assert reply == "ERROR: planner unavailable\n" or reply == values + "\n", reply
+            assert time.monotonic() < deadline, "the restarted planner's configuration never showed"
+            time.sleep(0.05)
+        assert client.ask("GetRTSpeedControl") == "1\n"

@@ -23,7 +23,7 @@ from rob6_recorder.writer import Recorder
 
 from .rec_helpers import REPLIES, SESSION_LINES, FakeServer, dict_handler, record_session
 
-CONFORMANCE = Path("/work/shared/conformance")
+from system import CONFORMANCE
 
 
 @pytest.fixture

@@ -24,8 +24,8 @@ from bench.reliability import FuzzClient
 # service -> (probe command, is the answer a correct one?)
 PROBES = {
     "kinematics": ("ForwardCalc 10 0 0 0 0 0", lambda lines: len(lines) == 2 and lines[1].startswith(b"noflip")),
-    "planner": ("GetJointsMaxSpeed", lambda lines: len(lines) == 1 and len(lines[0].split()) == 6
-                and not lines[0].startswith(b"ERROR")),
+    # a Set reaches the planner (reads are answered from the gateway's mirror); 1 is the default
+    "planner": ("SetRTSpeedControl 1", lambda lines: lines == [b"true"]),
     "driver": ("PingRobot 1 0", lambda lines: len(lines) == 1 and len(lines[0].split()) == 5),
     "gripper": ("HasGripper", lambda lines: lines[-1:] == [b"true"]),
     "recorder": ("GetVersion", lambda lines: lines == [b"0.1.01"]),  # needs no service: must not notice

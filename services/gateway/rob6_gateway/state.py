@@ -8,6 +8,7 @@ trip, not two.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import msgspec
@@ -15,7 +16,6 @@ import msgspec
 from rob6.bus import Bus, new_cid
 from rob6.messages import MotionConfig
 from rob6.robots import RobotModel
-
 
 
 def default_config(robot: RobotModel) -> MotionConfig:
@@ -29,15 +29,35 @@ def default_config(robot: RobotModel) -> MotionConfig:
 
 
 class ConfigMirror:
-    """The planner's motion configuration: from its replies and its publications."""
+    """The planner's motion configuration: from its replies and its publications.
+
+    ``current()`` answers configuration reads without a bus round trip, but only with
+    a configuration known to come from the planner instance alive now (a restarted
+    planner starts from its defaults: until its configuration arrived, reads ask it).
+    Every Set updates the mirror from the planner's reply before the client gets its
+    answer, so a read after a Set always shows it.
+    """
 
     def __init__(self, bus: Bus, robot: RobotModel):
-        self.config = default_config(robot)
+        self.bus = bus
+        self.config = default_config(robot)  # what kinematics requests use until the planner's is known
+        self._source: str | None = None  # the planner instance ``config`` came from
+        self._lock = threading.Lock()
         self._decoder = msgspec.json.Decoder(MotionConfig)
-        bus.subscribe("planner/config", self._on_config)
+        bus.subscribe("planner/config", self._on_config, owner="planner")
 
     def _on_config(self, _key: str, payload: bytes) -> None:
-        self.config = self._decoder.decode(payload)
+        self.set(self._decoder.decode(payload))
+
+    def set(self, config: MotionConfig) -> None:
+        source = self.bus.owner("planner")
+        with self._lock:  # publications (Zenoh's thread) and replies (the loop) may cross
+            if source != self._source or config.version >= self.config.version:
+                self.config, self._source = config, source
+
+    def current(self) -> MotionConfig | None:
+        source = self._source
+        return self.config if source is not None and source == self.bus.owner("planner") else None
 
 
 @dataclass
