@@ -17,10 +17,11 @@ import numpy as np
 
 from rob6.bus import Bus
 from rob6.config import BusSettings
-from rob6.messages import Empty, IkBatchRequest
+from rob6.messages import IkBatchRequest
 from rob6.testing import running
 
 from .latency import echo_baseline, measure, percentiles
+from .links import links_table
 
 COUNT = int(os.environ.get("ROB6_BENCH_COUNT", "3000"))
 
@@ -142,47 +143,6 @@ def planner_table() -> None:
     table("PTP planning (validation + Ruckig), microseconds", ("robot", "what", "p50", "p99"), rows)
 
 
-def alter_streaming_table(seconds: float = float(os.environ.get("ROB6_BENCH_ALTER_S", "60"))) -> None:
-    """MoveRTJoints at 250 Hz on kr16rt (4 ms cycle) through the whole system."""
-    with running("kr16rt", dummy=False) as system:
-        settings = BusSettings(robot="kr16rt", robot_id=system.robot_id,
-                               connect=(f"tcp/127.0.0.1:{system.router_port}",))
-        bus = Bus(settings, "bench")
-        try:
-            with system.client() as client:
-                client.ask("MovePTPJoints 0 -80 100 0 30 0", timeout=60)
-                before = bus.request("driver", "state", Empty())
-                assert client.ask("EnableAlter") == "true\n"
-                rtts, period, n = [], 0.004, int(seconds * 250)
-                start = time.perf_counter()
-                for k in range(n):
-                    line = "MoveRTJoints %f -80 100 0 30 0\n" % (5.0 * np.sin(2 * np.pi * 0.2 * k * period))
-                    sent = time.perf_counter()
-                    client.send(line)
-                    client.read_lines(1)
-                    rtts.append(time.perf_counter() - sent)
-                    delay = start + (k + 1) * period - time.perf_counter()
-                    if delay > 0:
-                        time.sleep(delay)
-                elapsed = time.perf_counter() - start
-                after = bus.request("driver", "state", Empty())
-                client.ask("DisableAlter", timeout=10)
-        finally:
-            bus.close()
-    cycles = after.cycle - before.cycle
-    missed = after.missed - before.missed
-    p50, p99 = percentiles(rtts)
-    table(f"Alter streaming: MoveRTJoints at 250 Hz for {seconds:.0f} s on kr16rt (4 ms driver cycle)",
-          ("measure", "value", "target"), [
-              ("commands sent / achieved rate", f"{n} / {n / elapsed:.1f} Hz", "250 Hz"),
-              ("driver cycles run / missed", f"{cycles} / {missed} ({100 * missed / max(cycles + missed, 1):.3f} %)",
-               "< 0.1 %"),
-              ("command -> target in the driver, p50 / p99 (ms)", f"{p50:.3f} / {p99:.3f}", ""),
-              ("command -> motion p99 (+ at most one cycle, 4 ms)", f"{p99 + 4:.3f} ms = {(p99 + 4) / 4:.2f} cycles",
-               "<= 2 cycles"),
-          ])
-
-
 def recording_table() -> None:
     sys.path.insert(0, os.path.dirname(__file__))
     from bench_recording import bench_burst, bench_replay, bench_sustained
@@ -198,7 +158,7 @@ def main() -> int:
     gateway_tables()
     kinematics_tables()
     planner_table()
-    alter_streaming_table()
+    links_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")), table)
     recording_table()
     return 0
 

@@ -35,7 +35,7 @@ class Struct(msgspec.Struct, kw_only=True, omit_defaults=True):
 
 # ---------------------------------------------------------------- envelopes
 class ErrorBody(Struct):
-    code: str  # unavailable | timeout | invalid | rejected | internal | unknown_op | schema
+    code: str  # unavailable | timeout | invalid | rejected | internal | unknown_op | schema | foreign
     message: str
 
 
@@ -49,6 +49,7 @@ class ReplyEnvelope(msgspec.Struct, Generic[T], omit_defaults=True):
     v: int
     cid: str
     ok: bool
+    instance: str = ""  # who answered: the caller checks it is the instance it asked
     body: T | None = None
     error: ErrorBody | None = None
 
@@ -61,6 +62,7 @@ class Empty(Struct):
 class Ack(Struct):
     ok: bool = True
     reason: str = ""  # why ok is False, for logs and recordings
+    error: str = ""  # the plant failed, not the command (robot not connected, link lost): shown to the client
 
 
 # ---------------------------------------------------------------- driver
@@ -79,6 +81,10 @@ class JointState(Struct):
     moving: bool = False
     mode: str = "idle"  # idle | trajectory | alter | stopping | fault
     missed: int = 0  # controller cycles missed so far (the cycle came too late to run)
+    link: str = "connected"  # the plant: connected | lost | waiting (the simulation is always connected)
+    late: int = 0  # packets the robot controller counted late so far (RSI's Delay, summed over runs)
+    q_actual: Joints | None = None  # where the robot reports it is (RSI's AIPos); None: the simulation
+    instance: str = ""  # the driver instance that published it (one robot, one owner)
 
 
 class Trajectory(Struct):
@@ -98,6 +104,7 @@ class ExecuteRequest(Struct):
 class ExecuteReply(Struct):
     ok: bool
     reason: str = ""
+    error: str = ""  # the plant failed, not the command (robot not connected, link lost)
     state: JointState | None = None  # at the end of the motion (or where it stopped)
 
 
@@ -119,6 +126,40 @@ class AlterMode(Struct):
     enable: bool
     synchronized: bool = False  # RTSpeedControl 0: axes arrive together
     timeout_s: float = 0.5  # stop if no target arrives for this long
+
+
+class LinkQuery(Struct):
+    reset: bool = False  # start the latency statistics afresh after this answer
+
+
+class LinkStatus(Struct):
+    """The driver's link to the robot (``driver/link`` operation)."""
+
+    link: str  # sim | rsi
+    state: str  # connected | lost | waiting
+    address: str = ""  # where the driver listens (rsi: udp HOST:PORT)
+    peer: str = ""  # the controller's address
+    packets: int = 0  # cycles the plant ran (rsi: packets answered)
+    late: int = 0  # packets the controller counted late, all runs
+    missed: int = 0  # controller cycles without a packet/cycle in the driver
+    runs: int = 0  # RSI runs seen (each RSI_ON is one)
+    garbage: int = 0  # packets that could not be parsed (not answered)
+    start_pose: Joints | None = None  # ASPos of the current run
+    latency_us: list[float] = []  # packet in -> reply out since the last reset: p50, p99, max
+    realtime: bool = False  # the link's thread runs with real-time scheduling
+
+
+class LinkEvent(Struct):
+    """A link event of the driver (``rob6/<id>/driver/link``), recorded."""
+
+    t: float  # wall time, epoch seconds
+    event: str  # waiting | run_start | restart | late | lost | back | trip | stop_sent | garbage
+    message: str
+    link: str = "rsi"
+    cycle: int = 0  # the driver cycle it happened at
+    late: int = 0  # late packets so far (all runs)
+    start_pose: Joints | None = None  # ASPos (run_start, restart)
+    q_actual: Joints | None = None  # AIPos at the event
 
 
 # ---------------------------------------------------------------- kinematics
@@ -196,6 +237,7 @@ class MotionConfig(Struct):
     weights: Joints
     allowed: Pattern
     rt_speed_control: int
+    version: int = 0  # counts the planner's changes: a mirror never goes back to an older one
 
 
 class ConfigReply(Struct):
@@ -218,6 +260,7 @@ class MoveReply(Struct):
     ok: bool
     joints: Joints | None = None  # where the robot is (or would be, dry run) afterwards
     reason: str = ""
+    error: str = ""  # the driver's plant failed (robot not connected, link lost): the client sees it
     state: JointState | None = None  # the driver's state when the move ended
 
 
@@ -296,6 +339,7 @@ OPS: dict[tuple[str, str], Op] = {
     ("driver", "alter_mode"): Op(AlterMode, Ack),
     ("driver", "alter_target"): Op(AlterTarget, Ack),
     ("driver", "stop"): Op(Empty, Ack, timeout=5.0),
+    ("driver", "link"): Op(LinkQuery, LinkStatus),
     ("kinematics", "fk"): Op(FkRequest, FkReply),
     ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply),
     ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply),
@@ -313,5 +357,9 @@ OPS: dict[tuple[str, str], Op] = {
 #: Services whose operations have no side effects: a failed call may be retried on
 #: another replica.
 IDEMPOTENT_SERVICES = frozenset({"kinematics"})
+
+#: Services a robot id has exactly one of (see rob6.ownership): callers follow that one
+#: instance, never a second one that should not be there.
+OWNER_SERVICES = frozenset({"driver", "planner", "gripper", "gateway"})
 
 SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder")

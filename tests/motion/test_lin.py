@@ -5,7 +5,7 @@ import pytest
 
 from motion_kin import fk, make_ik
 from rob6.robots import get_robot
-from rob6_driver.sim import SimRobot
+from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import LinOptions, TrajectoryPlanner, finite_difference_violations
 
@@ -44,7 +44,7 @@ def test_lin_is_straight_and_within_limits():
     lim = p.limits(c)
     assert finite_difference_violations(np.vstack([tr.q, tr.q[-1:]]), tr.dt, lim.vmax, lim.amax) == []
     # the sim accepts and executes it without a violation
-    sim = SimRobot(r, q0=q0)
+    sim = MotionCore(r, q0=q0)
     m = sim.execute(tr.q, tr.dt, tr.qd, tr.qdd)
     sim.run_until_idle()
     assert m.ok and sim.violation_count == 0

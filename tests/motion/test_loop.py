@@ -4,12 +4,12 @@ import threading
 import time
 
 from rob6_driver.loop import CycleRunner
-from rob6_driver.sim import SimRobot
+from rob6_driver.motion import MotionCore
 from rob6_planner.bench import bench_ptp
 
 
 def test_runner_publishes_every_cycle_on_time():
-    sim = SimRobot("kr16rt")  # 4 ms
+    sim = MotionCore("kr16rt")  # 4 ms
     published = []
     runner = CycleRunner(sim.step, sim.dt, published.append)
     t0 = time.monotonic()
@@ -50,7 +50,7 @@ def test_trajectory_completion_is_awaitable_in_real_time():
     from rob6_planner.config import MotionConfig
     from rob6_planner.trajectory import TrajectoryPlanner
 
-    sim = SimRobot("kr16rt")
+    sim = MotionCore("kr16rt")
     tr = TrajectoryPlanner("kr16rt").plan_ptp(sim.state().q, [2, 0, 0, 0, 0, 0],
                                               MotionConfig("kr16rt")).trajectory
     done = threading.Event()

@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rob6.robots import get_robot
-from rob6_driver.sim import SimRobot
+from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import TrajectoryPlanner
 
@@ -55,7 +55,7 @@ class Harness:
         self.robot = get_robot(robot)
         self.config = MotionConfig(self.robot)
         self.planner = TrajectoryPlanner(self.robot)
-        self.sim = SimRobot(self.robot, alter_timeout_s=0.15)
+        self.sim = MotionCore(self.robot, alter_timeout_s=0.15)
         s = self.sim.state()
         self.prev_q = s.q
         self.prev_v = np.zeros(6)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rob6.robots import ROBOT_TYPES, UNIT_CYCLE_S
-from rob6_driver.sim import SimRobot
+from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import (JERK_RAMP_S, TrajectoryPlanner, check_target,
                                      finite_difference_violations, sample_at_time)
@@ -32,7 +32,7 @@ def analytic_time(d: float, v: float, a: float, j: float) -> float:
 def run_ptp_in_sim(robot, q1, config=None):
     config = config or MotionConfig(robot)
     planner = TrajectoryPlanner(robot)
-    sim = SimRobot(robot)
+    sim = MotionCore(robot)
     res = planner.plan_ptp(sim.state().q, q1, config)
     assert res.ok, res.reason
     tr = res.trajectory

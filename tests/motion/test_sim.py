@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from rob6_driver.sim import SimLimits, SimRobot
+from rob6_driver.motion import Limits, MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import TrajectoryPlanner
 
@@ -17,7 +17,7 @@ TOL_V = 1e-9
 TOL_A = 1e-6
 
 
-def limit_problems(qs, dt, lim: SimLimits, q_before=None, v_before=None, qd=None, qdd=None):
+def limit_problems(qs, dt, lim: Limits, q_before=None, v_before=None, qd=None, qdd=None):
     """All speed/acceleration/turn problems of a state sequence (finite differences + exact)."""
     qs = np.asarray(qs, float)
     if q_before is not None:
@@ -54,7 +54,7 @@ def plan(robot, q0, q1, config=None):
 
 # ---------------------------------------------------------------- trajectories
 def test_execute_completes_awaitably():
-    sim = SimRobot("kr16")
+    sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [20, -30, 40, 10, 30, -50])
     seen = []
     motion = sim.execute(tr.q, tr.dt, tr.qd, tr.qdd)
@@ -71,7 +71,7 @@ def test_execute_completes_awaitably():
 
 
 def test_execute_refusals():
-    sim = SimRobot("kr16")
+    sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [10, 0, 0, 0, 0, 0])
     assert "start" in sim.execute(tr.q[5:]).reason
     assert "cycle" in sim.execute(tr.q, dt=0.004).reason
@@ -88,7 +88,7 @@ def test_execute_refusals():
 
 
 def test_monitor_stops_a_bad_sample_in_a_controlled_way():
-    sim = SimRobot("kr16")
+    sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [30, 0, 0, 0, 0, 0])
     bad = tr.q.copy()
     bad[100:, 0] += 2.0  # corrupted stream: skipped by the up-front check
@@ -108,7 +108,7 @@ def test_monitor_stops_a_bad_sample_in_a_controlled_way():
 
 def test_stop_mid_trajectory_ramps_within_limits():
     for with_derivatives in (True, False):
-        sim = SimRobot("kr16rt")
+        sim = MotionCore("kr16rt")
         tr = plan("kr16rt", np.zeros(6), [60, -40, 50, 90, 60, 120])
         m = sim.execute(tr.q, tr.dt, *((tr.qd, tr.qdd) if with_derivatives else ()))
         q1, qd1, qdd1, _ = run_states(sim, 170)  # in the acceleration phase
@@ -126,7 +126,7 @@ def test_stop_mid_trajectory_ramps_within_limits():
 
 
 def test_dummy_mode_jumps_to_the_end():
-    sim = SimRobot("kr16", dummy=True)
+    sim = MotionCore("kr16", dummy=True)
     tr = plan("kr16", np.zeros(6), [10, -60, 80, 20, 40, 30])
     m = sim.execute(tr.q, tr.dt)
     assert m.done.is_set() and m.ok
@@ -140,7 +140,7 @@ def test_dummy_mode_jumps_to_the_end():
 # ---------------------------------------------------------------- Alter mode
 @pytest.mark.parametrize("robot", ["kr16rt", "kr16"])
 def test_alter_streaming_250hz(robot):
-    sim = SimRobot(robot, alter_timeout_s=0.1)
+    sim = MotionCore(robot, alter_timeout_s=0.1)
     q_start = np.array([0, -60, 80, 0, 40, 0.0])
     sim.execute(plan(robot, np.zeros(6), q_start).q)
     sim.run_until_idle()
@@ -173,7 +173,7 @@ def test_alter_streaming_250hz(robot):
 
 def test_watchdog_event_and_resume():
     events = []
-    sim = SimRobot("kr16rt", alter_timeout_s=0.05, on_event=events.append)
+    sim = MotionCore("kr16rt", alter_timeout_s=0.05, on_event=events.append)
     sim.enable_alter()
     sim.set_target([40, 0, 0, 0, 0, 0])
     q, *_ = run_states(sim, 200)  # 0.8 s without news
@@ -190,7 +190,7 @@ def test_watchdog_event_and_resume():
 def test_rt_speed_control_synchronised_vs_independent():
     arrival = {}
     for synchronized in (True, False):
-        sim = SimRobot("kr16rt", alter_timeout_s=10)
+        sim = MotionCore("kr16rt", alter_timeout_s=10)
         sim.enable_alter(synchronized=synchronized)
         sim.set_target([30, 0, 0, 0, 3, 0])
         first = {}
@@ -205,7 +205,7 @@ def test_rt_speed_control_synchronised_vs_independent():
 
 
 def test_alter_targets_near_a_turn_limit_never_cross_it():
-    sim = SimRobot("kr16rt", alter_timeout_s=10)
+    sim = MotionCore("kr16rt", alter_timeout_s=10)
     sim.set_limits(max_speed=[1.872] * 3 + [3.96, 3.96, 7.38], max_accel=[0.02] * 6)
     sim.enable_alter()
     sim.set_target([170, 0, 0, 0, 0, 0])
@@ -220,7 +220,7 @@ def test_alter_targets_near_a_turn_limit_never_cross_it():
 
 
 def test_limit_change_during_alter_is_smooth():
-    sim = SimRobot("kr16rt", alter_timeout_s=10)
+    sim = MotionCore("kr16rt", alter_timeout_s=10)
     sim.enable_alter()
     sim.set_target([100, 0, 0, 0, 0, 0])
     q1, qd1, qdd1, _ = run_states(sim, 500)
@@ -228,7 +228,7 @@ def test_limit_change_during_alter_is_smooth():
     assert sim.set_limits(max_speed=[0.05] * 6, max_accel=[0.001] * 6)[0]
     q2, qd2, qdd2, st = run_states(sim, 3000)
     new = sim.limits()
-    wide = SimLimits(old.turn_min, old.turn_max, np.maximum(old.vmax, new.vmax),
+    wide = Limits(old.turn_min, old.turn_max, np.maximum(old.vmax, new.vmax),
                      np.maximum(old.amax, new.amax), old.jmax)
     q = np.vstack([q1, q2])
     assert limit_problems(q, sim.dt, wide, np.zeros(6)) == []
@@ -239,7 +239,7 @@ def test_limit_change_during_alter_is_smooth():
 
 
 def test_turn_limit_change_under_a_crossing_motion_stops():
-    sim = SimRobot("kr16")
+    sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [90, 0, 0, 0, 0, 0])
     m = sim.execute(tr.q, tr.dt, tr.qd, tr.qdd)
     q1, *_ = run_states(sim, 200)
@@ -248,13 +248,13 @@ def test_turn_limit_change_under_a_crossing_motion_stops():
     assert m.done.is_set() and not m.ok
     assert [v.kind for v in sim.violations] == ["limits_changed"]
     q = np.vstack([q1, q2])
-    assert limit_problems(q, sim.dt, SimLimits.defaults(sim.robot), np.zeros(6)) == []
+    assert limit_problems(q, sim.dt, Limits.defaults(sim.robot), np.zeros(6)) == []
     assert not states[-1].moving
     assert np.array_equal(sim.enforced_limits().turn_max, [40, 20, 154, 350, 125, 350])
 
 
 def test_stop_in_alter_leaves_alter_mode():
-    sim = SimRobot("kr16", alter_timeout_s=10)
+    sim = MotionCore("kr16", alter_timeout_s=10)
     sim.enable_alter()
     sim.set_target([20, -10, 10, 0, 20, 0])
     sim.run(60)
@@ -270,7 +270,7 @@ def test_trajectory_extrema_match_dense_sampling():
     """The sim's own extrema (used for the turn-limit look-ahead) against at_time sampling."""
     import ruckig
 
-    from rob6_driver.sim import trajectory_extrema
+    from rob6_driver.motion import trajectory_extrema
 
     rng = np.random.default_rng(5)
     otg = ruckig.Ruckig(6, 0.004)

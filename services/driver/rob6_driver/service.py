@@ -1,9 +1,13 @@
 """The driver service: owns the robot, runs the controller cycle, publishes joint state.
 
-The robot here is the simulation (``sim.SimRobot``): it runs at the controller cycle
-of the robot type, executes the planner's sampled trajectories in real time, follows
-Alter targets with Ruckig, and checks every commanded sample against the limits on
-its own, whatever the planner sent.
+The motion core (``motion.MotionCore``) executes the planner's sampled trajectories,
+follows Alter targets with Ruckig, and checks every setpoint against the limits on
+its own, whatever the planner sent. The link (``links/``) owns the clock and reaches
+the plant: ``sim``, the simulation (default), or ``rsi``, a KUKA KR C4 over RSI.
+
+A failure of the plant (robot not connected, link lost) comes back in the replies'
+``error`` field, which the gateway shows the client as ``ERROR: driver: <error>``;
+an ordinary refusal (busy, limits) only has ``reason`` and the client sees ``false``.
 """
 
 from __future__ import annotations
@@ -21,32 +25,49 @@ from rob6.messages import (
     ExecuteRequest,
     JointState,
     LimitsUpdate,
+    LinkEvent,
+    LinkQuery,
+    LinkStatus,
     PingReply,
 )
 from rob6.robots import RobotModel
 
-from .loop import CycleRunner
-from .sim import SimRobot, SimState
+from .links import Link
+from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, RsiLink
+from .links.sim import SimLink
+from .motion import CoreState, MotionCore, Offline
 
 log = logging.getLogger("rob6.driver")
 
 EXECUTE_MARGIN_S = 5.0  # beyond the trajectory's own duration
 
 
-def joint_state(state: SimState, missed: int = 0) -> JointState:
-    return JointState(t=state.t, cycle=state.cycle, q=state.q.tolist(), qd=state.qd.tolist(),
-                      moving=bool(state.moving), mode=state.mode, missed=missed)
-
-
 class DriverService:
-    def __init__(self, bus: Bus, robot: RobotModel, dummy: bool, alter_timeout_s: float = 0.5):
+    def __init__(self, bus: Bus, robot: RobotModel, dummy: bool, alter_timeout_s: float = 0.5, *,
+                 link: str = "sim", rsi_listen: str = DEFAULT_LISTEN, rsi_sen_type: str = DEFAULT_SEN_TYPE):
         self.bus = bus
         self.robot = robot
-        self.sim = SimRobot(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
-        self.runner = CycleRunner(self.sim.step, robot.cycle_s, self._publish, name="driver-cycle")
+        self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
+        self.link: Link
+        if link == "rsi":
+            self.link = RsiLink(self.core, robot, rsi_listen, self._publish, self._publish_link_event,
+                                sen_type=rsi_sen_type)
+        elif link == "sim":
+            self.link = SimLink(self.core, self._publish)
+        else:
+            raise ValueError(f"unknown link {link!r} (sim or rsi)")
 
-    def _publish(self, state: SimState) -> None:
-        self.bus.publish("driver/state", joint_state(state, self.runner.stats.missed))
+    def joint_state(self, state: CoreState) -> JointState:
+        link = self.link
+        return JointState(t=state.t, cycle=state.cycle, q=state.q.tolist(), qd=state.qd.tolist(),
+                          moving=bool(state.moving), mode=state.mode, missed=link.missed,
+                          instance=self.bus.instance, link=link.state, late=link.late, q_actual=link.q_actual)
+
+    def _publish(self, state: CoreState) -> None:
+        self.bus.publish("driver/state", self.joint_state(state))
+
+    def _publish_link_event(self, event: LinkEvent) -> None:
+        self.bus.publish("driver/link", event, reliable=True)
 
     def _on_event(self, event: dict) -> None:
         if event.get("type") == "violation":
@@ -56,60 +77,74 @@ class DriverService:
 
     # ---- operations ----------------------------------------------------------
     def ping(self, _req: Empty, _ctx) -> PingReply:
-        return PingReply(robot_time=self.sim.t, wall_time=time.time())
+        return PingReply(robot_time=self.core.t, wall_time=time.time())
 
     def state(self, _req: Empty, _ctx) -> JointState:
-        return joint_state(self.sim.state(), self.runner.stats.missed)
+        return self.joint_state(self.core.state())
 
     def execute(self, req: ExecuteRequest, _ctx) -> ExecuteReply:
         trajectory = req.trajectory
-        motion = self.sim.execute(trajectory.q, trajectory.dt, trajectory.qd, trajectory.qdd)
-        if not req.wait:
+        motion = self.core.execute(trajectory.q, trajectory.dt, trajectory.qd, trajectory.qdd)
+        if not req.wait and not (motion.done.is_set() and not motion.ok):
             return ExecuteReply(ok=True)
         duration = len(trajectory.q) * trajectory.dt
         if not motion.wait(duration + EXECUTE_MARGIN_S):
-            self.sim.stop("the motion did not end in time")
+            self.core.stop("the motion did not end in time")
             return ExecuteReply(ok=False, reason="the motion did not end in time",
-                                state=joint_state(self.sim.state()))
-        final = motion.final or self.sim.state()
-        if not motion.ok:
+                                state=self.joint_state(self.core.state()))
+        final = motion.final or self.core.state()
+        if motion.error:  # the link already said why, at WARNING
+            log.info("motion failed: %s", motion.error)
+        elif not motion.ok:
             log.warning("trajectory refused or stopped: %s", motion.reason)
-        return ExecuteReply(ok=bool(motion.ok), reason=motion.reason or "", state=joint_state(final))
+        return ExecuteReply(ok=bool(motion.ok), reason=motion.reason or "", error=motion.error,
+                            state=self.joint_state(final))
 
     def limits(self, req: LimitsUpdate, _ctx) -> Ack:
-        ok, reason = self.sim.set_limits(req.turn_min, req.turn_max, req.max_speed, req.max_accel)
+        ok, reason = self.core.set_limits(req.turn_min, req.turn_max, req.max_speed, req.max_accel)
         return Ack(ok=ok, reason=reason)
 
     def alter_mode(self, req: AlterMode, _ctx) -> Ack:
         if req.enable:
-            ok, reason = self.sim.enable_alter(req.synchronized, req.timeout_s)
+            try:
+                ok, reason = self.core.enable_alter(req.synchronized, req.timeout_s)
+            except Offline as exc:
+                return Ack(ok=False, reason=str(exc), error=str(exc))
             return Ack(ok=ok, reason=reason)
-        stopped = self.sim.disable_alter().wait(10.0)  # done once the robot is at rest
+        stopped = self.core.disable_alter().wait(10.0)  # done once the robot is at rest
         return Ack(ok=stopped, reason="" if stopped else "the robot did not come to rest in time")
 
     def alter_target(self, req: AlterTarget, _ctx) -> Ack:
-        ok, reason = self.sim.set_target(req.q, req.synchronized)
+        try:
+            ok, reason = self.core.set_target(req.q, req.synchronized)
+        except Offline as exc:
+            return Ack(ok=False, reason=str(exc), error=str(exc))
         return Ack(ok=ok, reason=reason)
 
     def stop(self, _req: Empty, _ctx) -> Ack:
-        motion = self.sim.stop("stop requested")
+        motion = self.core.stop("stop requested")
         return Ack(ok=motion.wait(4.0) and bool(motion.ok), reason=motion.reason or "")
+
+    def link_status(self, req: LinkQuery, _ctx) -> LinkStatus:
+        return self.link.status(reset=req.reset)
 
     def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:
         """The planner supervises every motion: without one, the robot stops (ramped)."""
         if service == "planner" and not alive and not self.bus.instances("planner"):
-            if self.sim.state().moving:
+            if self.core.state().moving:
                 log.warning("the planner went away during a motion: stopping")
-                self.sim.stop("planner went away")
+                self.core.stop("planner went away")
 
     def start(self) -> None:
         self.bus.on_liveliness(self._on_liveliness)
-        self.runner.start()
+        self.link.start()
         self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,
                         "limits": self.limits, "alter_mode": self.alter_mode,
-                        "alter_target": self.alter_target, "stop": self.stop}, workers=4)
+                        "alter_target": self.alter_target, "stop": self.stop,
+                        "link": self.link_status}, workers=4)
 
     def shutdown(self) -> None:
-        self.sim.stop("driver shutting down").wait(2.0)
-        self.runner.stop()
-        log.info("driver: %d cycles, %d missed", self.runner.stats.cycles, self.runner.stats.missed)
+        self.core.stop("driver shutting down").wait(2.0)
+        self.link.stop()
+        status = self.link.status()
+        log.info("driver: %d cycles, %d missed, %d late", status.packets, status.missed, status.late)

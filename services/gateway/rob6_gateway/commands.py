@@ -28,6 +28,7 @@ from rob6.messages import (
     ForwardCalcRequest,
     GripperCommand,
     ModeRequest,
+    MotionConfig,
     MoveRequest,
     Verbosity,
 )
@@ -280,11 +281,18 @@ async def get_status(gw, session, args):
 
 
 # ====================================================================== limits and configuration
+async def _config(gw, session) -> MotionConfig:
+    """The planner's configuration: mirrored, or asked when the mirror cannot vouch for it."""
+    config = gw.limits.current()
+    if config is None:
+        config = await gw.call(session, "planner", "config", Empty())
+        gw.limits.set(config)
+    return config
+
+
 def _config_getter(field: str):
     async def handler(gw, session, args):
-        config = await gw.call(session, "planner", "config", Empty())
-        gw.limits.config = config
-        return fmt(getattr(config, field)) + "\n"
+        return fmt(getattr(await _config(gw, session), field)) + "\n"
     return handler
 
 
@@ -297,7 +305,7 @@ for _name, _field in (("GetJointsMaxSpeed", "speed"), ("GetJointsMaxAcceleration
 async def _change(gw, session, name: str, values=(), words=()) -> bool:
     reply = await gw.call(session, "planner", "config_change",
                           ConfigChange(command=name, args=list(values), words=list(words)))
-    gw.limits.config = reply.config
+    gw.limits.set(reply.config)
     return reply.ok
 
 
@@ -334,8 +342,7 @@ for _name in ("ResetJointsMaxSpeed", "ResetJointsMaxAcceleration", "ResetJointsM
 
 @command("GetAllowedStatus")
 async def get_allowed_status(gw, session, args):
-    config = await gw.call(session, "planner", "config", Empty())
-    return " ".join(config.allowed) + "\n"
+    return " ".join((await _config(gw, session)).allowed) + "\n"
 
 
 @command("SetAllowedStatus")
@@ -350,8 +357,7 @@ async def set_allowed_status(gw, session, args):
 
 @command("GetRTSpeedControl")
 async def get_rt_speed_control(gw, session, args):
-    config = await gw.call(session, "planner", "config", Empty())
-    return f"{config.rt_speed_control}\n"
+    return f"{(await _config(gw, session)).rt_speed_control}\n"
 
 
 @command("SetRTSpeedControl")
@@ -422,6 +428,8 @@ async def _move(gw, session, kind: str, **fields) -> str:
     reply = await gw.call(session, "planner", "move", MoveRequest(kind=kind, **fields))
     if reply.state is not None:
         gw.joints.update(reply.state)
+    if not reply.ok and reply.error:  # the robot failed (not connected, link lost), not the command
+        return error(f"driver: {reply.error}")
     if not reply.ok and reply.reason:
         log.warning("%s refused: %s", kind, reply.reason)
     return boolean(reply.ok)
@@ -501,6 +509,8 @@ def _mode(name):
             gw.alter = True
         elif name == "DisableAlter":
             gw.alter = False
+        if not reply.ok and reply.error:  # the robot failed (not connected, link lost)
+            return error(f"driver: {reply.error}")
         return boolean(reply.ok)
     return handler
 

@@ -65,11 +65,12 @@ class PlannerService:
         # Adept V+ settings (ad850): speed and accelerations in percent of the maximum
         self.adept = {"speed": 100.0, "accel": 100.0, "decel": 100.0, "fine": 100.0, "coarse": 100.0}
         self._lock = threading.Lock()  # one motion at a time; the planner reuses its Ruckig buffers
+        self._version = 0  # of the configuration, for the gateway's mirror
         bus.on_liveliness(self._on_liveliness)
 
     # ------------------------------------------------------------------ configuration
     def _message(self) -> ConfigMessage:
-        return ConfigMessage(**self.config.to_dict())
+        return ConfigMessage(**self.config.to_dict(), version=self._version)
 
     def get_config(self, _req: Empty, _ctx) -> ConfigMessage:
         return self._message()
@@ -81,6 +82,7 @@ class PlannerService:
         ok = self.config.apply(req.command, req.args, req.words)
         after = self.config.to_dict()
         if after != before:
+            self._version += 1
             self.bus.publish("planner/config", self._message(), reliable=True)
             if any(before[f] != after[f] for f in LIMIT_FIELDS):
                 self._push_limits(ctx.cid)
@@ -210,7 +212,7 @@ class PlannerService:
         if reply.state is not None:  # newer than any state the driver published before
             self.joints.update(reply.state)
             joints = reply.state.q
-        return MoveReply(ok=reply.ok, joints=joints, reason=reply.reason, state=reply.state)
+        return MoveReply(ok=reply.ok, joints=joints, reason=reply.reason, error=reply.error, state=reply.state)
 
     def _lin(self, req: MoveRequest, start: list[float], cid: str) -> MoveReply:
         if not self.lin:
@@ -254,7 +256,7 @@ class PlannerService:
             raise Refused("Alter target beyond the max change")
         reply = self.bus.request("driver", "alter_target", AlterTarget(
             q=target, synchronized=c.rt_speed_control == 0), cid=cid)
-        return MoveReply(ok=reply.ok, joints=target, reason=reply.reason)
+        return MoveReply(ok=reply.ok, joints=target, reason=reply.reason, error=reply.error)
 
     def _pose(self, joints, cid) -> list[float]:
         return self.bus.request("kinematics", "fk", FkRequest(joints=[joints]), cid=cid).poses[0]

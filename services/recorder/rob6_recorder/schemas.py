@@ -171,17 +171,45 @@ BUS_REPLY = {
 
 JOINT_STATE = {
     "title": "rob6.JointState",
-    "description": "Driver state every cycle; degrees and degrees/s. Plot q[0]..q[5].",
+    "description": "Driver state every cycle; degrees and degrees/s. Plot q[0]..q[5]. "
+                   "Fields at their default are left out (link connected, late 0...).",
     "type": "object",
     "properties": {
         "t": {"type": "number", "description": "driver clock, s"},
         "cycle": {"type": "integer"},
-        "q": _JOINTS,
+        "q": {**_JOINTS, "description": "setpoint, deg (KUKA: axis angles A1..A6)"},
         "qd": _JOINTS,
         "moving": {"type": "boolean"},
-        "mode": {"type": "string"},
+        "mode": {"type": "string", "description": "idle | trajectory | alter | stopping"},
+        "missed": {"type": "integer", "description": "controller cycles missed so far"},
+        "instance": {"type": "string", "description": "the driver instance that published it"},
+        "link": {"type": "string", "enum": ["connected", "lost", "waiting"],
+                 "description": "the link to the robot; absent: connected. While not connected the "
+                                "state is repeated (same cycle) a few times a second"},
+        "late": {"type": "integer", "description": "late packets the controller counted so far (RSI Delay)"},
+        "q_actual": {**_JOINTS, "description": "where the robot reports it is (RSI AIPos), deg; "
+                                               "absent in the simulation"},
     },
     "required": ["q"],
+}
+
+LINK_EVENT = {
+    "title": "rob6.LinkEvent",
+    "description": "An event of the driver's link to the robot: waiting, run_start, restart, late, "
+                   "lost, back, trip, stop_sent, garbage.",
+    "type": "object",
+    "properties": {
+        "t": {"type": "number", "description": "wall time, epoch s"},
+        "event": {"type": "string", "enum": ["waiting", "run_start", "restart", "late", "lost", "back",
+                                             "trip", "stop_sent", "garbage"]},
+        "message": {"type": "string"},
+        "link": {"type": "string", "description": "rsi (absent: rsi)"},
+        "cycle": {"type": "integer", "description": "driver cycle it happened at"},
+        "late": {"type": "integer", "description": "late packets so far, all runs"},
+        "start_pose": {**_JOINTS, "description": "RSI ASPos of the new run, deg"},
+        "q_actual": {**_JOINTS, "description": "RSI AIPos at the event, deg"},
+    },
+    "required": ["event", "message"],
 }
 
 GRIPPER_STATE = {
@@ -234,6 +262,7 @@ TOPIC_SCHEMAS: list[tuple[re.Pattern, SchemaSpec]] = [
     (re.compile(r"^/bus/[^/]+/[^/]+/request$"), SchemaSpec("rob6.BusRequest", BUS_REQUEST)),
     (re.compile(r"^/bus/[^/]+/[^/]+/reply$"), SchemaSpec("rob6.BusReply", BUS_REPLY)),
     (re.compile(r"^/driver/joint_state$"), SchemaSpec("rob6.JointState", JOINT_STATE)),
+    (re.compile(r"^/driver/link$"), SchemaSpec("rob6.LinkEvent", LINK_EVENT)),
     (re.compile(r"^/gripper/state$"), SchemaSpec("rob6.GripperState", GRIPPER_STATE)),
     (re.compile(r"^/log$"), SchemaSpec("foxglove.Log", FOXGLOVE_LOG)),
     (re.compile(r"^/tf$"), SchemaSpec("foxglove.FrameTransforms", FOXGLOVE_FRAME_TRANSFORMS)),

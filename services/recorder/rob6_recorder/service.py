@@ -27,7 +27,7 @@ log = logging.getLogger("rob6.recorder")
 URDF_DIR = Path(rob6.__file__).parent / "urdf"
 
 # bus key (after rob6/<id>/) -> recording topic, for the streams recorded as they are
-TOPICS = {"driver/state": "/driver/joint_state", "gripper/state": "/gripper/state"}
+TOPICS = {"driver/state": "/driver/joint_state", "driver/link": "/driver/link", "gripper/state": "/gripper/state"}
 
 
 class RecorderService:
@@ -41,10 +41,12 @@ class RecorderService:
 
     def start(self) -> None:
         self.recorder.start()
-        self.bus.subscribe("**", self.on_sample)
+        self._subscriber = self.bus.subscribe("**", self.on_sample)
         self.bus.announce()
 
     def stop(self) -> None:
+        # stop listening first, then write out what is queued: nothing arrives after the close
+        self._subscriber.undeclare()
         self.recorder.close()
 
     def on_sample(self, key: str, payload: bytes) -> None:

@@ -1,13 +1,20 @@
-"""Simulated robot of the driver: state at the controller cycle, trajectory execution,
-Alter (real-time target) mode with Ruckig online generation, watchdog, and an
-independent limit monitor (defence in depth).
+"""The motion core of the driver, independent of the robot it drives: state at the
+controller cycle, trajectory execution, Alter (real-time target) mode with Ruckig
+online generation, watchdog, and an independent limit monitor (defence in depth).
+
+A *link* (``links/``) owns the clock: it calls ``step()`` once per controller cycle
+and hands the new setpoint to the plant (the simulation takes it as reached; RSI sends
+it to a KUKA controller). When the plant cannot be reached the link calls
+``offline(reason)``: any motion ends (``ok`` False, ``error`` = the reason) and motion
+commands are refused with ``Offline`` until ``online(q_actual)`` resumes from where the
+robot really is, at rest.
 
 Units: degrees, seconds (``qd`` deg/s, ``qdd`` deg/s^2). Limits are given in the
 protocol's units (deg per 12 ms cycle, deg per cycle^2) and converted like the
 planner does: ``v = speed / 0.012``, ``a = accel / 0.012**2``, ``j = a / 0.048``.
 
-Nothing here sleeps: ``step()`` advances exactly one controller cycle. ``loop.py``
-calls it in real time; tests call it in fast-forward.
+Nothing here sleeps: ``step()`` advances exactly one controller cycle. The links call
+it in real time; tests call it in fast-forward.
 
 Limit monitor
 -------------
@@ -23,7 +30,7 @@ Every commanded sample (from a trajectory or from the internal generator) is che
 A sampled C2 motion that respects the limits everywhere always passes (the finite
 differences are averages of the true velocity/acceleration). A sample that fails is
 not applied: the violation is reported (``violations``, ``on_event``) and the robot
-makes a controlled, jerk-limited stop from its last good state. Samples the sim
+makes a controlled, jerk-limited stop from its last good state. Samples the core
 generates itself (Alter, stops) are planned from the exact state and checked too; if
 one ever failed it would be clamped to the largest admissible step instead (and
 reported), so the state itself never breaks the speed/acceleration limits.
@@ -47,6 +54,7 @@ widened just enough to contain that stop (reported), and close again at rest.
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -56,6 +64,8 @@ import numpy as np
 import ruckig
 
 from rob6.robots import UNIT_CYCLE_S, RobotModel, get_robot
+
+log = logging.getLogger(__name__)
 
 N_JOINTS = 6
 #: acceleration ramp time defining the jerk limit (same as the planner)
@@ -75,7 +85,7 @@ MIN_LIMIT = 1e-9
 
 # ====================================================================== data
 @dataclass
-class SimLimits:
+class Limits:
     """Limits in deg, deg/s, deg/s^2, deg/s^3."""
 
     turn_min: np.ndarray
@@ -86,25 +96,25 @@ class SimLimits:
 
     @classmethod
     def from_protocol(cls, turn_min, turn_max, max_speed, max_accel,
-                      jerk_ramp_s: float = JERK_RAMP_S) -> "SimLimits":
+                      jerk_ramp_s: float = JERK_RAMP_S) -> "Limits":
         v = np.asarray(max_speed, float) / UNIT_CYCLE_S
         a = np.asarray(max_accel, float) / UNIT_CYCLE_S**2
         return cls(np.asarray(turn_min, float).copy(), np.asarray(turn_max, float).copy(),
                    v, a, a / jerk_ramp_s)
 
     @classmethod
-    def defaults(cls, robot: RobotModel) -> "SimLimits":
+    def defaults(cls, robot: RobotModel) -> "Limits":
         return cls.from_protocol(robot.turn_min, robot.turn_max, robot.default_speed,
                                  robot.default_accel)
 
-    def copy(self) -> "SimLimits":
-        return SimLimits(self.turn_min.copy(), self.turn_max.copy(), self.vmax.copy(),
+    def copy(self) -> "Limits":
+        return Limits(self.turn_min.copy(), self.turn_max.copy(), self.vmax.copy(),
                          self.amax.copy(), self.jmax.copy())
 
 
 @dataclass
-class SimState:
-    """One controller cycle. ``t`` = cycle * dt (simulated clock, seconds)."""
+class CoreState:
+    """One controller cycle. ``t`` = cycle * dt (the controller's clock, seconds)."""
 
     t: float
     cycle: int
@@ -113,11 +123,6 @@ class SimState:
     qdd: np.ndarray
     mode: str  # idle | trajectory | alter | stopping
     moving: bool
-
-    def to_message(self) -> dict:
-        """Fields of ``rob6.messages.JointState``."""
-        return {"t": self.t, "cycle": self.cycle, "q": self.q.tolist(), "qd": self.qd.tolist(),
-                "moving": self.moving, "mode": self.mode}
 
 
 @dataclass
@@ -136,7 +141,8 @@ class Motion:
     """Handle of a trajectory (or stop): completion is awaitable.
 
     ``done`` is a threading.Event set when the robot has arrived (``ok`` True) or has
-    come to rest after a stop/violation (``ok`` False, ``reason``). Callbacks added
+    come to rest after a stop/violation (``ok`` False, ``reason``); ``error`` is set
+    (to the reason) when the plant failed, not the command (link lost). Callbacks added
     with ``add_done_callback(fn)`` run once with the motion, on the cycle thread (use
     ``loop.call_soon_threadsafe`` to hand over to asyncio).
     """
@@ -146,7 +152,8 @@ class Motion:
         self.done = threading.Event()
         self.ok: bool | None = None
         self.reason = ""
-        self.final: SimState | None = None
+        self.error = ""
+        self.final: CoreState | None = None
         self._callbacks: list[Callable[["Motion"], None]] = []
         self._lock = threading.Lock()
 
@@ -160,12 +167,13 @@ class Motion:
                 return
         fn(self)
 
-    def _finish(self, ok: bool, reason: str, state: SimState | None) -> list[Callable[[], None]]:
-        """Mark finished; returns the callbacks to run (outside the simulator's lock)."""
+    def _finish(self, ok: bool, reason: str, state: CoreState | None,
+                error: str = "") -> list[Callable[[], None]]:
+        """Mark finished; returns the callbacks to run (outside the core's lock)."""
         with self._lock:
             if self.done.is_set():
                 return []
-            self.ok, self.reason, self.final = ok, reason, state
+            self.ok, self.reason, self.final, self.error = ok, reason, state, error
             self.done.set()
             callbacks, self._callbacks = self._callbacks, []
         return [lambda fn=fn: fn(self) for fn in callbacks]
@@ -174,15 +182,20 @@ class Motion:
         return f"Motion({self.kind}, done={self.done.is_set()}, ok={self.ok}, reason={self.reason!r})"
 
 
-# ====================================================================== simulator
-class SimRobot:
-    """The simulated robot. Thread-safe: commands from any thread, ``step()`` from one."""
+class Offline(Exception):
+    """A motion command while the plant cannot be reached (the message says why)."""
+
+
+# ====================================================================== the core
+class MotionCore:
+    """The robot's motion. Thread-safe: commands from any thread, ``step()`` from one."""
 
     def __init__(self, robot: RobotModel | str, dt: float | None = None, *, dummy: bool = False,
-                 q0: Sequence[float] | None = None, limits: SimLimits | None = None,
-                 alter_timeout_s: float = 0.5,
+                 q0: Sequence[float] | None = None, limits: Limits | None = None,
+                 alter_timeout_s: float = 0.5, offline: str = "",
                  on_event: Callable[[dict], None] | None = None, max_violations: int = 1000):
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
+        self._offline = offline  # why the plant cannot be reached ("": it can)
         self.dt = float(dt if dt is not None else self.robot.cycle_s)
         self.dummy = dummy
         self.alter_timeout_s = float(alter_timeout_s)
@@ -190,7 +203,7 @@ class SimRobot:
         self.violations: deque[Violation] = deque(maxlen=max_violations)
         self.violation_count = 0
         self._lock = threading.RLock()
-        self._lim = (limits or SimLimits.defaults(self.robot)).copy()
+        self._lim = (limits or Limits.defaults(self.robot)).copy()
         # monitor limits (may be wider than _lim during a transition)
         self._mon = self._lim.copy()
         self._settle = 0
@@ -231,12 +244,16 @@ class SimRobot:
     def t(self) -> float:
         return self._cycle * self.dt
 
-    def state(self) -> SimState:
+    @property
+    def cycle(self) -> int:
+        return self._cycle
+
+    def state(self) -> CoreState:
         with self._lock:
             return self._state()
 
-    def _state(self) -> SimState:
-        return SimState(self.t, self._cycle, self._q.copy(), self._qd.copy(), self._qdd.copy(),
+    def _state(self) -> CoreState:
+        return CoreState(self.t, self._cycle, self._q.copy(), self._qd.copy(), self._qdd.copy(),
                         self._mode, self._moving())
 
     def _moving(self) -> bool:
@@ -251,11 +268,11 @@ class SimRobot:
     def alter_enabled(self) -> bool:
         return self._alter
 
-    def limits(self) -> SimLimits:
+    def limits(self) -> Limits:
         with self._lock:
             return self._lim.copy()
 
-    def enforced_limits(self) -> SimLimits:
+    def enforced_limits(self) -> Limits:
         """The limits the monitor checks right now (wider than ``limits()`` only in a transition)."""
         with self._lock:
             return self._mon.copy()
@@ -282,8 +299,51 @@ class SimRobot:
             try:
                 fn()
             except Exception:  # a callback must never stop the controller
-                import logging
-                logging.getLogger(__name__).exception("sim callback failed")
+                log.exception("motion core callback failed")
+
+    # ------------------------------------------------------------------ the plant
+    @property
+    def offline_reason(self) -> str:
+        """Why the plant cannot be reached right now ("" when it can)."""
+        return self._offline
+
+    def offline(self, reason: str) -> None:
+        """The plant cannot be reached: every motion ends at once (``ok`` False, ``error`` =
+        ``reason``) and motion commands are refused until ``online``. No cycle runs
+        meanwhile (the link owns the clock); the last setpoint stays."""
+        with self._lock:
+            self._offline = reason
+            self._abort(reason)
+        self._run_deferred()
+
+    def online(self, q_actual, reason: str = "resynchronized with the robot") -> None:
+        """The plant answers again: continue from ``q_actual`` (deg), at rest, never from
+        where an interrupted motion would have been. A motion still running (the plant
+        restarted under it) ends with ``reason``. Alter mode stays on, holding here."""
+        q = _six(q_actual)
+        with self._lock:
+            self._abort(self._offline or reason)
+            self._q = q.copy()
+            self._target = q.copy()
+            self._offline = ""
+        self._run_deferred()
+
+    def _abort(self, reason: str) -> None:
+        """End every motion now (lock held) and hold still: no brake ramp, the plant has
+        already stopped (or is unreachable)."""
+        self._samples = self._samples_qd = self._samples_qdd = None
+        self._gen, self._ebrake, self._resync, self._target_pending = None, False, False, False
+        self._qd[:] = 0.0
+        self._qdd[:] = 0.0
+        self._v_fd[:] = 0.0
+        self._target = self._q.copy()
+        self._mode = "alter" if self._alter else "idle"
+        self._mon, self._settle = self._lim.copy(), 0  # at rest: the monitor takes the current limits
+        state = self._state()
+        for motion in (self._motion, self._stop_motion):
+            if motion is not None:
+                self._deferred += motion._finish(False, reason, state, error=reason)
+        self._motion = self._stop_motion = None
 
     # ------------------------------------------------------------------ limits
     def set_limits(self, turn_min=None, turn_max=None, max_speed=None, max_accel=None) -> tuple[bool, str]:
@@ -308,7 +368,7 @@ class SimRobot:
         self._run_deferred()
         return True, ""
 
-    def _apply_limits(self, new: SimLimits) -> None:
+    def _apply_limits(self, new: Limits) -> None:
         self._lim = new
         self._lim_version += 1
         if not self._moving():
@@ -325,7 +385,7 @@ class SimRobot:
         elif self._mode == "stopping":
             self._resync = True  # re-plan the stop with the new limits
 
-    def _on_turn_change_in_motion(self, new: SimLimits) -> None:
+    def _on_turn_change_in_motion(self, new: Limits) -> None:
         lo, hi = new.turn_min, new.turn_max
         future = self._future_extrema()
         if future is None:
@@ -383,7 +443,9 @@ class SimRobot:
         motion = Motion("trajectory")
         with self._lock:
             reason = self._check_execute(q, dt, qd, qdd, check)
-            if reason:
+            if self._offline:
+                self._deferred += motion._finish(False, self._offline, self._state(), error=self._offline)
+            elif reason:
                 self._deferred += motion._finish(False, reason, self._state())
             elif self.dummy:
                 self._q = np.asarray(q, float)[-1].copy()
@@ -450,8 +512,11 @@ class SimRobot:
 
     # ------------------------------------------------------------------ alter mode
     def enable_alter(self, synchronized: bool | None = None, timeout_s: float | None = None) -> tuple[bool, str]:
-        """Enter Alter (real-time target) mode; only at rest (idempotent when enabled)."""
+        """Enter Alter (real-time target) mode; only at rest (idempotent when enabled).
+        Raises ``Offline`` while the plant cannot be reached."""
         with self._lock:
+            if self._offline:
+                raise Offline(self._offline)
             if self._alter and self._mode == "alter":
                 if timeout_s is not None:
                     self.alter_timeout_s = float(timeout_s)
@@ -487,9 +552,11 @@ class SimRobot:
 
         ``synchronized``: RTSpeedControl 0 -> True (axes arrive together), 1 -> False
         (every axis ramps on its own as fast as its limits allow). Any call counts as a
-        heartbeat for the watchdog.
+        heartbeat for the watchdog. Raises ``Offline`` while the plant cannot be reached.
         """
         with self._lock:
+            if self._offline:
+                raise Offline(self._offline)
             if not self._alter:
                 return False, "alter mode is not enabled"
             self._last_heard = self.t
@@ -565,7 +632,7 @@ class SimRobot:
         return motion
 
     # ------------------------------------------------------------------ generator
-    def _gen_input(self, lim: SimLimits, target: np.ndarray | None):
+    def _gen_input(self, lim: Limits, target: np.ndarray | None):
         """Ruckig input from the exact current state; axes that may not move are held."""
         inp = self._inp
         q, v, a = self._q, self._qd, self._qdd
@@ -615,7 +682,7 @@ class SimRobot:
             return None
         return traj
 
-    def _safe(self, traj: ruckig.Trajectory, *lims: SimLimits) -> bool:
+    def _safe(self, traj: ruckig.Trajectory, *lims: Limits) -> bool:
         """Does the whole future of ``traj`` stay inside the turn limits of ``lims``?"""
         # cheap bound first: no joint can get further than (max speed x duration)
         reach = 1.01 * np.maximum(self._mon.vmax, np.abs(self._qd)) * traj.duration + 1e-9
@@ -646,7 +713,7 @@ class SimRobot:
         return None
 
     # ------------------------------------------------------------------ the cycle
-    def step(self) -> SimState:
+    def step(self) -> CoreState:
         """Advance one controller cycle; returns the new state."""
         with self._lock:
             self._cycle += 1
@@ -845,10 +912,10 @@ class SimRobot:
             self._settle = 0
 
     # ------------------------------------------------------------------ fast-forward helpers
-    def run(self, cycles: int) -> list[SimState]:
+    def run(self, cycles: int) -> list[CoreState]:
         return [self.step() for _ in range(cycles)]
 
-    def run_until_idle(self, max_cycles: int = 1_000_000) -> list[SimState]:
+    def run_until_idle(self, max_cycles: int = 1_000_000) -> list[CoreState]:
         """Step until nothing moves (fast-forward; for tests and dummy use)."""
         states = []
         for _ in range(max_cycles):

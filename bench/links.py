@@ -1,0 +1,126 @@
+"""Alter streaming through the whole system on each robot link: MoveRTJoints at 250 Hz on
+kr16rt (4 ms cycle) with the recorder on, once on the simulation (``--link sim``) and
+once on RSI against the KR C4 simulator (kuka-rsi-sim, a separate process speaking
+RSI over real UDP), so the RSI figures stand beside the simulation's in the same run."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from rob6.bus import Bus
+from rob6.config import BusSettings
+from rob6.messages import Empty, LinkQuery
+from rob6.testing import running
+
+from .latency import percentiles
+
+START = "0 -80 100 0 30 0"
+
+
+class KukaSim:
+    """kuka-rsi-sim as a process, asked for its status on its JSON-lines control channel."""
+
+    def __init__(self, rob6_port: int):
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "kuka_rsi_sim", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{rob6_port}",
+             "--control", "127.0.0.1:0", "--start-pose", START.replace(" ", ",")],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        ready = self.proc.stdout.readline()  # "kuka-rsi-sim ready: control HOST:PORT, ..."
+        host, port = ready.split("control ", 1)[1].split(",", 1)[0].rsplit(":", 1)
+        self.control = socket.create_connection((host, int(port)), timeout=10).makefile("rwb")
+
+    def status(self) -> dict:
+        self.control.write(b'{"cmd": "status"}\n')
+        self.control.flush()
+        return json.loads(self.control.readline())
+
+    def close(self) -> None:
+        self.control.close()
+        self.proc.terminate()
+        self.proc.wait(10)
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def stream(link: str, seconds: float) -> dict:
+    """Stream for ``seconds``; the client's round trips and what the driver and controller counted."""
+    udp = free_udp_port()
+    extra = {"ROB6_LINK": link, "ROB6_RSI_LISTEN": f"127.0.0.1:{udp}"} if link == "rsi" else {}
+    kuka = None
+    with tempfile.TemporaryDirectory() as logs, \
+            running("kr16rt", dummy=False, log_dir=logs, extra_env=extra) as system:
+        bus = Bus(BusSettings(robot="kr16rt", robot_id=system.robot_id,
+                              connect=(f"tcp/127.0.0.1:{system.router_port}",)), "bench")
+        try:
+            bus.wait_for(["driver"], 10)
+            if link == "rsi":
+                kuka = KukaSim(udp)
+                while bus.request("driver", "link", LinkQuery()).state != "connected":
+                    time.sleep(0.05)
+            with system.client() as client:
+                client.ask("MovePTPJoints " + START, timeout=60)
+                assert client.ask("EnableAlter") == "true\n"
+                before = bus.request("driver", "state", Empty())
+                controller_before = kuka.status() if kuka else None
+                bus.request("driver", "link", LinkQuery(reset=True))
+                rtts, period, n = [], 0.004, int(seconds * 250)
+                start = time.perf_counter()
+                for k in range(n):
+                    line = "MoveRTJoints %f -80 100 0 30 0\n" % (5.0 * np.sin(2 * np.pi * 0.2 * k * period))
+                    sent = time.perf_counter()
+                    client.send(line)
+                    client.read_lines(1)
+                    rtts.append(time.perf_counter() - sent)
+                    delay = start + (k + 1) * period - time.perf_counter()
+                    if delay > 0:
+                        time.sleep(delay)
+                elapsed = time.perf_counter() - start
+                after = bus.request("driver", "state", Empty())
+                status = bus.request("driver", "link", LinkQuery())
+                controller = kuka.status() if kuka else None
+                client.ask("DisableAlter", timeout=10)
+        finally:
+            bus.close()
+            if kuka:
+                kuka.close()
+    result = {"n": n, "rate": n / elapsed, "cycles": after.cycle - before.cycle,
+              "missed": after.missed - before.missed, "rtt": percentiles(rtts), "latency_us": status.latency_us,
+              "realtime": status.realtime}
+    if controller:
+        result.update(late=controller["late_total"] - controller_before["late_total"],
+                      trips=len(controller["trips"]), controller_rtt=controller["rtt_ms"])
+    return result
+
+
+def links_table(seconds: float, table) -> None:
+    sim, rsi = stream("sim", seconds), stream("rsi", seconds)
+    p50s, p99s = sim["rtt"]
+    p50r, p99r = rsi["rtt"]
+    lat = rsi["latency_us"] or [float("nan")] * 3
+    crtt = rsi["controller_rtt"]
+    table(f"Alter streaming: MoveRTJoints at 250 Hz for {seconds:.0f} s on kr16rt (4 ms cycle), recorder on",
+          ("measure", "--link sim", "--link rsi (kuka-rsi-sim, UDP)", "goal"), [
+              ("commands sent / achieved rate", f"{sim['n']} / {sim['rate']:.1f} Hz",
+               f"{rsi['n']} / {rsi['rate']:.1f} Hz", "250 Hz"),
+              ("driver cycles run / missed", f"{sim['cycles']} / {sim['missed']}",
+               f"{rsi['cycles']} / {rsi['missed']}", "missed 0"),
+              ("late packets counted by the controller / RSI stops", "-", f"{rsi['late']} / {rsi['trips']}", "0 / 0"),
+              ("packet in -> answer out (driver) p50 / p99 / max, ms", "-",
+               f"{lat[0] / 1000:.3f} / {lat[1] / 1000:.3f} / {lat[2] / 1000:.3f}"
+               f"{'' if rsi['realtime'] else ' (no RT priority)'}", "p99 <= 1, max < 4"),
+              ("packet out -> answer in (controller) p50 / p99 / max, ms", "-",
+               f"{crtt['p50']} / {crtt['p99']} / {crtt['max']}", ""),
+              ("command -> target in the driver p50 / p99, ms", f"{p50s:.3f} / {p99s:.3f}",
+               f"{p50r:.3f} / {p99r:.3f}", "p99 <= 4 (one cycle)"),
+          ])

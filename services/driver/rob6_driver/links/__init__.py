@@ -1,0 +1,47 @@
+"""Links from the driver's motion core to the plant.
+
+A link owns the controller clock: it calls ``MotionCore.step()`` once per cycle and
+delivers the setpoint. ``sim`` takes every setpoint as reached (the default); ``rsi``
+drives a KUKA KR C4 over RSI, where every packet from the controller is one cycle.
+Another controller (Adept over simple_message, Kawasaki) becomes one more ``Link``
+beside these, without touching the motion core.
+
+What the service needs from a link is small: ``start``/``stop``, the plant's state for
+each published joint state (``state``, ``late``, ``missed``, ``q_actual``) and a
+status report (``status``). A link calls ``core.offline(reason)`` when the plant
+cannot be reached and ``core.online(q_actual)`` when it can again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from rob6.messages import LinkStatus
+
+from ..motion import CoreState
+
+#: called with the core's state after every cycle (the service publishes it)
+Publish = Callable[[CoreState], None]
+
+
+class Link:
+    """The plant as the service sees it."""
+
+    kind = ""
+    #: connected | lost | waiting
+    state = "connected"
+    #: late packets the controller counted so far (all runs)
+    late = 0
+    #: controller cycles that ran without the driver (no packet reached it, or the cycle came too late)
+    missed = 0
+    #: where the plant says the robot is (deg), or None when it only follows the setpoint
+    q_actual: list[float] | None = None
+
+    def start(self) -> None:
+        raise NotImplementedError
+
+    def stop(self) -> None:
+        raise NotImplementedError
+
+    def status(self, reset: bool = False) -> LinkStatus:
+        raise NotImplementedError

@@ -1,0 +1,35 @@
+"""The simulation link (the default): the driver's own real-time clock, perfect tracking.
+
+Every ``robot.cycle_s`` the cycle runner steps the motion core and the setpoint is
+where the robot is; nothing can be lost, so the link is always connected.
+"""
+
+from __future__ import annotations
+
+from rob6.messages import LinkStatus
+
+from ..loop import CycleRunner
+from ..motion import MotionCore
+from . import Link, Publish
+
+
+class SimLink(Link):
+    kind = "sim"
+
+    def __init__(self, core: MotionCore, publish: Publish):
+        self.core = core
+        self.runner = CycleRunner(core.step, core.dt, publish, name="driver-cycle")
+
+    @property
+    def missed(self) -> int:
+        return self.runner.stats.missed
+
+    def start(self) -> None:
+        self.runner.start()
+
+    def stop(self) -> None:
+        self.runner.stop()
+
+    def status(self, reset: bool = False) -> LinkStatus:
+        return LinkStatus(link="sim", state="connected", packets=self.runner.stats.cycles,
+                          missed=self.runner.stats.missed)

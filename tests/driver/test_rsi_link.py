@@ -1,0 +1,185 @@
+"""The RSI link's rules, packet by packet, against a scripted controller on real UDP:
+zero correction on a run's first packet, one step per cycle, the same setpoint again when
+an answer came too late, duplicates and garbage unanswered, link lost and back (from
+AIPos), a restart re-based on the new start pose, Stop at the end."""
+
+from __future__ import annotations
+
+import re
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from rob6.robots import get_robot
+from rob6_driver.links.rsi import RsiLink
+from rob6_driver.motion import MotionCore
+from rob6_planner.config import MotionConfig
+from rob6_planner.trajectory import TrajectoryPlanner
+
+HOME = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
+SEN = re.compile(rb'<Sen Type="ImFree"><AK A1="([^"]+)" A2="([^"]+)" A3="([^"]+)" A4="([^"]+)" '
+                 rb'A5="([^"]+)" A6="([^"]+)"/>(<Stop>1</Stop>)?<IPOC>(\d+)</IPOC></Sen>$')
+
+
+def axes(name, q):
+    return f"<{name} " + " ".join(f'A{i + 1}="{v:.4f}"' for i, v in enumerate(q)) + "/>"
+
+
+class Controller:
+    """Sends hand-made <Rob> packets to the link and reads its answers."""
+
+    def __init__(self, address):
+        host, port = address.rsplit(":", 1)
+        self.target = (host, int(port))
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(2.0)
+        self.ipoc = 1000
+
+    def send(self, aipos=HOME, aspos=HOME, delay=0, ipoc=None, raw=None):
+        if ipoc is None:
+            self.ipoc += 4
+            ipoc = self.ipoc
+        data = raw or (f'<Rob TYPE="KUKA">{axes("AIPos", aipos)}{axes("ASPos", aspos)}<Delay D="{delay}"/>'
+                       f"<IPOC>{ipoc}</IPOC></Rob>").encode()
+        self.sock.sendto(data, self.target)
+        return ipoc
+
+    def answer(self, timeout=2.0):
+        """(AK, stop, ipoc) of the next answer, or None if none comes within timeout."""
+        self.sock.settimeout(timeout)
+        try:
+            data = self.sock.recv(4096)
+        except socket.timeout:
+            return None
+        m = SEN.match(data)
+        assert m, data
+        return np.array([float(x) for x in m.groups()[:6]]), m.group(7) is not None, int(m.group(8))
+
+    def cycle(self, **kw):
+        ipoc = self.send(**kw)
+        ak, stop, echoed = self.answer()
+        assert echoed == ipoc
+        return ak
+
+
+@pytest.fixture
+def rig():
+    robot = get_robot("kr16rt")
+    core = MotionCore(robot)
+    states, events = [], []
+    link = RsiLink(core, robot, "127.0.0.1:0", states.append, events.append, lost_after_s=0.3)
+    link.start()
+    controller = Controller(link.address)
+    yield core, link, controller, states, events
+    link.stop()
+    controller.sock.close()
+
+
+def wait(predicate, timeout=5.0):
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
+def ptp(core, target):
+    plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), list(target), MotionConfig(core.robot))
+    t = plan.trajectory
+    return core.execute(t.q, t.dt, t.qd, t.qdd)
+
+
+def test_start_steps_and_late_answers(rig):
+    core, link, ctl, states, events = rig
+    assert link.state == "waiting"
+    assert core.execute([list(HOME)] * 2, core.dt).error.startswith("robot not connected (waiting for RSI on 127.0.0.1:")
+    assert np.array_equal(ctl.cycle(aspos=HOME), np.zeros(6))  # the first packet: zero correction
+    assert link.state == "connected" and core.state().q.tolist() == list(HOME)
+    motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
+    ak = [ctl.cycle() for _ in range(60)]
+    steps = np.diff([a[0] for a in ak])
+    assert np.all(steps > 0)  # one step a cycle
+    # our last answer came too late: the controller counted it and still applies the one before
+    held = ctl.cycle(delay=1)
+    assert np.array_equal(held, ak[-1]), "the same setpoint again, not a second step"
+    nxt = ctl.cycle(delay=1)
+    one_step = steps[-1] + 1e-3  # the next sample (accelerating), never two
+    assert 0 < nxt[0] - held[0] <= one_step
+    # a packet that never reached us: its lateness is explained by the gap, the robot steps on
+    ctl.ipoc += 4
+    after_gap = ctl.cycle(delay=2)
+    assert 0 < after_gap[0] - nxt[0] <= one_step + 1e-3
+    assert link.late == 2 and link.missed == 1
+    wait(lambda: [e.event for e in events if e.event == "late"] == ["late", "late"])  # published after the answers
+    # a duplicate of the last packet, an older one, garbage and a stranger get no answer
+    stranger = Controller(link.address)
+    for send in (lambda: ctl.send(delay=2, ipoc=ctl.ipoc), lambda: ctl.send(delay=2, ipoc=ctl.ipoc - 8),
+                 lambda: ctl.send(raw=b"<Rob><IPOC>12</IPOC>"), lambda: stranger.send(delay=2, ipoc=ctl.ipoc + 4)):
+        send()
+        time.sleep(0.01)  # one at a time (several waiting at once: only the newest is looked at)
+    assert ctl.answer(timeout=0.05) is None and stranger.answer(timeout=0.05) is None
+    assert link.garbage == 1
+    while not motion.done.is_set():
+        ctl.cycle(delay=2)
+    assert motion.ok
+    assert ctl.cycle(delay=2)[0] == pytest.approx(20.0, abs=1e-6)
+
+
+def test_lost_and_back_in_the_same_run_continues_from_aipos(rig):
+    core, link, ctl, states, events = rig
+    ctl.cycle()
+    motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
+    for _ in range(100):
+        last = ctl.cycle()
+    motion.wait(2.0)  # the link is lost (no packet for 0.3 s): the motion ends with the error
+    assert motion.ok is False and motion.error.startswith("RSI link lost: no packet from the controller at 127.0.0.1:")
+    assert link.state == "lost"
+    wait(lambda: states[-1].cycle == core.cycle and states[-1].mode == "idle")
+    # the controller held; its robot settled a little beyond the last answer
+    aipos = np.array(HOME) + last + [0.0005, 0, 0, 0, 0, 0]
+    back = ctl.cycle(aipos=aipos, delay=30)
+    assert np.allclose(back, aipos - HOME, atol=1e-9), "AK = AIPos - ASPos: no jump"
+    assert link.state == "connected" and link.late == 30
+    wait(lambda: [e.event for e in events][-2:] == ["lost", "back"])
+    # a new motion starts from there
+    motion = ptp(core, HOME)
+    first = ctl.cycle(aipos=aipos, delay=30)
+    assert abs(first[0] - back[0]) < 0.01
+
+
+def test_a_restart_rebases_on_the_new_start_pose(rig):
+    core, link, ctl, states, events = rig
+    ctl.cycle()
+    motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
+    for _ in range(50):
+        ctl.cycle()
+    new_start = (5.0, -80.0, 85.0, 0.0, 10.0, 0.0)
+    assert np.array_equal(ctl.cycle(aipos=new_start, aspos=new_start), np.zeros(6))
+    assert motion.ok is False and "restarted" in motion.error
+    assert core.state().q.tolist() == list(new_start) and link.runs == 2
+    wait(lambda: [e.event for e in events][-2:] == ["trip", "restart"])
+    assert events[-1].start_pose == list(new_start)
+    assert np.array_equal(ctl.cycle(aipos=new_start, aspos=new_start), np.zeros(6))
+
+
+def test_stop_ends_the_correction_run():
+    robot = get_robot("kr16rt")
+    core = MotionCore(robot)
+    link = RsiLink(core, robot, "127.0.0.1:0", lambda s: None)
+    link.start()
+    ctl = Controller(link.address)
+    try:
+        ctl.cycle()
+        import threading
+        stopper = threading.Thread(target=link.stop)
+        stopper.start()
+        time.sleep(0.05)
+        ipoc = ctl.send()
+        ak, stop, echoed = ctl.answer()
+        assert stop and echoed == ipoc and np.array_equal(ak, np.zeros(6))
+        stopper.join(5)
+        assert not stopper.is_alive()
+    finally:
+        ctl.sock.close()
