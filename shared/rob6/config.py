@@ -19,8 +19,9 @@ import click
 from .robots import ROBOT_TYPES
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
-#: how the driver reaches the robot: the simulation, or a KUKA KR C4 over RSI
-LINKS = ("sim", "rsi")
+#: how the driver reaches the robot: the simulation, a KUKA KR C4 over RSI, or an Adept
+#: V+ controller over ROS-Industrial simple_message (``adept`` is another name for it)
+LINKS = ("sim", "rsi", "simple_message", "adept")
 
 
 @dataclass(frozen=True)

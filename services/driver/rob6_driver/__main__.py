@@ -1,5 +1,7 @@
-"""rob6-driver: the robot, simulated (``--link sim``, the default) or a KUKA KR C4 over
-RSI (``--link rsi``: this PC is the UDP server the controller's RSI context sends to)."""
+"""rob6-driver: the robot, simulated (``--link sim``, the default), a KUKA KR C4 over
+RSI (``--link rsi``: this PC is the UDP server the controller's RSI context sends to), or
+an Adept V+ controller over ROS-Industrial simple_message (``--link simple_message``, or
+``adept``: this PC is the client of the controller's motion and state ports)."""
 
 from __future__ import annotations
 
@@ -10,6 +12,14 @@ from rob6.config import LINKS, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
 
+from .links.adept import (
+    DEFAULT_BYTE_ORDER,
+    DEFAULT_HOST,
+    DEFAULT_MOTION_PORT,
+    DEFAULT_PERIOD_S,
+    DEFAULT_STATE_PORT,
+    AdeptSettings,
+)
 from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, parse_address
 from .service import DriverService
 
@@ -19,14 +29,42 @@ from .service import DriverService
 @click.option("--dummy/--real-time", envvar="ROB6_DUMMY", default=False, show_default=True,
               help="Instantaneous motion like the original's -d, or motion in real time [env ROB6_DUMMY=1].")
 @click.option("--link", envvar="ROB6_LINK", default="sim", show_default=True, type=click.Choice(LINKS),
-              help="The robot: the simulation, or a KUKA KR C4 over RSI [env ROB6_LINK].")
+              help="The robot: the simulation, a KUKA KR C4 over RSI, or an Adept over simple_message "
+                   "(simple_message, also called adept) [env ROB6_LINK].")
 @click.option("--rsi-listen", envvar="ROB6_RSI_LISTEN", default=DEFAULT_LISTEN, show_default=True,
               help="UDP HOST:PORT the controller's RSI packets come to [env ROB6_RSI_LISTEN].")
 @click.option("--rsi-sentype", envvar="ROB6_RSI_SENTYPE", default=DEFAULT_SEN_TYPE, show_default=True,
               help="The Type of the answer's <Sen> element, as in the RSI configuration [env ROB6_RSI_SENTYPE].")
-def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype):
+@click.option("--sm-host", envvar="ROB6_SM_HOST", default=DEFAULT_HOST, show_default=True,
+              help="simple_message: the controller's address [env ROB6_SM_HOST].")
+@click.option("--sm-motion-port", envvar="ROB6_SM_MOTION_PORT", default=DEFAULT_MOTION_PORT, show_default=True,
+              type=int, help="simple_message: the controller's motion port [env ROB6_SM_MOTION_PORT].")
+@click.option("--sm-state-port", envvar="ROB6_SM_STATE_PORT", default=DEFAULT_STATE_PORT, show_default=True,
+              type=int, help="simple_message: the controller's state port [env ROB6_SM_STATE_PORT].")
+@click.option("--sm-byte-order", envvar="ROB6_SM_BYTE_ORDER", default=DEFAULT_BYTE_ORDER, show_default=True,
+              type=click.Choice(["big", "little"]),
+              help="simple_message: the controller's byte order (the Adept V+ program: big) "
+                   "[env ROB6_SM_BYTE_ORDER].")
+@click.option("--sm-period", envvar="ROB6_SM_PERIOD", default=DEFAULT_PERIOD_S, show_default=True, type=float,
+              help="simple_message: seconds between streamed points, rounded to controller cycles "
+                   "[env ROB6_SM_PERIOD].")
+def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_motion_port, sm_state_port,
+         sm_byte_order, sm_period):
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
+    sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port,
+                       byte_order=sm_byte_order, period_s=sm_period)
+    if link in ("simple_message", "adept"):
+        if not robot.is_adept:
+            service.fail("driver", f"--link {link} drives the Adept Viper s850 (ad850), not {robot.name}; "
+                         "use --link sim", EXIT_REFUSED)
+        if dummy:
+            service.fail("driver", f"--link {link} moves a real robot in real time: --dummy is not possible",
+                         EXIT_REFUSED)
+        try:
+            sm.check()
+        except ValueError as exc:
+            service.fail("driver", str(exc), EXIT_REFUSED)
     if link == "rsi":
         if not robot.is_kuka:
             service.fail("driver", f"--link rsi drives KUKA robots (kr3, kr16, kr3rt, kr16rt), not {robot.name}; "
@@ -41,7 +79,8 @@ def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype):
 
     def setup(bus):
         try:
-            driver = DriverService(bus, robot, dummy, link=link, rsi_listen=rsi_listen, rsi_sen_type=rsi_sentype)
+            driver = DriverService(bus, robot, dummy, link=link, rsi_listen=rsi_listen, rsi_sen_type=rsi_sentype,
+                                   sm=sm)
         except OSError as exc:
             raise service.StartupError(f"cannot listen for RSI on udp/{rsi_listen}: {exc.strerror or exc}; "
                                        "is another driver running? Set ROB6_RSI_LISTEN") from None

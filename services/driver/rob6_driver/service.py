@@ -3,7 +3,9 @@
 The motion core (``motion.MotionCore``) executes the planner's sampled trajectories,
 follows Alter targets with Ruckig, and checks every setpoint against the limits on
 its own, whatever the planner sent. The link (``links/``) owns the clock and reaches
-the plant: ``sim``, the simulation (default), or ``rsi``, a KUKA KR C4 over RSI.
+the plant: ``sim``, the simulation (default), ``rsi``, a KUKA KR C4 over RSI, or
+``simple_message`` (also called ``adept``), an Adept V+ controller over ROS-Industrial
+simple_message. A motion's ``true`` waits for the link to confirm the robot arrived.
 
 A failure of the plant (robot not connected, link lost) comes back in the replies'
 ``error`` field, which the gateway shows the client as ``ERROR: driver: <error>``;
@@ -33,6 +35,7 @@ from rob6.messages import (
 from rob6.robots import RobotModel
 
 from .links import Link
+from .links.adept import AdeptLink, AdeptSettings
 from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, RsiLink
 from .links.sim import SimLink
 from .motion import CoreState, MotionCore, Offline
@@ -44,7 +47,8 @@ EXECUTE_MARGIN_S = 5.0  # beyond the trajectory's own duration
 
 class DriverService:
     def __init__(self, bus: Bus, robot: RobotModel, dummy: bool, alter_timeout_s: float = 0.5, *,
-                 link: str = "sim", rsi_listen: str = DEFAULT_LISTEN, rsi_sen_type: str = DEFAULT_SEN_TYPE):
+                 link: str = "sim", rsi_listen: str = DEFAULT_LISTEN, rsi_sen_type: str = DEFAULT_SEN_TYPE,
+                 sm: AdeptSettings | None = None):
         self.bus = bus
         self.robot = robot
         self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
@@ -52,10 +56,12 @@ class DriverService:
         if link == "rsi":
             self.link = RsiLink(self.core, robot, rsi_listen, self._publish, self._publish_link_event,
                                 sen_type=rsi_sen_type)
+        elif link in ("simple_message", "adept"):
+            self.link = AdeptLink(self.core, robot, sm or AdeptSettings(), self._publish, self._publish_link_event)
         elif link == "sim":
             self.link = SimLink(self.core, self._publish)
         else:
-            raise ValueError(f"unknown link {link!r} (sim or rsi)")
+            raise ValueError(f"unknown link {link!r} (sim, rsi or simple_message)")
 
     def joint_state(self, state: CoreState) -> JointState:
         link = self.link
@@ -93,6 +99,11 @@ class DriverService:
             return ExecuteReply(ok=False, reason="the motion did not end in time",
                                 state=self.joint_state(self.core.state()))
         final = motion.final or self.core.state()
+        if motion.ok:  # the setpoints are done; a robot that lags behind them must arrive too
+            failed = self.link.settle(final.q)
+            if failed:
+                log.info("motion failed: %s", failed)
+                return ExecuteReply(ok=False, reason=failed, error=failed, state=self.joint_state(self.core.state()))
         if motion.error:  # the link already said why, at WARNING
             log.info("motion failed: %s", motion.error)
         elif not motion.ok:

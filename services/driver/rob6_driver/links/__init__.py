@@ -2,14 +2,17 @@
 
 A link owns the controller clock: it calls ``MotionCore.step()`` once per cycle and
 delivers the setpoint. ``sim`` takes every setpoint as reached (the default); ``rsi``
-drives a KUKA KR C4 over RSI, where every packet from the controller is one cycle.
-Another controller (Adept over simple_message, Kawasaki) becomes one more ``Link``
-beside these, without touching the motion core.
+drives a KUKA KR C4 over RSI, where every packet from the controller is one cycle;
+``simple_message`` (``adept.py``) streams the setpoints as ROS-Industrial
+simple_message points to an Adept V+ controller. Another controller (Kawasaki)
+becomes one more ``Link`` beside these, without touching the motion core.
 
 What the service needs from a link is small: ``start``/``stop``, the plant's state for
 each published joint state (``state``, ``late``, ``missed``, ``q_actual``) and a
-status report (``status``). A link calls ``core.offline(reason)`` when the plant
-cannot be reached and ``core.online(q_actual)`` when it can again.
+status report (``status``), and ``settle`` after a motion the core has finished (a
+robot that lags behind its setpoints: has it arrived?). A link calls
+``core.offline(reason)`` when the plant cannot be reached and ``core.online(q_actual)``
+when it can again.
 """
 
 from __future__ import annotations
@@ -45,3 +48,9 @@ class Link:
 
     def status(self, reset: bool = False) -> LinkStatus:
         raise NotImplementedError
+
+    def settle(self, q_final, timeout: float | None = None) -> str:
+        """After a motion ended at ``q_final`` (deg): wait until the robot is there.
+        "" when it is, else why not (the motion then fails with that error). Links
+        whose robot is where the setpoint is (sim, rsi) return at once."""
+        return ""
