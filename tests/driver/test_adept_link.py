@@ -1,0 +1,369 @@
+"""The simple_message link's rules against a scripted controller on real TCP (frames packed
+by hand here): the stream's form (hold point, sequence, -3 at the end, one request at a
+time), arrival before true, the faults (E-stop, drives off, refused points, silence,
+late and missing acknowledgements, a robot that stops short) ending motions with their
+error and the resync at the robot's actual position, and the robot's range guarded.
+Assertions are about what was sent and said, never about how fast this machine is."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import select
+import socket
+import struct
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from rob6.robots import get_robot
+from rob6_driver.links.adept import RATED_SPEED_DEG_S, AdeptLink, AdeptSettings, from_wire, to_wire
+from rob6_driver.motion import MotionCore
+from rob6_planner.config import MotionConfig
+from rob6_planner.trajectory import TrajectoryPlanner
+
+ROBOT = get_robot("ad850")
+ORDERS = {"big": ">", "little": "<"}
+STATE_PERIOD_S = 0.02
+
+
+class Point:
+    def __init__(self, sequence, comm, joints, velocity, duration):
+        self.sequence, self.comm, self.velocity, self.duration = sequence, comm, velocity, duration
+        self.joints = list(joints)  # ten, radians
+        self.q = from_wire(self.joints)  # rob6 degrees
+
+
+class FakeController:
+    """Both ports of a simple_message controller, scripted by the test."""
+
+    def __init__(self, order: str = "big"):
+        self.e = ORDERS[order]
+        self.motion_server = socket.create_server(("127.0.0.1", 0))
+        self.state_server = socket.create_server(("127.0.0.1", 0))
+        self.points: list[Point] = []
+        self.reply_code = 1
+        self.ack_delay = 0.0
+        self.follow = True  # the robot is at every acknowledged point at once
+        self.in_motion = 0
+        self.status = {"drives_powered": 1, "e_stopped": 0, "error_code": 0, "in_error": 0}
+        self.position = [0.0, 0.0, math.pi / 2, 0.0, 0.0, 0.0]  # rob6's zero
+        self.silent = False
+        self.pipelined = 0  # requests sent before the previous one was answered
+        self.connections = {"motion": 0, "state": 0}
+        self._sockets: list[socket.socket] = []
+        self._closing = False
+        for server, serve in ((self.motion_server, self._motion), (self.state_server, self._state)):
+            threading.Thread(target=self._accept, args=(server, serve), daemon=True).start()
+
+    @property
+    def settings(self) -> dict:
+        return {"motion_port": self.motion_server.getsockname()[1], "state_port": self.state_server.getsockname()[1]}
+
+    def close(self) -> None:
+        self._closing = True
+        for sock in (self.motion_server, self.state_server, *self._sockets):
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            sock.close()
+
+    def drop(self) -> None:
+        """Close every connection (the ports take new ones)."""
+        for sock in self._sockets:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        self._sockets.clear()
+
+    def _accept(self, server, serve) -> None:
+        while not self._closing:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            self._sockets.append(conn)
+            threading.Thread(target=serve, args=(conn,), daemon=True).start()
+
+    def _frame(self, msg_type, comm, reply, body) -> bytes:
+        e = self.e
+        return struct.pack(e + "i", 12 + len(body)) + struct.pack(e + "3i", msg_type, comm, reply) + body
+
+    def _motion(self, conn) -> None:
+        self.connections["motion"] += 1
+        e = self.e
+        try:
+            while True:
+                (length,) = struct.unpack(e + "i", _exact(conn, 4))
+                payload = _exact(conn, length)
+                msg_type, comm, _ = struct.unpack_from(e + "3i", payload)
+                assert msg_type == 11 and length == 64, (msg_type, length)
+                seq, *rest = struct.unpack_from(e + "i10fff", payload, 12)
+                point = Point(seq, comm, rest[:10], rest[10], rest[11])
+                self.points.append(point)
+                if self.ack_delay:
+                    time.sleep(self.ack_delay)
+                if conn.fileno() >= 0 and select.select([conn], [], [], 0)[0]:
+                    self.pipelined += 1
+                code = 1 if seq == -4 else self.reply_code
+                if code == 1 and seq != -4 and self.follow:
+                    self.position = point.joints[:6]
+                conn.sendall(self._frame(11, 3, code, struct.pack(e + "i", -4 if seq == -4 else 0)))
+        except (OSError, ConnectionError):
+            pass
+
+    def _state(self, conn) -> None:
+        self.connections["state"] += 1
+        e = self.e
+        try:
+            while not self._closing:
+                if not self.silent:
+                    st = self.status
+                    conn.sendall(self._frame(10, 1, 0, struct.pack(e + "i10f", 0, *self.position, 0, 0, 0, 0))
+                                 + self._frame(13, 1, 0, struct.pack(
+                                     e + "7i", st["drives_powered"], st["e_stopped"], st["error_code"],
+                                     st["in_error"], self.in_motion, 2, 1 - self.in_motion)))
+                time.sleep(STATE_PERIOD_S)
+        except OSError:
+            pass
+
+
+def _exact(conn, n) -> bytes:
+    data = b""
+    while len(data) < n:
+        chunk = conn.recv(n - len(data))
+        if not chunk:
+            raise ConnectionError
+        data += chunk
+    return data
+
+
+def wait(predicate, timeout=15.0, what="condition"):
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.005)
+
+
+def ptp(core, target, config=None):
+    plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), list(target),
+                                                  config or MotionConfig(core.robot))
+    assert plan.ok, plan.reason
+    t = plan.trajectory
+    return core.execute(t.q, t.dt, t.qd, t.qdd), len(t.q)
+
+
+def online(core, link):
+    wait(lambda: link.state == "connected" and not core.offline_reason, what="the link to be up")
+
+
+@pytest.fixture(params=["big", "little"])
+def rig(request):
+    fake = FakeController(request.param)
+    core = MotionCore(ROBOT)
+    events = []
+    link = AdeptLink(core, ROBOT, AdeptSettings(byte_order=request.param, **fake.settings), lambda s: None,
+                     events.append, ack_timeout_s=0.5, state_timeout_s=0.3, retry_s=0.1, no_progress_s=0.5)
+    yield fake, core, link, events
+    link.stop()
+    fake.close()
+
+
+def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig):
+    fake, core, link, events = rig
+    port, state_port = fake.settings["motion_port"], fake.settings["state_port"]
+    refused = core.execute([[0.0] * 6] * 2, core.dt)
+    assert refused.error == f"robot not connected (waiting for simple_message at 127.0.0.1:{port}/{state_port})"
+    link.start()
+    online(core, link)
+    assert core.state().q.tolist() == [0.0] * 6 and link.q_actual == [0.0] * 6
+    target = [10.0, -20.0, 15.0, 5.0, 20.0, -30.0]
+    motion, samples = ptp(core, target)
+    assert motion.wait(20) and motion.ok
+    assert link.settle(motion.final.q) == ""
+    points = fake.points
+    assert all(p.comm == 2 for p in points) and fake.pipelined == 0
+    # the hold point: where the robot rests, for one period plus the lead
+    assert points[0].sequence == 0 and points[0].q.tolist() == [0.0] * 6 and points[0].velocity == 0.0
+    assert points[0].duration == pytest.approx(2 * link.period_s)
+    assert [p.sequence for p in points[1:-1]] == list(range(1, len(points) - 1))
+    assert points[-1].sequence == -3 and np.allclose(points[-1].q, target, atol=1e-4)
+    # the durations add up to the trajectory (plus the hold point's own): the controller's timing is rob6's
+    assert sum(p.duration for p in points) == pytest.approx((samples - 1) * core.dt + link.period_s + link.lead_s + core.dt,
+                                                            abs=core.dt + 1e-6)
+    assert link.period_s == pytest.approx(3 * core.dt)
+    for before, point in itertools.pairwise(points):
+        step = np.abs(np.degrees(np.subtract(point.joints[:6], before.joints[:6])))
+        assert point.velocity == pytest.approx(min(1.0, np.max(step / point.duration / RATED_SPEED_DEG_S)),
+                                               rel=1e-3, abs=1e-6)
+        assert np.all(point.q >= ROBOT.hw_min) and np.all(point.q <= ROBOT.hw_max)
+    assert link.packets == len(points) and link.late == 0
+    assert [e.event for e in events][:2] == ["waiting", "connected"]
+
+
+def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig):
+    fake, core, link, events = rig
+    link.start()
+    online(core, link)
+    motion, _ = ptp(core, [30.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    wait(lambda: len(fake.points) > 10, what="points")
+    fake.follow = False  # the arm stands where the E-stop caught it
+    fake.status.update(e_stopped=1, drives_powered=0)
+    assert motion.wait(10)
+    assert (motion.ok, motion.error) == (False, "robot reports an E-stop")
+    wait(lambda: fake.points[-1].sequence == -4, what="the stop request")  # the controller's queue is dropped
+    assert core.execute([core.state().q.tolist()] * 2, core.dt).error == "robot reports an E-stop"
+    stood = from_wire(fake.position)
+    assert 0.0 < stood[0] < 30.0
+    fake.status.update(e_stopped=0)
+    wait(lambda: core.offline_reason == "robot reports drives off", what="drives off")
+    fake.status.update(drives_powered=1)
+    online(core, link)
+    assert np.array_equal(core.state().q, stood)  # from where the robot is, not where the motion was
+    fake.follow = True
+    sent = len(fake.points)
+    motion, _ = ptp(core, [0.0] * 6)
+    assert motion.wait(20) and motion.ok and link.settle(motion.final.q) == ""
+    assert np.array_equal(fake.points[sent].q, stood)  # the new stream starts there: no jump
+    kinds = [e.event for e in events]
+    assert "fault" in kinds and kinds[-1] == "back"
+
+
+def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_words(rig):
+    fake, core, link, events = rig
+    link.start()
+    online(core, link)
+    motion, _ = ptp(core, [20.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    wait(lambda: len(fake.points) > 5, what="points")
+    fake.status.update(error_code=1107, in_error=1)
+    assert motion.wait(10) and motion.error == "robot reports controller error 1107"
+    fake.status.update(error_code=0, in_error=0)
+    online(core, link)
+    fake.reply_code = 2  # like adept-sm-sim for a point it cannot move to; STATUS says nothing
+    motion, _ = ptp(core, [0.0] * 6)
+    assert motion.wait(10) and motion.error == "robot refused a point (reply code 2)"
+    assert link.refused >= 1
+    fake.reply_code = 1
+    online(core, link)  # resynchronized once the robot is at rest
+    motion, _ = ptp(core, [0.0] * 6)
+    assert motion.wait(20) and motion.ok and link.settle(motion.final.q) == ""
+    assert "refused" in [e.event for e in events]
+
+
+def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig):
+    fake, core, link, events = rig
+    link.start()
+    online(core, link)
+    port = fake.settings["motion_port"]
+    fake.ack_delay = 2.0
+    motion, _ = ptp(core, [10.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert motion.wait(10)
+    assert motion.error == f"simple_message link lost: no acknowledgement from the controller at 127.0.0.1:{port} " \
+                           "for 500 ms"
+    assert link.state == "lost"
+    refused = core.execute([core.state().q.tolist()] * 2, core.dt)
+    assert refused.error.startswith("simple_message link lost: ")
+    fake.ack_delay = 0.0
+    wait(lambda: fake.connections["motion"] == 2, what="a new motion connection")
+    online(core, link)
+    assert np.allclose(core.state().q, from_wire(fake.position), atol=1e-9)
+    motion, _ = ptp(core, [5.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert motion.wait(20) and motion.ok and link.settle(motion.final.q) == ""
+    assert [e.event for e in events].count("back") >= 1
+
+
+def test_a_silent_state_port_is_a_lost_link(rig):
+    fake, core, link, events = rig
+    link.start()
+    online(core, link)
+    fake.silent = True
+    wait(lambda: core.offline_reason.startswith("simple_message link lost: no state message from the controller "
+                                                "at 127.0.0.1:"), what="the link lost")
+    assert core.offline_reason.endswith(" for 300 ms")
+    fake.silent = False
+    online(core, link)
+    fake.drop()  # both connections closed by the controller
+    wait(lambda: fake.connections == {"motion": 2, "state": 3}, what="both ports connected again")
+    online(core, link)
+    lost = [e.message for e in events if e.event == "lost"]
+    assert any(m.startswith("simple_message link lost: the controller at 127.0.0.1:") and
+               m.endswith(" closed the state connection") for m in lost), lost
+
+
+def test_late_acknowledgements_merge_points_and_keep_the_timing(rig):
+    fake, core, link, _ = rig
+    link.start()
+    online(core, link)
+    fake.ack_delay = 0.15  # three periods: the points made meanwhile go as one
+    motion, samples = ptp(core, [8.0, 0.0, 4.0, 0.0, 0.0, 0.0])
+    assert motion.wait(20) and motion.ok and link.settle(motion.final.q) == ""
+    assert link.late > 0 and len(fake.points) + link.late == link.late + link.packets
+    assert sum(p.duration for p in fake.points) == pytest.approx((samples - 1) * core.dt + link.period_s + link.lead_s + core.dt,
+                                                                 abs=core.dt + 1e-6)
+    assert np.allclose(fake.points[-1].q, [8.0, 0.0, 4.0, 0.0, 0.0, 0.0], atol=1e-4)
+
+
+def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig):
+    fake, core, link, _ = rig
+    link.start()
+    online(core, link)
+    fake.follow = False
+    motion, _ = ptp(core, [3.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert motion.wait(10) and motion.ok  # the setpoints are done ...
+    failed = link.settle(motion.final.q)  # ... the robot is not there
+    assert failed == "robot stopped short of the target (joint 1 at 0.000, target 3.000)"
+    assert core.offline_reason == failed
+    online(core, link)
+    assert core.state().q.tolist() == [0.0] * 6
+
+
+def test_a_point_beyond_the_robots_range_is_never_sent():
+    config = MotionConfig(ROBOT)
+    fake = FakeController()
+    core = MotionCore(ROBOT)
+    link = AdeptLink(core, ROBOT, AdeptSettings(**fake.settings), lambda s: None, retry_s=0.1)
+    try:
+        link.start()
+        fake.position = to_wire([165.0, 0, 0, 0, 0, 0])
+        online(core, link)
+        # limits wider than the arm's (a client's SetTurnLimits): the core would allow 175
+        config.turn_min[0], config.turn_max[0] = -200.0, 200.0
+        assert core.set_limits(turn_min=config.turn_min, turn_max=config.turn_max)[0]
+        motion, _ = ptp(core, [175.0, 0.0, 0.0, 0.0, 0.0, 0.0], config)
+        assert motion.wait(20)
+        assert motion.error.startswith("refused to send a point outside the robot's range (joint 1 at 170.")
+        assert motion.error.endswith(", range -170 .. 170)")
+        assert max(p.q[0] for p in fake.points) <= 170.0
+    finally:
+        link.stop()
+        fake.close()
+
+
+def test_stopping_the_link_mid_motion_sends_a_stop():
+    fake = FakeController()
+    core = MotionCore(ROBOT)
+    link = AdeptLink(core, ROBOT, AdeptSettings(**fake.settings), lambda s: None, retry_s=0.1)
+    try:
+        link.start()
+        online(core, link)
+        ptp(core, [30.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+        wait(lambda: len(fake.points) > 3, what="points")
+    finally:
+        link.stop()
+        fake.close()
+    assert fake.points[-1].sequence == -4
+
+
+def test_only_the_adept_and_sensible_settings():
+    with pytest.raises(ValueError, match=r"drives the Adept Viper s850 \(ad850\), not kr16"):
+        AdeptLink(MotionCore("kr16"), get_robot("kr16"), AdeptSettings(), lambda s: None)
+    for settings, text in ((AdeptSettings(motion_port=0), "ROB6_SM_MOTION_PORT=0"),
+                           (AdeptSettings(byte_order="middle"), "ROB6_SM_BYTE_ORDER='middle'"),
+                           (AdeptSettings(period_s=0.0), "ROB6_SM_PERIOD=0.0"),
+                           (AdeptSettings(host=" "), "ROB6_SM_HOST is empty")):
+        with pytest.raises(ValueError, match=text):
+            settings.check()
