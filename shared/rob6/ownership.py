@@ -73,11 +73,20 @@ class Claim:
         liveliness = bus.session.liveliness()
         self._subscriber = liveliness.declare_subscriber(
             bus.key("claim", self.service, "*", "*"), zenoh.handlers.Callback(self._on_claim), history=True)
+        # the one-shot query above can miss an owner whose token has not reached this new
+        # session yet (in peer mode the router leaves peers to link to each other); a
+        # subscription with history gets it as soon as it arrives, like the claims
+        alive: set[str] = set()
+        alive_subscriber = liveliness.declare_subscriber(
+            bus.key("alive", self.service, "*"),
+            zenoh.handlers.Callback(lambda sample: alive.add(str(sample.key_expr).rsplit("/", 1)[-1])
+                                    if sample.kind == zenoh.SampleKind.PUT else None), history=True)
         self._token = liveliness.declare_token(bus.key("claim", self.service, self.me, str(self.epoch)))
         time.sleep(settle_s)
+        alive_subscriber.undeclare()
         with self._lock:
             earlier = sorted((e, i) for i, e in self._claims.items() if i != self.me and (e, i) < (self.epoch, self.me))
-        holder = _live_owner(bus, self.service)
+        holder = next(iter(sorted(alive - {self.me})), None) or _live_owner(bus, self.service)
         if holder or earlier:
             self.release()
             # a claim token lives as long as its owner: one much older than this start is an
@@ -128,11 +137,14 @@ class Claim:
                       self.service, other, self.bus.settings.robot_id)
 
     def release(self) -> None:
-        for declared in (self._token, self._subscriber):
-            try:
-                declared.undeclare()
-            except Exception:  # the session may already be closed
-                log.debug("undeclare failed", exc_info=True)
+        try:  # the session may already be closed: then both fail
+            self._token.undeclare()
+        except Exception:
+            log.debug("undeclaring the claim token failed", exc_info=True)
+        try:
+            self._subscriber.undeclare()
+        except Exception:
+            log.debug("undeclaring the claim subscriber failed", exc_info=True)
 
 
 def already_running(bus: Bus, holder: str) -> str:
