@@ -419,9 +419,8 @@ class AdeptLink(Link):
         with self._cond:
             fault = self._fault()
             connected = self._motion_up and self._state_up
-            if connected and self._status is not None and self._position is not None:
-                self._ready_once = True
-            self.state = "connected" if connected else ("lost" if self._ready_once else "waiting")
+            # waiting: never ready yet; connected: both ports up (the robot may report a fault); lost
+            self.state = ("connected" if connected else "lost") if self._ready_once else "waiting"
             reason = fault or hiccup
             if reason:
                 if self._online or reason != self._reason:
@@ -436,7 +435,8 @@ class AdeptLink(Link):
                         self._report(event, f"driver: {reason}", logging.WARNING if event == "lost" else logging.ERROR)
             elif not self._online and self._at_rest():
                 back = self._reason
-                self._online = True
+                self._online = self._ready_once = True
+                self.state = "connected"
                 self._reason = ""
                 self._sent_ctrl = None
                 self._rest_q = self._position.copy()

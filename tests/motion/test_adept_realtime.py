@@ -1,0 +1,308 @@
+"""The whole system (``rob6 run --robot ad850 --link simple_message``) driving the Adept
+controller simulator (adept-sm-sim, a separate process speaking simple_message over real
+TCP) in real time: PTP, LIN and Alter sessions within every limit, in both byte orders and
+both of the simulator's timings; and the faults: E-stop, drives off and a controller
+error mid-motion, the motion or state connection dropped, slow and missing
+acknowledgements. Each ends the motion with a clear ``ERROR: driver: ...`` and
+``false``, refuses motion meanwhile, and rob6 continues from where the robot really is.
+Assertions are about positions, limits, texts and recovery, never about how fast this
+(shared) machine is; bench/links.py measures the timing."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from controllers.adept_controller import AdeptController
+from system import running
+from test_realtime_system import assert_within_limits
+
+from rob6.bus import Bus
+from rob6.config import BusSettings
+from rob6.messages import LinkQuery
+from rob6.robots import get_robot
+from rob6_recorder.reader import read_records
+
+pytestmark = pytest.mark.slow
+
+ROBOT = get_robot("ad850")
+START = [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]
+#: float32 radians on the wire, rob6 rounds what it reads to 1e-4 deg
+POSITION_TOL = 2e-4
+
+
+def free_tcp_ports(n: int) -> list[int]:
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for sock in socks:
+            sock.bind(("127.0.0.1", 0))
+        return [sock.getsockname()[1] for sock in socks]
+    finally:
+        for sock in socks:
+            sock.close()
+
+
+def adept_system(motion: int, state: int, order: str = "big", **kwargs):
+    return running("ad850", dummy=False, extra_env={
+        "ROB6_LINK": "simple_message", "ROB6_SM_HOST": "127.0.0.1", "ROB6_SM_MOTION_PORT": str(motion),
+        "ROB6_SM_STATE_PORT": str(state), "ROB6_SM_BYTE_ORDER": order}, **kwargs)
+
+
+def controller(motion: int, state: int, *args: str, order: str = "big") -> AdeptController:
+    return AdeptController("--motion-port", str(motion), "--state-port", str(state), *args, byte_order=order)
+
+
+def reply(client, command: str, timeout: float = 30.0) -> str:
+    """The whole reply: one line, or two when the first is an ERROR line."""
+    client.send(command + "\n")
+    text = client.read_lines(1, timeout)
+    return text + client.read_lines(1, timeout) if text.startswith("ERROR") else text
+
+
+def joints(client) -> np.ndarray:
+    return np.array([float(x) for x in client.ask("GetPositionJoints").split()])
+
+
+def wait_until(predicate, timeout: float = 20.0, what: str = "condition"):
+    deadline = time.monotonic() + timeout
+    while (result := predicate()) is None or result is False:
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.02)
+    return result
+
+
+def link_status(system):
+    bus = Bus(BusSettings(robot="ad850", robot_id=system.robot_id,
+                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
+    try:
+        bus.wait_for(["driver"], 10)
+        return bus.request("driver", "link", LinkQuery())
+    finally:
+        bus.close()
+
+
+def robot_at(ctl) -> np.ndarray:
+    return np.array(ctl.status()["position_rob6_deg"])
+
+
+def connected(client, ctl, system) -> np.ndarray:
+    """Wait until rob6 can move the robot again and follows it: a motion to where the robot
+    stands is accepted (it sends nothing), and rob6's position is the robot's."""
+    def ready():
+        here = robot_at(ctl)
+        if reply(client, "MovePTPJoints " + fmt(here)) != "true\n":
+            return None
+        q = joints(client)
+        return q if np.allclose(q, robot_at(ctl), atol=POSITION_TOL) else None
+    q = wait_until(ready, what="rob6 to follow the controller")
+    assert link_status(system).state == "connected"
+    return q
+
+
+def arrived(ctl, target) -> dict:
+    """The controller at rest on target (rob6's degrees)."""
+    return ctl.wait_for(lambda st: not st["in_motion"] and np.allclose(st["position_rob6_deg"], target,
+                                                                       atol=POSITION_TOL),
+                        timeout=20, what=f"the robot at {target}")
+
+
+def fmt(q) -> str:
+    return " ".join(f"{x:f}" for x in q)
+
+
+def session(client, ctl) -> None:
+    """PTP, LIN and Alter (EnableAdeptAlter, MoveRTJoints every 16 ms)."""
+    for target in (START, [30.0, -50.0, 50.0, 10.0, 20.0, -20.0], START):
+        assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
+        assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)  # true: the robot is there
+    assert client.ask("GetPositionJoints") == "0.000000 -60.000000 40.000000 0.000000 30.000000 0.000000\n"
+    pose = [float(x) for x in client.ask("GetPositionHomRowWise").split()]
+    pose[7] += 100.0  # 100 mm along y, a straight line
+    assert client.ask("EnableLin") == "true\n"
+    assert reply(client, "MoveLINHomRowWise " + fmt(pose)) == "true\n"
+    assert np.allclose([float(x) for x in client.ask("GetPositionHomRowWise").split()], pose, atol=1e-3)
+    assert np.allclose(robot_at(ctl), joints(client), atol=POSITION_TOL)
+    assert client.ask("DisableLin") == "true\n"
+    assert client.ask("EnableAdeptAlter") == "true\n"
+    here = joints(client)
+    began = time.monotonic()
+    for k in range(250):
+        target = here.copy()
+        target[0] += 3.0 * np.sin(2 * np.pi * 0.5 * k * ROBOT.cycle_s)
+        assert reply(client, "MoveRTJoints " + fmt(target)) == "true\n"
+        delay = began + (k + 1) * ROBOT.cycle_s - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+    final = here.copy()
+    final[0] += 2.0
+    assert reply(client, "MoveRTJoints " + fmt(final)) == "true\n"
+    arrived(ctl, final)
+    assert np.allclose(joints(client), final, atol=1e-6)
+    assert client.ask("DisableAlter") == "true\n"
+
+
+def recorded_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
+    rows = {}
+    for path in directory.glob("*_system_*.mcap"):
+        for r in read_records(path, ["/driver/joint_state"]):
+            rows[r.data["cycle"]] = (r.data["t"], r.data["q"])
+    cycles = sorted(rows)
+    return np.array([rows[c][0] for c in cycles]), np.array([rows[c][1] for c in cycles])
+
+
+@pytest.mark.parametrize("order, timing", [("big", "vplus"), ("little", "duration")])
+def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path, order, timing):
+    motion, state = free_tcp_ports(2)
+    with adept_system(motion, state, order, log_dir=str(tmp_path)) as system:
+        with system.client() as client:
+            waiting = f"ERROR: driver: robot not connected (waiting for simple_message at 127.0.0.1:{motion}/{state})\n"
+            assert reply(client, "MovePTPJoints 10 -60 40 0 30 0") == waiting + "false\n"
+            assert reply(client, "EnableAdeptAlter") == waiting + "false\n"
+            assert reply(client, "MovePTPJoints 999 0 0 0 0 0") == "false\n"  # refused before the driver
+            with controller(motion, state, "--timing", timing, order=order) as ctl:
+                assert np.array_equal(connected(client, ctl, system), np.zeros(6))
+                session(client, ctl)
+                status = ctl.status()
+                assert status["points_refused"] == 0 and status["malformed_frames"] == 0
+                assert status["points_acknowledged"] > 100
+                link = link_status(system)
+                assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
+                assert link.packets == status["points_acknowledged"]
+                assert client.ask("Quit") == "bye!\n"
+            time.sleep(1.0)  # the recorder writes the last states
+    t, q = recorded_states(tmp_path)
+    assert len(t) > 1000
+    assert_within_limits(ROBOT, t, q)  # rob6's setpoints, every cycle, the controller connected or not
+    events = [r.data for path in tmp_path.glob("*_system_*.mcap") for r in read_records(path, ["/driver/link"])]
+    assert [e["event"] for e in events][:2] == ["waiting", "connected"]
+    assert all(e["link"] == "simple_message" for e in events)
+
+
+@pytest.fixture(scope="module")
+def adept():
+    """One rob6 system on simple_message for the fault tests; each test brings its own controller."""
+    motion, state = free_tcp_ports(2)
+    with adept_system(motion, state) as system:
+        yield system, motion, state
+
+
+def long_move(client, ctl) -> None:
+    """Start a PTP of ~3 s (J1 0 -> 60) without waiting for its reply."""
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    target = list(START)
+    target[0] = 60.0
+    client.send("MovePTPJoints " + fmt(target) + "\n")
+    wait_until(lambda: float(robot_at(ctl)[0]) > 5.0, what="the robot to move")
+
+
+def back_home(client, ctl, system) -> None:
+    here = connected(client, ctl, system)
+    assert 5.0 < here[0] < 60.0  # where the fault caught it: rob6 continues from there
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
+
+
+def test_estop_mid_motion_then_released_and_drives_on(adept):
+    system, motion, state = adept
+    with controller(motion, state) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        long_move(client, ctl)
+        ctl.estop()
+        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports an E-stop\nfalse\n"
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports an E-stop\nfalse\n"
+        assert reply(client, "EnableAdeptAlter") == "ERROR: driver: robot reports an E-stop\nfalse\n"
+        ctl.release()  # the drives stay off
+        wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START))
+                   == "ERROR: driver: robot reports drives off\nfalse\n", what="drives off")
+        ctl.drives(True)
+        back_home(client, ctl, system)
+        assert ctl.status()["points_refused"] == 0  # nothing was sent while the robot could not move
+
+
+def test_drives_off_mid_motion(adept):
+    system, motion, state = adept
+    with controller(motion, state) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        long_move(client, ctl)
+        ctl.drives(False)
+        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports drives off\nfalse\n"
+        ctl.drives(True)
+        back_home(client, ctl, system)
+
+
+def test_controller_error_mid_motion(adept):
+    system, motion, state = adept
+    with controller(motion, state) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        long_move(client, ctl)
+        ctl.error(1107)
+        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports controller error 1107\nfalse\n"
+        assert reply(client, "MovePTPJoints " + fmt(START)) == (
+            "ERROR: driver: robot reports controller error 1107\nfalse\n")
+        ctl.clear_error()
+        back_home(client, ctl, system)
+
+
+def test_motion_connection_dropped_mid_motion_and_restored(adept):
+    system, motion, state = adept
+    with controller(motion, state) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        long_move(client, ctl)
+        assert ctl.drop_connection("motion")
+        assert client.read_lines(2, timeout=30) == (
+            f"ERROR: driver: simple_message link lost: the controller at 127.0.0.1:{motion} closed the motion "
+            "connection\nfalse\n")
+        wait_until(lambda: ctl.status()["clients"]["motion"], what="rob6 to reconnect")
+        back_home(client, ctl, system)  # after the points already queued ran out: no jump back
+        assert link_status(system).runs >= 2
+
+
+def test_state_connection_dropped_mid_motion_and_restored(adept):
+    system, motion, state = adept
+    with controller(motion, state) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        long_move(client, ctl)
+        assert ctl.drop_connection("state")
+        assert client.read_lines(2, timeout=30) == (
+            f"ERROR: driver: simple_message link lost: the controller at 127.0.0.1:{state} closed the state "
+            "connection\nfalse\n")
+        back_home(client, ctl, system)
+
+
+def test_slow_then_missing_acknowledgements(adept):
+    system, motion, state = adept
+    with controller(motion, state) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+        merged = link_status(system).late
+        ctl.slow_ack(150)  # three points' time: what rob6 makes meanwhile goes as one point
+        target = [20.0, -50.0, 50.0, 0.0, 30.0, 10.0]
+        assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
+        assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)
+        assert link_status(system).late > merged
+        ctl.slow_ack(3000)  # beyond rob6's 2 s: the controller is taken for lost
+        client.send("MovePTPJoints " + fmt(START) + "\n")
+        assert client.read_lines(2, timeout=30) == (
+            f"ERROR: driver: simple_message link lost: no acknowledgement from the controller at "
+            f"127.0.0.1:{motion} for 2000 ms\nfalse\n")
+        ctl.slow_ack(0)
+        connected(client, ctl, system)
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+        assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
+
+
+def test_simple_message_on_a_robot_other_than_the_adept_is_refused_in_one_line():
+    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kr16", "--link", "simple_message"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 78
+    assert result.stderr == ("rob6-driver: --link simple_message drives the Adept Viper s850 (ad850), not kr16; "
+                             "use --link sim\n")
+    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kaw_fs", "--link", "adept"],
+                            capture_output=True, text=True, timeout=60)
+    assert (result.returncode, result.stderr) == (
+        78, "rob6-driver: --link adept drives the Adept Viper s850 (ad850), not kaw_fs; use --link sim\n")
