@@ -13,11 +13,12 @@ SHARED_TRUTH ?= ../shared
 # `make test PYTEST_ARGS="-m 'not docker'"` skips the slow Docker end-to-end tests
 PYTEST_ARGS ?=
 
-.PHONY: help install run test test-fast bench lock clean transcripts python-version
+.PHONY: help install run test test-fast check bench lock clean transcripts python-version
 
 help:
 	@echo "make run    start router, services and gateway (simulated KR16 on port 5005)"
 	@echo "make test   run every test (set ROB6_SKIP_DOCKER=1 to skip the Docker e2e tests)"
+	@echo "make check  lint (ruff) and type-check (mypy), configured in pyproject.toml"
 	@echo "make bench  run the benchmarks and print the tables"
 
 # rob6 runs on CPython 3.11-3.13 (uv.lock resolves for all three; every dependency has wheels)
@@ -49,6 +50,11 @@ test: install
 
 test-fast: install
 	ROB6_SKIP_DOCKER=1 ROB6_SHARED=$(SHARED_TRUTH) $(BIN)/pytest -x -q $(PYTEST_ARGS)
+
+# ruff: pyflakes, import order, bugbear; mypy: strict for shared, gripper and recorder
+check: install
+	$(BIN)/ruff check .
+	$(BIN)/mypy
 
 bench: install
 	$(BIN)/python -m bench

@@ -28,11 +28,11 @@ COUNT = int(os.environ.get("ROB6_BENCH_COUNT", "3000"))
 
 def table(title: str, header: tuple[str, ...], rows: list[tuple]) -> None:
     print(f"\n{title}\n")
-    widths = [max(len(str(x)) for x in column) for column in zip(header, *rows)]
-    print("| " + " | ".join(str(h).ljust(w) for h, w in zip(header, widths)) + " |")
+    widths = [max(len(str(x)) for x in column) for column in zip(header, *rows, strict=True)]
+    print("| " + " | ".join(str(h).ljust(w) for h, w in zip(header, widths, strict=True)) + " |")
     print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
     for row in rows:
-        print("| " + " | ".join(str(x).ljust(w) for x, w in zip(row, widths)) + " |")
+        print("| " + " | ".join(str(x).ljust(w) for x, w in zip(row, widths, strict=True)) + " |")
 
 
 def latency_row(name: str, samples: list[float], target: str) -> tuple:
@@ -92,8 +92,8 @@ def kinematics_tables() -> None:
 
 def replica_scaling(requests: int = 40, poses: int = 2000) -> tuple[float, float]:
     rng = np.random.default_rng(0)
-    from rob6_kinematics.calc import Kinematics
     from rob6.robots import get_robot
+    from rob6_kinematics.calc import Kinematics
     T = Kinematics(get_robot("kr16")).fk(rng.uniform(-60, 60, (poses, 6)) * [1, 0.5, 0.5, 1, 1, 1])
     body = IkBatchRequest(poses=T.reshape(-1, 12).tolist())
     with running("kr16", services=("kinematics",)) as system:
@@ -144,8 +144,8 @@ def planner_table() -> None:
 
 
 def recording_table() -> None:
-    sys.path.insert(0, os.path.dirname(__file__))
-    from bench_recording import bench_burst, bench_replay, bench_sustained
+    from bench.bench_recording import bench_burst, bench_replay, bench_sustained
+
     rows = [bench_burst(100_000, session=True), bench_sustained(50_000, 2.0, session=True)]
     replay = bench_replay(2000)
     table("Recording (MCAP, zstd chunks, session + system file)",

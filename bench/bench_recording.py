@@ -24,7 +24,7 @@ from pathlib import Path
 
 # the replay target is the test suite's fake rob6 server (tests/recording/rec_helpers.py)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "recording"))
-from rec_helpers import FakeServer  # noqa: E402
+from rec_helpers import FakeServer
 
 from rob6_recorder.replay import load_script, replay
 from rob6_recorder.writer import Recorder

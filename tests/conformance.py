@@ -82,14 +82,14 @@ def same(send: str, got: str, expected: str) -> bool:
     got_lines, want_lines = got.split("\n"), expected.split("\n")
     if len(got_lines) != len(want_lines):
         return False
-    for got_line, want_line in zip(got_lines, want_lines):
+    for got_line, want_line in zip(got_lines, want_lines, strict=True):
         if got_line == want_line:
             continue
         got_tokens, want_tokens = got_line.split(" "), want_line.split(" ")
         if len(got_tokens) != len(want_tokens):
             return False
         tols = tolerances(send, want_line)
-        for i, (a, b) in enumerate(zip(got_tokens, want_tokens)):
+        for i, (a, b) in enumerate(zip(got_tokens, want_tokens, strict=True)):
             if a == b:
                 continue
             if not (NUMBER.match(a) and NUMBER.match(b)):

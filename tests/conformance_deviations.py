@@ -8,11 +8,7 @@ docs/COMPATIBILITY.md describes the same differences for users.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "services" / "gateway"))
-from rob6_gateway.args import Args, ParseError  # noqa: E402
+from rob6_gateway.args import Args, ParseError
 
 #: kaw_fs uses the self-consistent +250 geometry: forward kinematics differ by design
 KAW_FS_FK_BY_DESIGN = {"ForwardCalc", "GetPositionHomRowWise"}

@@ -37,8 +37,9 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import msgspec
 import zenoh
@@ -55,6 +56,8 @@ from .messages import (
 )
 
 log = logging.getLogger("rob6.bus")
+
+T = TypeVar("T")
 
 _encoder = msgspec.json.Encoder()
 
@@ -80,6 +83,11 @@ class Context:
     op: str
 
 
+#: a request handler: ``handler(request body, ctx) -> reply body``, of the types
+#: ``rob6.messages.OPS`` gives for its operation
+Handler = Callable[[Any, Context], Any]
+
+
 def new_cid() -> str:
     return uuid.uuid4().hex[:12]
 
@@ -103,7 +111,7 @@ def zenoh_config(settings: BusSettings, *, mode: str | None = None,
         # without opening ports on the lab network
         listen = ("tcp/127.0.0.1:0",)
 
-    def set_unless_in_file(key: str, value) -> None:
+    def set_unless_in_file(key: str, value: object) -> None:
         if config.get_json(key) == defaults.get_json(key):
             config.insert_json5(key, msgspec.json.encode(value).decode())
 
@@ -135,10 +143,10 @@ class Bus:
         self._rotation = itertools.count()
         self._listeners: list[Callable[[str, str, bool], None]] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._declared: list = []
+        self._declared: list[Any] = []  # zenoh declarations that live as long as the session
         self._workers: list[threading.Thread] = []
         self._closed = threading.Event()
-        self._decoders: dict[type, msgspec.json.Decoder] = {}
+        self._decoders: dict[Any, msgspec.json.Decoder[Any]] = {}
         self._attachment = self.instance.encode()
         self._foreign_warned: set[tuple[str, str]] = set()
         self._live_sub = self.session.liveliness().declare_subscriber(
@@ -206,7 +214,7 @@ class Bus:
             return min(ordered, key=lambda i: self._inflight.get(i, 0))
 
     # ------------------------------------------------------------------ serving
-    def serve(self, handlers: dict[str, Callable], *, workers: int = 4) -> None:
+    def serve(self, handlers: Mapping[str, Handler], *, workers: int = 4) -> None:
         """Answer ``handlers[op](request, ctx)`` for this service and announce it as alive.
 
         Handlers run on ``workers`` threads, so a long request (a motion) does not
@@ -230,7 +238,8 @@ class Bus:
         self._declared.append(self.session.liveliness().declare_token(
             self.key("alive", self.service, self.instance)))
 
-    def _serve_loop(self, queryable, handlers) -> None:
+    def _serve_loop(self, queryable: zenoh.Queryable[zenoh.handlers.Handler[zenoh.Query]],
+                    handlers: Mapping[str, Handler]) -> None:
         while not self._closed.is_set():
             try:
                 query = queryable.recv()
@@ -241,7 +250,7 @@ class Bus:
             except Exception:
                 log.exception("failed to answer a query")
 
-    def _answer(self, query: zenoh.Query, handlers) -> None:
+    def _answer(self, query: zenoh.Query, handlers: Mapping[str, Handler]) -> None:
         started = time.time()
         op = str(query.key_expr).rsplit("/", 1)[-1]
         cid = ""
@@ -251,14 +260,14 @@ class Bus:
             if spec is None or op not in handlers:
                 raise BusError("unknown_op", f"{self.service} has no operation {op!r}")
             try:
-                envelope = self._decoder(RequestEnvelope[spec.request]).decode(raw)
+                envelope = self._decoder(_parametrize(RequestEnvelope, spec.request)).decode(raw)
             except msgspec.DecodeError as exc:
                 raise BusError("schema", f"malformed {self.service}.{op} request: {exc}") from None
             cid = envelope.cid
             if envelope.v != SCHEMA_VERSION:
                 raise BusError("schema", f"schema version {envelope.v}, expected {SCHEMA_VERSION}")
             body = handlers[op](envelope.body, Context(cid=cid, op=op))
-            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=True, instance=self.instance, body=body)
+            reply: ReplyEnvelope[Any] = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=True, instance=self.instance, body=body)
         except BusError as exc:
             reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance,
                                   error=ErrorBody(code=exc.code, message=exc.message))
@@ -275,15 +284,15 @@ class Bus:
                          started, time.time() - started, self.instance.encode(),
                          raw or b"null", payload), reliable=True)
 
-    def _decoder(self, typ: type) -> msgspec.json.Decoder:
+    def _decoder(self, typ: Any) -> msgspec.json.Decoder[Any]:
         decoder = self._decoders.get(typ)
         if decoder is None:
             decoder = self._decoders[typ] = msgspec.json.Decoder(typ)
         return decoder
 
     # ------------------------------------------------------------------ requests
-    def request(self, service: str, op: str, body, *, timeout: float | None = None,
-                cid: str | None = None, instance: str | None = None):
+    def request(self, service: str, op: str, body: object, *, timeout: float | None = None,
+                cid: str | None = None, instance: str | None = None) -> Any:
         """Send ``body`` to ``service.op`` and return the typed reply body.
 
         Raises ``BusError`` with code ``unavailable`` (no live instance), ``timeout``,
@@ -300,8 +309,8 @@ class Bus:
             finally:
                 self._done(target, waiter)
 
-    async def arequest(self, service: str, op: str, body, *, timeout: float | None = None,
-                       cid: str | None = None, instance: str | None = None):
+    async def arequest(self, service: str, op: str, body: object, *, timeout: float | None = None,
+                       cid: str | None = None, instance: str | None = None) -> Any:
         """``request`` for asyncio code: the reply wakes the event loop straight from
         Zenoh's callback thread (no executor thread in between)."""
         call = _Request(self, service, op, body, timeout, cid, instance)
@@ -321,10 +330,11 @@ class Bus:
         service = call.service
 
         def on_reply(reply: zenoh.Reply) -> None:
-            if reply.ok is not None:
-                waiter.resolve(reply.ok.payload.to_bytes())
-            else:
-                message = reply.err.payload.to_string()
+            ok, err = reply.ok, reply.err  # exactly one of them is set
+            if ok is not None:
+                waiter.resolve(ok.payload.to_bytes())
+            elif err is not None:
+                message = err.payload.to_string()
                 if message == "Timeout":  # Zenoh's own error reply: the query timed out
                     # (a stopped/hung instance); report it like any lost instance, not as
                     # a bare "ERROR: Timeout" that names no service
@@ -348,7 +358,7 @@ class Bus:
             self._inflight[instance] = self._inflight.get(instance, 1) - 1
 
     # ------------------------------------------------------------------ pub/sub
-    def publish(self, suffix: str, data, *, reliable: bool = False) -> None:
+    def publish(self, suffix: str, data: object, *, reliable: bool = False) -> None:
         """Publish a message struct, dict or raw JSON bytes on ``rob6/<id>/<suffix>``.
 
         ``reliable`` blocks rather than drops under congestion (logs, traces); state
@@ -363,7 +373,8 @@ class Bus:
                 self.key(suffix), congestion_control=congestion)
         publisher.put(data if isinstance(data, bytes) else _encoder.encode(data), attachment=self._attachment)
 
-    def subscribe(self, suffix: str, on_message: Callable[[str, bytes], None], *, owner: str | None = None):
+    def subscribe(self, suffix: str, on_message: Callable[[str, bytes], None], *,
+                  owner: str | None = None) -> zenoh.Subscriber[None]:
         """Call ``on_message(key, payload)`` for every sample; it must not block.
 
         ``owner``: an owner service; only what its followed instance publishes is passed
@@ -409,7 +420,7 @@ class Bus:
 class _Request:
     """One request: its encoded payload, deadline and the instances tried so far."""
 
-    def __init__(self, bus: Bus, service: str, op: str, body, timeout: float | None,
+    def __init__(self, bus: Bus, service: str, op: str, body: object, timeout: float | None,
                  cid: str | None, instance: str | None):
         self.bus, self.service, self.op, self.instance = bus, service, op, instance
         self.spec = OPS[(service, op)]
@@ -438,9 +449,9 @@ class _Request:
             raise BusError(code, f"{self.service} unavailable ({exc})") from None
         log.warning("retrying %s.%s on another instance: %s", self.service, self.op, exc)
 
-    def decode(self, raw: bytes, target: str):
+    def decode(self, raw: bytes, target: str) -> Any:
         try:
-            envelope = self.bus._decoder(ReplyEnvelope[self.spec.reply]).decode(raw)
+            envelope = self.bus._decoder(_parametrize(ReplyEnvelope, self.spec.reply)).decode(raw)
         except msgspec.DecodeError as exc:
             raise BusError("schema", f"malformed {self.service}.{self.op} reply: {exc}") from None
         if envelope.instance != target:  # never a second owner's answer, whatever the network did
@@ -461,15 +472,18 @@ class _Waiter:
 
     def __init__(self, loop: asyncio.AbstractEventLoop | None = None):
         self.loop = loop
-        self.future = loop.create_future() if loop is not None else concurrent.futures.Future()
+        self.future: asyncio.Future[bytes] | concurrent.futures.Future[bytes] = (
+            loop.create_future() if loop is not None else concurrent.futures.Future())
 
     def result(self, timeout: float) -> bytes:
+        assert isinstance(self.future, concurrent.futures.Future)  # made without a loop
         try:
             return self.future.result(timeout=timeout)
         except concurrent.futures.TimeoutError:
             raise _InstanceLost("no reply in time") from None
 
     async def aresult(self, timeout: float) -> bytes:
+        assert isinstance(self.future, asyncio.Future)  # made with the running loop
         try:
             return await asyncio.wait_for(self.future, timeout)
         except TimeoutError:
@@ -481,7 +495,7 @@ class _Waiter:
     def fail(self, exc: BaseException) -> None:
         self._complete(self.future.set_exception, exc)
 
-    def _complete(self, setter, value) -> None:
+    def _complete(self, setter: Callable[[Any], None], value: object) -> None:
         if self.loop is None:
             try:
                 setter(value)
@@ -493,11 +507,16 @@ class _Waiter:
             except RuntimeError:  # the loop is closed: nobody waits any more
                 pass
 
-    def _complete_in_loop(self, setter, value) -> None:
+    def _complete_in_loop(self, setter: Callable[[Any], None], value: object) -> None:
         if not self.future.done():
             setter(value)
 
 
-def decode(typ: type, payload: bytes):
+def decode(typ: type[T], payload: bytes) -> T:
     """Decode a published message of type ``typ``."""
     return msgspec.json.decode(payload, type=typ)
+
+
+def _parametrize(generic: Any, typ: type) -> Any:
+    """``generic[typ]`` for a type known only at run time (the operation's message type)."""
+    return generic[typ]

@@ -9,8 +9,12 @@ from __future__ import annotations
 import logging
 import sys
 import time
+from typing import TYPE_CHECKING
 
 from .messages import LogRecord
+
+if TYPE_CHECKING:
+    from .bus import Bus
 
 #: the protocol's verbosity levels: 0 nothing, 1 errors, 2 +warnings, 3 +communication, 4 all
 VERBOSITY_LEVELS = {0: logging.CRITICAL + 10, 1: logging.ERROR, 2: logging.WARNING,
@@ -33,7 +37,7 @@ def set_verbosity(level: int) -> None:
 class BusLogHandler(logging.Handler):
     """Publishes every record on ``rob6/<id>/log/<service>`` (for the recorder)."""
 
-    def __init__(self, bus):
+    def __init__(self, bus: Bus) -> None:
         super().__init__()
         self.bus = bus
         self._busy = False

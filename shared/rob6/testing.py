@@ -12,19 +12,23 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
+
 
 def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+        port: int = sock.getsockname()[1]
+        return port
 
 
 class System:
     """A running ``rob6 run`` (router, services, gateway) on free ports."""
 
     def __init__(self, robot: str = "kr16", *, dummy: bool = True, services: tuple[str, ...] = (),
-                 restart: bool = False, log_dir: str | None = None, extra_env: dict | None = None):
+                 restart: bool = False, log_dir: str | None = None, extra_env: dict[str, str] | None = None):
         self.robot = robot
         self.port = free_port()
         self.router_port = free_port()
@@ -39,11 +43,12 @@ class System:
             env["ROB6_LOG_DIR"] = log_dir
         self.output: list[str] = []
         self._ready = threading.Event()
-        self.process = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+        self.process: subprocess.Popen[str] = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                         stderr=subprocess.STDOUT, text=True, start_new_session=True)
         threading.Thread(target=self._collect, daemon=True).start()
 
     def _collect(self) -> None:
+        assert self.process.stdout is not None  # stdout=PIPE
         for line in self.process.stdout:
             self.output.append(line.rstrip("\n"))
             if line.startswith("rob6 ready"):
@@ -69,7 +74,7 @@ class System:
                     pids["router"] = int(pid)
         return pids
 
-    def client(self, **kwargs) -> "Client":
+    def client(self, **kwargs: Any) -> "Client":
         return Client(self.port, **kwargs)
 
     def stop(self, timeout: float = 5.0) -> int:
@@ -84,7 +89,7 @@ class System:
 
 
 @contextmanager
-def running(robot: str = "kr16", **kwargs):
+def running(robot: str = "kr16", **kwargs: Any) -> Iterator[System]:
     system = System(robot, **kwargs)
     try:
         system.wait_ready()
@@ -156,8 +161,8 @@ class Client:
     def close(self) -> None:
         self.sock.close()
 
-    def __enter__(self):
+    def __enter__(self) -> "Client":
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.close()

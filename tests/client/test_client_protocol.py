@@ -7,11 +7,11 @@ import inspect
 import math
 
 import pytest
-from rob6_gateway.args import Args
-from rob6_gateway.commands import COMMANDS as GATEWAY_COMMANDS
 
 from rob6_client import COMMANDS, AsyncRobot, Pose, Robot, Status, normalize_status, parse_reply
 from rob6_client._stubgen import STUB, stub
+from rob6_gateway.args import Args
+from rob6_gateway.commands import COMMANDS as GATEWAY_COMMANDS
 
 
 def test_every_protocol_command_has_a_method():

@@ -23,7 +23,7 @@ def kr16():
 
 
 def close_to(a, b, tol=1e-3) -> bool:
-    return len(a) == len(b) and all(abs(x - y) <= tol for x, y in zip(a, b))
+    return len(a) == len(b) and all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
 def stream(robot: Robot, start, count: int, rate_hz: float = 250.0) -> None:
@@ -99,7 +99,7 @@ def test_lab_session(kr16):
         with pytest.raises(ZeroDivisionError):
             with robot.alter():
                 assert robot.do_alter_joint([0.1, 0, 0, 0, 0, 0]) is True
-                1 / 0
+                raise ZeroDivisionError
         assert robot.move_rt_joints(Q) is False  # disabled on the way out
         time.sleep(0.3)
         assert robot.move_ptp_joints(Q) is True

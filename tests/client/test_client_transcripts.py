@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from itertools import pairwise
 
 import pytest
 from system import CONFORMANCE
@@ -110,7 +111,7 @@ def test_set_allowed_status_normalises_like_the_original():
     compared = 0
     for path in FILES:
         records = [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines()]
-        for first, second in zip(records, records[1:]):
+        for first, second in pairwise(records):
             words = first.get("send", "").split()[1:4]  # the original ignores a 4th word
             if (first.get("send", "").startswith("SetAllowedStatus ") and first["reply"] == ""
                     and second.get("send") == "GetAllowedStatus\n"):

@@ -115,12 +115,12 @@ class State:
                     item = ("joints", tuple(joints))
                 elif msg_type == STATUS:
                     assert length == 40
-                    item = ("status", dict(zip(STATUS_FIELDS, struct.unpack(self.e + "7i", body))))
+                    item = ("status", dict(zip(STATUS_FIELDS, struct.unpack(self.e + "7i", body), strict=True)))
                 else:
                     raise AssertionError(f"unexpected message type {msg_type} on the state port")
                 with self.lock:
                     self.frames.append((time.monotonic(), *item))
-        except Exception as exc:  # noqa: BLE001 - reported by wait()
+        except Exception as exc:  # whatever it is: reported by wait()
             self.error = exc
 
     def count(self) -> int:
@@ -145,7 +145,7 @@ class State:
 
 
 def close_to(a, b, tol):
-    return all(abs(x - y) <= tol for x, y in zip(a, b))
+    return all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
 @pytest.fixture
@@ -192,7 +192,7 @@ def test_streamed_points_are_acknowledged_and_executed(byte_order):
         state.wait("status", lambda s: s["in_motion"] == 0 and s["drives_powered"] == 1
                    and s["e_stopped"] == 0 and s["mode"] == 2 and s["motion_possible"] == 1)
         mark = state.count()
-        for seq, q in zip((0, 1, -3), targets):
+        for seq, q in zip((0, 1, -3), targets, strict=True):
             assert motion.point(seq, q) == (SUCCESS, 0)
         state.wait("status", lambda s: s["in_motion"] == 1, since=mark)
         st = ctl.wait_for(lambda s: s["points_executed"] == 3 and not s["in_motion"],

@@ -117,4 +117,4 @@ def test_krl_program():
                       r"A4 ([-\d.]+),A5 ([-\d.]+),A6 ([-\d.]+)", dat)
     pose = [float(v) for v in start.groups()]
     for machine in MACHINES.values():
-        assert all(lo < q < hi for q, lo, hi in zip(pose, machine.lower, machine.upper)), machine.name
+        assert all(lo < q < hi for q, lo, hi in zip(pose, machine.lower, machine.upper, strict=True)), machine.name

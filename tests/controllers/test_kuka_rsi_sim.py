@@ -16,6 +16,7 @@ import signal
 import socket
 import threading
 import time
+from itertools import pairwise
 
 import pytest
 
@@ -81,7 +82,7 @@ class Follow:
         elif self.sent is not None and pkt["D"] == self.last_delay:
             self.applied = self.sent
         self.last_delay = pkt["D"]
-        self.sent = [a + max(-self.step, min(self.step, t - a)) for a, t in zip(self.applied, self.target)]
+        self.sent = [a + max(-self.step, min(self.step, t - a)) for a, t in zip(self.applied, self.target, strict=True)]
         stop, self.stop_next = self.stop_next, False
         return sen(pkt["IPOC"], self.sent, stop=stop, sen_type=self.sen_type)
 
@@ -147,7 +148,7 @@ def sim(pc: Responder, *args: str, robot: str = "kr16") -> RsiController:
 
 
 def close(a, b, tol=1e-4):
-    return all(abs(x - y) <= tol for x, y in zip(a, b))
+    return all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
 # ---------------------------------------------------------------------------- start-up
@@ -160,7 +161,7 @@ def test_first_packets_zero_correction(pc):
         # home by hand from the DH table: x = a1 + d4 + d6, z = d1 + a2 + a3 (a3 = -35)
         assert close(first["rist"], [1088.0, 0.0, 1320.0, 0.0, 0.0, 0.0])
         assert first["rsol"] == first["rist"]
-        steps = [b["IPOC"] - a["IPOC"] for a, b in zip(pkts, pkts[1:20])]
+        steps = [b["IPOC"] - a["IPOC"] for a, b in pairwise(pkts[:20])]
         assert all(s > 0 and s % 12 == 0 for s in steps), steps  # a time stamp, ms, by the cycle
         assert all(p["aipos"] == HOME and p["aspos"] == HOME for p in pkts[:20])
         st = kuka.status()
@@ -199,7 +200,7 @@ def test_smooth_ramp_moves_aipos_and_rist(pc):
         assert close(last["rist"], [1088 * c, -1088 * s, 1320, -10, 0, 0])
         # the axis never moved faster than the correction, and lags it by one cycle at most
         a1 = [p["aipos"][0] for p in pc.packets]
-        assert all(0 <= b - a <= 0.5 + 1e-9 for a, b in zip(a1, a1[1:]))
+        assert all(0 <= b - a <= 0.5 + 1e-9 for a, b in pairwise(a1))
 
 
 def test_rated_speed_step_accepted(pc):
@@ -355,7 +356,7 @@ def test_unreadable_answer_counts_late(pc):
 
 # ---------------------------------------------------------------------------- faults
 def ipoc_steps(pkts, cycle):
-    return [(b["IPOC"] - a["IPOC"]) // cycle for a, b in zip(pkts, pkts[1:])]
+    return [(b["IPOC"] - a["IPOC"]) // cycle for a, b in pairwise(pkts)]
 
 
 def test_fault_drop_every(pc):
@@ -407,7 +408,7 @@ def test_fault_lose_both_directions(pc):
         st = kuka.wait_for(lambda s: s["faults"]["lose_s"] == 0 and s["late_consecutive"] == 0
                            and s["delay"] > 0, what="loss over")
         assert st["state"] == "running" and st["fault_stats"]["lost_out"] >= 15 and st["delay"] >= 15
-        gaps = [b["t"] - a["t"] for a, b in zip(pc.packets, pc.packets[1:])]
+        gaps = [b["t"] - a["t"] for a, b in pairwise(pc.packets)]
         assert max(gaps) >= 0.2
 
 

@@ -14,7 +14,6 @@ from pathlib import Path
 
 import pytest
 import zenoh
-
 import zenoh_probe
 from zenoh_probe import free_port, local_router, localize_config, secure_profile_checks
 

@@ -1,6 +1,7 @@
 """The argument reader behaves like the original's C++ istream parsing (REFERENCE.md 3, 5)."""
 
 import pytest
+
 from rob6_gateway.args import Args, ParseError
 
 

@@ -7,8 +7,7 @@ import threading
 import time
 
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from rob6_gripper.backend import GRIPPING, IDLE, MOVING, GripperStatus, VirtualClock
 from rob6_gripper.sim import GripperModel, GripperParams, SimGripper

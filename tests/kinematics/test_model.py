@@ -40,9 +40,9 @@ def test_urdf_structure(robot):
         assert math.isclose(float(lim.get("lower")), math.radians(r.turn_min[i]), abs_tol=1e-9)
         assert math.isclose(float(lim.get("upper")), math.radians(r.turn_max[i]), abs_tol=1e-9)
         assert float(lim.get("velocity")) > 0 and float(lim.get("effort")) > 0
-    links = {l.get("name") for l in root.findall("link")}
+    links = {link.get("name") for link in root.findall("link")}
     assert {"base_link", "flange"} | {f"link_{i}" for i in range(1, 7)} <= links
-    assert all(l.find("visual") is not None for l in root.findall("link"))
+    assert all(link.find("visual") is not None for link in root.findall("link"))
 
     model = pin.buildModelFromUrdf(str(path))
     assert model.nq == 6 and model.existFrame("flange")

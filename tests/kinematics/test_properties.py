@@ -16,8 +16,7 @@ import functools
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
 from rob6.robots import get_robot
 from rob6_kinematics.calc import Kinematics

@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-
 from motion_kin import fk, make_ik
+
 from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionConfig

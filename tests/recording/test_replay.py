@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import asyncio
 import json
+from itertools import pairwise
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from system import CONFORMANCE
 
 from rob6_recorder.cli import main as cli
+from rob6_recorder.reader import read_records
 from rob6_recorder.replay import (
     compare_reply,
     load_script,
@@ -18,12 +21,9 @@ from rob6_recorder.replay import (
     replay,
     replay_joints,
 )
-from rob6_recorder.reader import read_records
 from rob6_recorder.writer import Recorder
 
 from .rec_helpers import REPLIES, SESSION_LINES, FakeServer, dict_handler, record_session
-
-from system import CONFORMANCE
 
 
 @pytest.fixture
@@ -40,7 +40,7 @@ def test_load_recording(session_file):
     assert [ex.send.decode() for ex in script.exchanges] == SESSION_LINES
     assert [ex.expected for ex in script.exchanges] == [REPLIES[line] for line in SESSION_LINES]
     assert script.handshake_recorded
-    assert all(b.t > a.t for a, b in zip(script.exchanges, script.exchanges[1:]))
+    assert all(b.t > a.t for a, b in pairwise(script.exchanges))
 
 
 def test_replay_identical_server_zero_differences(session_file):

@@ -8,13 +8,12 @@ import re
 import time
 
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 from mcap.reader import make_reader
 
 from rob6_recorder.geometry import TfDeriver, pose_from_fk
 from rob6_recorder.mcapwriter import LeanWriter
-from rob6_recorder.reader import is_complete, read_records, RecordingReader
+from rob6_recorder.reader import RecordingReader, is_complete, read_records
 from rob6_recorder.schemas import schema_for, to_foxglove_log
 from rob6_recorder.writer import Recorder
 

@@ -17,9 +17,8 @@ import os
 import signal
 import time
 
-from rob6.testing import running
-
 from bench.reliability import FuzzClient
+from rob6.testing import running
 
 # service -> (probe command, is the answer a correct one?)
 PROBES = {

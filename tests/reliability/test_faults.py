@@ -8,9 +8,9 @@ import signal
 import time
 
 import pytest
+from faults import FAULTS, PROBES, SERVICES, _ask, inject
 
 from bench.reliability import FuzzClient
-from faults import FAULTS, PROBES, SERVICES, _ask, inject
 from rob6.testing import running
 
 

@@ -14,8 +14,7 @@ import os
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from bench.reliability import (COMMAND_NAMES, EXTREMES_TCP, TcpFuzzer, command_line_strategy,
-                               vm_rss_kib)
+from bench.reliability import COMMAND_NAMES, EXTREMES_TCP, TcpFuzzer, command_line_strategy, vm_rss_kib
 from rob6.testing import running
 
 TCP = dict(deadline=None, database=None,

@@ -11,8 +11,15 @@ import asyncio
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from bench.reliability import (COMMAND_NAMES, check_args, check_execute, check_framer, command_line_strategy,
-                         make_dead_gateway, reference_lines)
+from bench.reliability import (
+    COMMAND_NAMES,
+    check_args,
+    check_execute,
+    check_framer,
+    command_line_strategy,
+    make_dead_gateway,
+    reference_lines,
+)
 from rob6_gateway.commands import _split_command
 from rob6_gateway.framing import MAX_LINE, Framer
 
@@ -46,7 +53,7 @@ def test_framer_buffer_stays_bounded_on_endless_line():
     for _ in range(64):  # 64 MiB without a newline
         assert framer.feed(b"q" * (1 << 20)) == []
         assert len(framer._buffer) <= MAX_LINE
-    assert [(l.text, l.too_long) for l in framer.feed(b"\n")] == [("", 64 * (1 << 20) + 1)]
+    assert [(line.text, line.too_long) for line in framer.feed(b"\n")] == [("", 64 * (1 << 20) + 1)]
 
 
 @FAST

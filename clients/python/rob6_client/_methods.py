@@ -9,6 +9,7 @@ same table: ``python -m rob6_client._stubgen`` rewrites it (a test checks it is 
 from __future__ import annotations
 
 import inspect
+
 from .protocol import COMMANDS, ENCODERS, Command, docstring
 
 _SELF = inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD)

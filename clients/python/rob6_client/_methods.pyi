@@ -4,7 +4,6 @@ from collections.abc import Sequence
 
 from .protocol import Joints, PingResult, Pose, PoseLike, Status, StatusLike
 
-
 class RobotCommands:
     def get_robot(self, *, timeout: float | None = None) -> str:
         """The robot type: ad850, kaw_fs, kr3, kr3rt, kr16 or kr16rt.

@@ -46,11 +46,11 @@ class AsyncRobot(AsyncRobotCommands):
         if self.connected:
             return self
         try:
-            self._reader, self._writer = await asyncio.wait_for(
+            self._reader, self._writer = reader, writer = await asyncio.wait_for(
                 asyncio.open_connection(self.host, self.port), self.connect_timeout)
         except (OSError, asyncio.TimeoutError) as exc:
             raise Rob6ConnectionError(f"cannot connect to {self.host}:{self.port}: {exc!r}") from exc
-        self._writer.get_extra_info("socket").setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        writer.get_extra_info("socket").setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         try:
             self.greeting = await self._run("handshake", handshake(), self.connect_timeout)
         except Rob6Timeout:
@@ -107,6 +107,7 @@ class AsyncRobot(AsyncRobotCommands):
             try:
                 action = next(exchange)
                 while True:
+                    result: str | bool | None
                     if action is READ:
                         result = await self._read_line(name, deadline, timeout)
                     elif action is MAYBE_FALSE:
@@ -127,6 +128,7 @@ class AsyncRobot(AsyncRobotCommands):
                 raise
 
     async def _send(self, name: str, line: str) -> None:
+        assert self._writer is not None  # connected: _run checked
         try:
             self._writer.write(line.encode("latin-1") + b"\n")
             await self._writer.drain()
@@ -155,6 +157,7 @@ class AsyncRobot(AsyncRobotCommands):
 
     async def _receive(self, timeout: float) -> bool:
         """Append what arrives within ``timeout`` to the buffer; False when nothing did."""
+        assert self._reader is not None  # connected: _run checked
         try:
             chunk = await asyncio.wait_for(self._reader.read(65536), timeout)
         except asyncio.TimeoutError:

@@ -112,6 +112,7 @@ class Robot(RobotCommands):
             try:
                 action = next(exchange)
                 while True:
+                    result: str | bool | None
                     if action is READ:
                         result = self._read_line(name, deadline, timeout)
                     elif action is MAYBE_FALSE:
@@ -132,6 +133,7 @@ class Robot(RobotCommands):
                 raise
 
     def _send(self, name: str, line: str) -> None:
+        assert self._sock is not None  # connected: _run checked
         try:
             self._sock.sendall(line.encode("latin-1") + b"\n")
         except OSError as exc:
@@ -159,6 +161,7 @@ class Robot(RobotCommands):
 
     def _receive(self, timeout: float) -> bool:
         """Append what arrives within ``timeout`` to the buffer; False when nothing did."""
+        assert self._sock is not None  # connected: _run checked
         self._sock.settimeout(timeout)
         try:
             chunk = self._sock.recv(65536)

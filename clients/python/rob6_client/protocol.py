@@ -111,7 +111,7 @@ def pose_values(pose: PoseLike) -> list[float]:
     """12 floats from a flat pose, 3 rows of 4 or a 4x4 homogeneous matrix."""
     if isinstance(pose, (str, bytes)):
         raise TypeError("a pose is 12 numbers or a 3x4/4x4 matrix, not a string")
-    items = list(pose)
+    items: list[Any] = list(pose)
     if items and _iterable(items[0]):
         rows = [[_finite(v) for v in row] for row in items]
         if len(rows) == 4 and [round(v, 9) for v in rows[3]] == [0.0, 0.0, 0.0, 1.0]:
@@ -228,7 +228,7 @@ def _floats(name: str, line: str, count: int) -> tuple[float, ...]:
 
 def _status(name: str, line: str) -> Status:
     words = line.split()
-    if len(words) != 3 or any(w not in vocab for w, vocab in zip(words, CATEGORIES)):
+    if len(words) != 3 or any(w not in vocab for w, vocab in zip(words, CATEGORIES, strict=True)):
         raise _unexpected(name, line)
     return Status(*words)
 
@@ -381,7 +381,7 @@ class Command:
         """The command line (without "\\n"); raises ValueError/TypeError on bad arguments, so
         the original never sees a command missing arguments (it would wait for them)."""
         parts = [self.name]
-        for param, value in zip(self.params, values):
+        for param, value in zip(self.params, values, strict=True):
             try:
                 parts.append(ENCODERS[param.kind][0](value))
             except (TypeError, ValueError) as exc:

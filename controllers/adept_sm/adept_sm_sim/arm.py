@@ -84,7 +84,7 @@ class Arm:
 
     def segment_time(self, start, point: Point) -> float:
         """How long the commanded path takes from start to point."""
-        full_speed = max(abs(b - a) / v for a, b, v in zip(start, point.q, self.vcap))
+        full_speed = max(abs(b - a) / v for a, b, v in zip(start, point.q, self.vcap, strict=True))
         if self.timing == "vplus":  # SPEED 100 ALWAYS: velocity and duration are ignored
             return full_speed
         if point.duration > 0:
@@ -114,8 +114,8 @@ class Arm:
             r0, point, ts, T = self._seg
             if t < ts + T:
                 f = (t - ts) / T
-                self.ref = [a + (b - a) * f for a, b in zip(r0, point.q)]
-                return [(b - a) / T for a, b in zip(r0, point.q)]
+                self.ref = [a + (b - a) * f for a, b in zip(r0, point.q, strict=True)]
+                return [(b - a) / T for a, b in zip(r0, point.q, strict=True)]
             self.ref = list(point.q)
             self._seg = None
             self.executed += 1
@@ -149,7 +149,7 @@ class Arm:
             self.q[i] += self.v[i] * dt
         if rdot is None and all(
             abs(r - q) < SETTLE_DEG and abs(v) < KP * SETTLE_DEG * 10
-            for r, q, v in zip(self.ref, self.q, self.v)
+            for r, q, v in zip(self.ref, self.q, self.v, strict=True)
         ):
             self.q = list(self.ref)
             self.v = [0.0] * N_JOINTS

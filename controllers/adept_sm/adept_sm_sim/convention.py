@@ -52,20 +52,20 @@ LIMIT_TOL_DEG = 1e-4
 def rob6_to_controller(q_rob6_deg):
     return tuple(
         s * q + o
-        for s, q, o in zip(ROB6_TO_CONTROLLER_SIGN, q_rob6_deg, ROB6_TO_CONTROLLER_OFFSET_DEG)
+        for s, q, o in zip(ROB6_TO_CONTROLLER_SIGN, q_rob6_deg, ROB6_TO_CONTROLLER_OFFSET_DEG, strict=True)
     )
 
 
 def controller_to_rob6(q_ctrl_deg):
     return tuple(
         (q - o) / s
-        for s, q, o in zip(ROB6_TO_CONTROLLER_SIGN, q_ctrl_deg, ROB6_TO_CONTROLLER_OFFSET_DEG)
+        for s, q, o in zip(ROB6_TO_CONTROLLER_SIGN, q_ctrl_deg, ROB6_TO_CONTROLLER_OFFSET_DEG, strict=True)
     )
 
 
 def limit_violation(q_ctrl_deg) -> str | None:
     """Why the controller would not move to these joints (controller degrees), or None."""
-    for i, (q, (lo, hi)) in enumerate(zip(q_ctrl_deg, CONTROLLER_LIMITS_DEG), start=1):
+    for i, (q, (lo, hi)) in enumerate(zip(q_ctrl_deg, CONTROLLER_LIMITS_DEG, strict=True), start=1):
         if not math.isfinite(q):
             return f"joint {i} is not a number"
         if q < lo - LIMIT_TOL_DEG or q > hi + LIMIT_TOL_DEG:

@@ -83,7 +83,7 @@ def main(robot, rob6, bind, control, sentype, timeout, timeout_counts, corr_wind
     pose = _numbers(start_pose, "--start-pose")
     if len(pose) != 6:
         raise click.BadParameter(f"need 6 axis angles, got {len(pose)}", param_hint="--start-pose")
-    for n, (v, lo, hi) in enumerate(zip(pose, machine.lower, machine.upper)):
+    for n, (v, lo, hi) in enumerate(zip(pose, machine.lower, machine.upper, strict=True)):
         if not lo <= v <= hi:
             raise click.BadParameter(f"A{n + 1} = {v:g} is outside {lo:g} .. {hi:g} of {robot}",
                                      param_hint="--start-pose")

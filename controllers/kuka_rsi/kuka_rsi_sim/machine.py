@@ -6,6 +6,7 @@ Axis angles A1..A6 in degrees, speeds in degrees per second, lengths in mm.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -24,16 +25,16 @@ class Machine:
     d6: float
 
     def range_width(self) -> tuple[float, ...]:
-        return tuple(hi - lo for lo, hi in zip(self.lower, self.upper))
+        return tuple(hi - lo for lo, hi in zip(self.lower, self.upper, strict=True))
 
 
-_KR16 = dict(
+_KR16: dict[str, Any] = dict(
     rated=(156.0, 156.0, 156.0, 330.0, 330.0, 615.0),
     lower=(-185.0, -155.0, -130.0, -350.0, -125.0, -350.0),
     upper=(185.0, 35.0, 154.0, 350.0, 125.0, 350.0),
     d1=675.0, a1=260.0, a2=680.0, a3=-35.0, d4=670.0, d6=158.0,
 )
-_KR3 = dict(
+_KR3: dict[str, Any] = dict(
     rated=(240.0, 210.0, 240.0, 375.0, 300.0, 375.0),
     lower=(-180.0, -135.0, -135.0, -180.0, -135.0, -350.0),
     upper=(180.0, 45.0, 135.0, 180.0, 135.0, 350.0),

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from .link import FaultError, Link
 from .machine import Machine
 from .rsi import Rsi
-from .wire import RobWriter, SenError, parse_sen
+from .wire import RobWriter, Sen, SenError, parse_sen
 
 RTT_WINDOW = 2048  # replies kept for the percentiles of the status
 SENT_RING = 256  # packets remembered for matching late replies (RTT, stale counts)
@@ -98,7 +98,7 @@ class Simulator:
 
         # the packet waiting for its answer
         self.pending_ipoc: int | None = None
-        self.answer = None
+        self.answer: Sen | None = None
         self.sent_ipoc = array("q", [-1] * SENT_RING)
         self.sent_t = array("d", [0.0] * SENT_RING)
         self.sent_answered = bytearray(SENT_RING)
@@ -139,7 +139,9 @@ class Simulator:
 
     def close(self) -> None:
         for key in list(self.sel.get_map().values()):
-            key.fileobj.close()
+            sock = key.fileobj
+            assert isinstance(sock, socket.socket)  # only sockets are registered
+            sock.close()
         self.sel.close()
 
     def _next_wake(self) -> float | None:
@@ -211,7 +213,8 @@ class Simulator:
             self.rsi.stop_reason = f"cannot resolve {host}"
             self.restart_at = time.monotonic() + 1.0
             return False
-        self.link.dest = info[0][4][:2]
+        address, resolved_port = info[0][4][:2]  # AF_INET: (host, port)
+        self.link.dest = (str(address), int(resolved_port))
         return True
 
     # ------------------------------------------------------------------ replies

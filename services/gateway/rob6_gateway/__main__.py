@@ -12,6 +12,7 @@ import click
 from rob6 import logs, service
 from rob6.bus import Bus
 from rob6.config import bus_options
+from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
 
 from .commands import Gateway, Options
@@ -53,8 +54,12 @@ async def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) ->
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     stood_down: list[str] = []  # an earlier gateway of this robot appeared (see rob6.ownership)
-    ownership = service.claim(bus, lambda message: (stood_down.append(message),
-                                                    loop.call_soon_threadsafe(stop.set)))
+
+    def stand_down(message: str) -> None:
+        stood_down.append(message)
+        loop.call_soon_threadsafe(stop.set)
+
+    ownership = service.claim(bus, stand_down)
     logging.getLogger().addHandler(logs.BusLogHandler(bus))
     gateway = Gateway(bus, get_robot(settings.robot), options)
     server = Server(gateway, pause_s=pause_s, idle_timeout_s=idle_timeout, allow=allow)
@@ -78,7 +83,7 @@ async def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) ->
         bus.close()
         service.fail("gateway", f"cannot listen on {bind}:{port}: {exc.strerror or exc}; is another "
                                 f"rob6 or rob6server running? Stop it or choose another ROB6_PORT",
-                     service.EXIT_REFUSED)
+                     EXIT_REFUSED)
     bus.announce()  # tells tools and the launcher the gateway is up
     log.warning("gateway listening on %s:%d (robot %s)", bind, port, settings.robot)
     done = asyncio.create_task(stop.wait())
@@ -92,7 +97,7 @@ async def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) ->
         ownership.release()
     bus.close()
     if stood_down:
-        sys.exit(service.EXIT_REFUSED)
+        sys.exit(EXIT_REFUSED)
 
 
 if __name__ == "__main__":

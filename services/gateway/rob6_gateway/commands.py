@@ -21,7 +21,6 @@ from rob6.bus import Bus, BusError
 from rob6.messages import (
     BackwardCalcRequest,
     ClientExchange,
-    SessionEvent,
     ConfigChange,
     Empty,
     FkRequest,
@@ -30,6 +29,7 @@ from rob6.messages import (
     ModeRequest,
     MotionConfig,
     MoveRequest,
+    SessionEvent,
     Verbosity,
 )
 from rob6.robots import RobotModel
@@ -97,8 +97,11 @@ class Gateway:
         self.alter = False  # EnableAlter succeeded (the planner owns the mode; this is its echo)
         self.shutdown_requested = asyncio.Event()
         # a service (re)appearing gets the current verbosity, so all processes agree
-        bus.on_liveliness(lambda service, _i, alive: alive and service != "gateway"
-                          and self.bus.publish("control/verbosity", Verbosity(level=self.verbosity)))
+        bus.on_liveliness(self._on_liveliness)
+
+    def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:
+        if alive and service != "gateway":
+            self.bus.publish("control/verbosity", Verbosity(level=self.verbosity))
 
     async def execute(self, session: Session, line: str) -> str | None:
         name, _, rest = _split_command(line)

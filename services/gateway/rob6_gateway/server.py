@@ -111,6 +111,7 @@ class Server:
             received = time.time()
             session.cid = new_cid()
             close = shutdown = False
+            reply: str | None
             if line.too_long:
                 reply = f"ERROR: line too long ({line.too_long} bytes, limit {self.max_line})\n"
             elif not handshake_done:

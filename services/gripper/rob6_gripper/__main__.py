@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import click
 
 from rob6 import service
-from rob6.config import bus_options
+from rob6.bus import Bus
+from rob6.config import BusSettings, bus_options
 
+from .backend import GripperBackend
 from .service import GripperService
 
 
@@ -19,8 +23,10 @@ from .service import GripperService
 @click.option("--module-id", envvar="ROB6_GRIPPER_MODULE_ID", default=12, show_default=True, type=int)
 @click.option("--sim-object", envvar="ROB6_GRIPPER_OBJECT", default=None, type=float,
               help="Simulation: width (m) of the object between the jaws [env ROB6_GRIPPER_OBJECT].")
-def main(settings, log_level, serial_port, baud, module_id, sim_object):
+def main(settings: BusSettings, log_level: str, serial_port: str | None, baud: int, module_id: int,
+         sim_object: float | None) -> None:
     """Serve the gripper commands of one robot."""
+    backend: GripperBackend
     if serial_port:
         from .smp import SchunkGripper
         backend = SchunkGripper(serial_port, baudrate=baud, module_id=module_id)
@@ -28,7 +34,7 @@ def main(settings, log_level, serial_port, baud, module_id, sim_object):
         from .sim import SimGripper
         backend = SimGripper(object_width=sim_object)
 
-    def setup(bus):
+    def setup(bus: Bus) -> Callable[[], None]:
         gripper = GripperService(bus, backend)
         gripper.start()
         return gripper.stop

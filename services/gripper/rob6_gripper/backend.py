@@ -23,6 +23,7 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass
+from typing import Any, Protocol
 
 #: Modes reported by ``state()``.
 IDLE, MOVING, GRIPPING, ERROR = "idle", "moving", "gripping", "error"
@@ -44,7 +45,7 @@ class GripperStatus:
     mode: str  # idle | moving | gripping | error
     error: str = ""
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -116,6 +117,14 @@ class GripperBackend(ABC):
 
 
 # ---------------------------------------------------------------- clocks
+class Clock(Protocol):
+    """Where a backend's time comes from: :class:`RealClock` or :class:`VirtualClock`."""
+
+    def now(self) -> float: ...
+
+    def wait(self, cond: threading.Condition, seconds: float) -> None: ...
+
+
 class RealClock:
     """Wall-clock time; waiting releases the caller's condition so other threads
     (``state()``, ``stop()``) get in."""
@@ -140,5 +149,5 @@ class VirtualClock:
     def advance(self, seconds: float) -> None:
         self.t += max(0.0, seconds)
 
-    def wait(self, cond: threading.Condition, seconds: float) -> None:  # noqa: ARG002
+    def wait(self, cond: threading.Condition, seconds: float) -> None:  # nobody else runs: cond unused
         self.advance(seconds)

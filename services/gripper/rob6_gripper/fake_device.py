@@ -28,6 +28,7 @@ import struct
 import threading
 import time
 import tty
+from collections.abc import Callable
 
 from . import smp
 from .backend import ERROR, MOVING
@@ -103,7 +104,7 @@ class FakeSmpDevice:
     def __enter__(self) -> FakeSmpDevice:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # ------------------------------------------------------------ controls
@@ -122,16 +123,19 @@ class FakeSmpDevice:
 
     # ------------------------------------------------------------ loop
     def _loop(self) -> None:
+        master = self._master
+        if master is None:  # closed before the thread ran
+            return
         while self._running:
             try:
-                ready, _, _ = select.select([self._master], [], [], 0.005)
+                ready, _, _ = select.select([master], [], [], 0.005)
             except (OSError, ValueError):
                 return
             with self._lock:
                 self._sync()
                 if ready:
                     try:
-                        data = os.read(self._master, 4096)
+                        data = os.read(master, 4096)
                     except OSError:
                         data = b""
                     if data and not self.silent:
@@ -183,7 +187,7 @@ class FakeSmpDevice:
         return smp.ModuleState(m.w * self.units, m.v * self.units, m.current, bits,
                                self.error_code if m.mode == ERROR else 0)
 
-    def _start_motion(self, command: int, start) -> None:
+    def _start_motion(self, command: int, start: Callable[[], int]) -> None:
         if self.model.mode == ERROR:
             self._refuse(smp.CMD_ERROR, self.error_code)
             return

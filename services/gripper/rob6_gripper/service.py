@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import threading
 
-from rob6.bus import Bus
+from rob6.bus import Bus, Context
 from rob6.messages import Empty, GripperCommand, GripperReply, GripperState
 
 from .backend import GripperBackend, Result
@@ -23,12 +23,14 @@ class GripperService:
         self._stop = threading.Event()
         self._publisher = threading.Thread(target=self._publish_state, name="gripper-state", daemon=True)
 
-    def command(self, req: GripperCommand, _ctx) -> GripperReply:
+    def command(self, req: GripperCommand, _ctx: Context) -> GripperReply:
         name, value = req.command, req.value
         if name == "HasGripper":
             return GripperReply(ok=self.backend.has_gripper())
         if name == "GripperGoHome":
             return self._reply(self.backend.go_home(self.timeout))
+        if value is None:  # the gateway sends one with every move (it answers ParseError otherwise)
+            return GripperReply(ok=False, reason=f"{name} without a value")
         if name == "GripperMove":
             # the original announces the move before it waits for its end
             return self._reply(self.backend.move_current(value, self.timeout),
@@ -43,7 +45,7 @@ class GripperService:
             log.warning("gripper: %s", result.error)
         return GripperReply(ok=result.ok, lines=lines or [], reason=result.error)
 
-    def state(self, _req: Empty, _ctx) -> GripperState:
+    def state(self, _req: Empty, _ctx: Context) -> GripperState:
         return GripperState(**self.backend.state().as_dict())
 
     def _publish_state(self) -> None:

@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from .backend import (
@@ -63,6 +64,7 @@ from .backend import (
     GRIPPING,
     IDLE,
     MOVING,
+    Clock,
     GripperBackend,
     GripperStatus,
     RealClock,
@@ -425,6 +427,7 @@ class GripperModel:
                 out = Outcome("blocked", self.w, f"blocked by {what} at {self.w:.4f} m "
                                                  f"before reaching {m.target:.4f} m")
         elif m.kind in ("position", "home"):
+            assert m.target is not None  # position and home motions have one
             self.w = m.target
             self.current = 0.0
             self.mode = IDLE
@@ -447,12 +450,12 @@ class GripperModel:
 class SimGripper(GripperBackend):
     """The simulated gripper as a backend (thread-safe; time from ``clock``)."""
 
-    def __init__(self, params: GripperParams | None = None, *, clock=None,
+    def __init__(self, params: GripperParams | None = None, *, clock: Clock | None = None,
                  object_width: float | None = None, present: bool = True,
                  referenced: bool = True, position: float | None = None) -> None:
         self.model = GripperModel(params, position=position, object_width=object_width,
                                   referenced=referenced)
-        self.clock = clock or RealClock()
+        self.clock: Clock = clock or RealClock()
         self.present = present
         self._cv = threading.Condition(threading.RLock())
         self._t = self.clock.now()
@@ -475,7 +478,7 @@ class SimGripper(GripperBackend):
             self.model.fault(message)
             self._cv.notify_all()
 
-    def _run(self, what: str, start, timeout: float) -> Result:
+    def _run(self, what: str, start: Callable[[], int], timeout: float) -> Result:
         err = check_timeout(timeout)
         if err:
             return fail(f"{what}: {err}")

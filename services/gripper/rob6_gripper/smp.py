@@ -68,8 +68,9 @@ import struct
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 from .backend import (
     DEFAULT_TIMEOUT,
@@ -420,7 +421,24 @@ class SmpDeviceError(SmpError):
 
 
 # ---------------------------------------------------------------- backend
-def _default_serial_factory(**kwargs):
+class SerialPort(Protocol):
+    """What :class:`SchunkGripper` uses of a port: pyserial's ``Serial``, or a test's fake."""
+
+    timeout: float | None
+
+    @property
+    def in_waiting(self) -> int: ...
+
+    def read(self, size: int = 1) -> bytes: ...
+
+    def write(self, data: bytes, /) -> int | None: ...
+
+    def reset_input_buffer(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def _default_serial_factory(**kwargs: Any) -> SerialPort:
     import serial  # pyserial
 
     return serial.Serial(**kwargs)
@@ -447,7 +465,7 @@ class SchunkGripper(GripperBackend):
                  response_timeout: float = 0.3, retries: int = 1, poll_interval: float = 0.05,
                  units_per_metre: float = 1000.0, stroke: tuple[float, float] = (0.0, 0.070),
                  home_position: float | None = None, settle_time: float = 0.3,
-                 serial_factory=None) -> None:
+                 serial_factory: Callable[..., SerialPort] | None = None) -> None:
         if not 0 <= module_id <= 255:
             raise ValueError("module id must be 0..255")
         self.port_name = port
@@ -461,7 +479,7 @@ class SchunkGripper(GripperBackend):
         self.home_position = home_position
         self.settle_time = settle_time
         self._factory = serial_factory or _default_serial_factory
-        self._port = None
+        self._port: SerialPort | None = None
         self._io = threading.RLock()
         self._decoder = FrameDecoder(module_id=module_id)
         self._queue: deque[Frame] = deque()
@@ -472,7 +490,7 @@ class SchunkGripper(GripperBackend):
         self.last_device_error: int | None = None
 
     # ------------------------------------------------------------ serial
-    def _open(self):
+    def _open(self) -> SerialPort:
         if self._port is None:
             try:
                 self._port = self._factory(port=self.port_name, baudrate=self.baudrate,
@@ -486,7 +504,7 @@ class SchunkGripper(GripperBackend):
         if port is not None:
             try:
                 port.close()
-            except Exception:  # noqa: BLE001 - closing a dead port
+            except Exception:  # closing a dead port: whatever it raises
                 pass
 
     def close(self) -> None:
@@ -521,7 +539,7 @@ class SchunkGripper(GripperBackend):
             # forget stale bytes (late replies of an earlier, timed-out command)
             try:
                 port.reset_input_buffer()
-            except Exception as e:  # noqa: BLE001
+            except Exception as e:  # SerialException, OSError
                 raise self._io_error(f"{name} (flush)", e) from e
             for f in self._queue:
                 if f.command != command:
@@ -531,7 +549,7 @@ class SchunkGripper(GripperBackend):
             crc_before = self._decoder.crc_errors
             try:
                 port.write(encode(self.module_id, command, payload))
-            except Exception as e:  # noqa: BLE001 - SerialException, SerialTimeoutException, OSError
+            except Exception as e:  # SerialException, SerialTimeoutException, OSError
                 raise self._io_error(f"{name} (write)", e) from e
             deadline = time.monotonic() + timeout
             while True:
@@ -556,7 +574,7 @@ class SchunkGripper(GripperBackend):
                 try:
                     port.timeout = min(left, 0.05)
                     data = port.read(max(1, port.in_waiting))
-                except Exception as e:  # noqa: BLE001
+                except Exception as e:  # SerialException, OSError
                     raise self._io_error(f"{name} (read)", e) from e
                 if data:
                     self._queue.extend(self._decoder.feed(data))

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from rob6.bus import Bus
+from rob6.bus import Bus, Context
 from rob6.messages import (
     BackwardCalcRequest,
     FkReply,
@@ -32,30 +32,30 @@ class KinematicsService:
     def __init__(self, robot: RobotModel):
         self.kin = Kinematics(robot)
 
-    def fk(self, req: FkRequest, _ctx) -> FkReply:
+    def fk(self, req: FkRequest, _ctx: Context) -> FkReply:
         q = np.asarray(req.joints, dtype=float).reshape(-1, 6)
         poses = self.kin.fk(q).reshape(-1, 12)
         return FkReply(poses=poses.tolist(), status=[self.kin.status(row) for row in q])
 
-    def forward_calc(self, req: ForwardCalcRequest, _ctx) -> ForwardCalcReply:
+    def forward_calc(self, req: ForwardCalcRequest, _ctx: Context) -> ForwardCalcReply:
         result = self.kin.forward_calc(req.numbers, req.turn_min, req.turn_max)
         if result is None:
             return ForwardCalcReply()
         pose, status = result
         return ForwardCalcReply(pose=pose, status=status)
 
-    def backward_calc(self, req: BackwardCalcRequest, _ctx) -> JointsReply:
+    def backward_calc(self, req: BackwardCalcRequest, _ctx: Context) -> JointsReply:
         return JointsReply(joints=self.kin.backward_calc(
             req.pose, req.pattern, req.current, req.turn_min, req.turn_max, req.max_change,
             req.weights))
 
-    def ik_batch(self, req: IkBatchRequest, _ctx) -> IkBatchReply:
+    def ik_batch(self, req: IkBatchRequest, _ctx: Context) -> IkBatchReply:
         solutions = self.kin.ik(np.asarray(req.poses, dtype=float).reshape(-1, 12))
         rows = [[None if any(math.isnan(v) for v in branch) else branch for branch in pose]
                 for pose in solutions.tolist()]
         return IkBatchReply(branches=list(self.kin.BRANCHES), solutions=rows)
 
-    def select(self, req: SelectRequest, _ctx) -> JointsReply:
+    def select(self, req: SelectRequest, _ctx: Context) -> JointsReply:
         return JointsReply(joints=selection.select(
             self.kin, req.pose, req.pattern, req.current, req.turn_min, req.turn_max,
             req.max_change, req.weights, req.allowed))

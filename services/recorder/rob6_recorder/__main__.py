@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import click
 
 from rob6 import service
-from rob6.config import bus_options
+from rob6.bus import Bus
+from rob6.config import BusSettings, bus_options
 from rob6.robots import get_robot
 
 from .service import RecorderService
@@ -19,10 +22,10 @@ from .service import RecorderService
               help="Start a new system recording after this many MiB.")
 @click.option("--rotate-minutes", envvar="ROB6_ROTATE_MINUTES", default=60, show_default=True, type=int,
               help="Start a new system recording after this many minutes.")
-def main(settings, log_level, log_dir, rotate_mb, rotate_minutes):
+def main(settings: BusSettings, log_level: str, log_dir: str, rotate_mb: int, rotate_minutes: int) -> None:
     """Record the robot's bus, client sessions, joint states and logs."""
 
-    def setup(bus):
+    def setup(bus: Bus) -> Callable[[], None]:
         recorder = RecorderService(bus, get_robot(settings.robot), log_dir,
                                    rotate_bytes=rotate_mb << 20, rotate_seconds=rotate_minutes * 60)
         recorder.start()

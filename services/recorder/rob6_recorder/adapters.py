@@ -15,10 +15,10 @@ import msgspec
 
 _decoder = msgspec.json.Decoder()
 
-Record = tuple[str, int, int, dict]
+Record = tuple[str, int, int, dict[str, Any]]
 
 
-def bus_trace_records(service: str, op: str, payload: bytes | dict,
+def bus_trace_records(service: str, op: str, payload: bytes | dict[str, Any],
                       received_ns: int | None = None) -> list[Record]:
     trace: dict[str, Any] = _decoder.decode(payload) if isinstance(payload, (bytes, bytearray, memoryview)) else payload
     t = trace.get("t")

@@ -19,12 +19,17 @@ import asyncio
 import json
 import logging
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from .inspect import export_csv, format_summary, summarize
 from .reader import NotMcap, ScanReport, scan
+
+if TYPE_CHECKING:
+    from .replay import ReplayResult
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -50,7 +55,7 @@ def summary(file: str, as_json: bool) -> None:
     try:
         s = summarize(_existing(file))
     except NotMcap as exc:
-        raise click.ClickException(str(exc))
+        raise click.ClickException(str(exc)) from exc
     if as_json:
         click.echo(json.dumps(s.as_dict(), indent=2))
     else:
@@ -66,7 +71,7 @@ def export(file: str, outdir: str) -> None:
     try:
         counts = export_csv(_existing(file), outdir)
     except NotMcap as exc:
-        raise click.ClickException(str(exc))
+        raise click.ClickException(str(exc)) from exc
     for name, n in counts.items():
         click.echo(f"{Path(outdir) / name}: {n} rows")
 
@@ -87,7 +92,7 @@ def recover(file: str, output: str | None, in_place: bool) -> None:
             out = Path(output) if output else src.with_name(src.stem + ".recovered.mcap")
             result = do_recover(src, out)
     except NotMcap as exc:
-        raise click.ClickException(str(exc))
+        raise click.ClickException(str(exc)) from exc
     click.echo(result.describe())
 
 
@@ -101,7 +106,7 @@ def doctor(file: str) -> None:
         for _ in scan(_existing(file), report):
             pass
     except NotMcap as exc:
-        raise click.ClickException(str(exc))
+        raise click.ClickException(str(exc)) from exc
     messages = report.messages
     state = "complete" if report.complete else ("truncated" if report.truncated else "unfinished")
     click.echo(f"{file}: {state}; {messages} messages in {report.chunks} chunks "
@@ -165,7 +170,7 @@ def replay(file: str, target: str, speed: float, afap: bool, robot: str | None,
                    err=True)
     total = sum(len(s.exchanges) for s in scripts)
 
-    async def run(progress):
+    async def run(progress: Callable[[int], None] | None) -> ReplayResult:
         return await do_replay(scripts, host, port, speed=None if afap else speed,
                                tolerance=tolerance, timeout=timeout, quiet=quiet_ms / 1000.0,
                                auto_handshake=not no_handshake, progress=progress)
@@ -195,7 +200,7 @@ def replay_joints_cmd(file: str, speed: float, topic: str) -> None:
 
     out = sys.stdout
 
-    def publish(state) -> None:
+    def publish(state: dict[str, Any]) -> None:
         out.write(json.dumps(state, separators=(",", ":")) + "\n")
         out.flush()
 

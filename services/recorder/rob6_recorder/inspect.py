@@ -48,11 +48,11 @@ class SessionSummary:
     end_ns: int = 0
     lines: int = 0
     replies: int = 0
-    commands: Counter = field(default_factory=Counter)
+    commands: Counter[str] = field(default_factory=Counter)
     errors: int = 0  # replies with an ``ERROR:`` line
     false: int = 0  # replies ending in ``false``
     no_reply: int = 0  # lines that got nothing back
-    failures: list[dict] = field(default_factory=list)  # first few error/false exchanges
+    failures: list[dict[str, Any]] = field(default_factory=list)  # first few error/false exchanges
     latencies_ms: list[float] = field(default_factory=list)
     events: list[str] = field(default_factory=list)
 
@@ -60,7 +60,7 @@ class SessionSummary:
     def duration_s(self) -> float:
         return (self.end_ns - self.start_ns) / 1e9 if self.end_ns else 0.0
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         lat = sorted(self.latencies_ms)
         return {
             "session": self.session, "start": iso(self.start_ns) if self.start_ns else None,
@@ -85,7 +85,7 @@ class Summary:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: list[str] = field(default_factory=list)
     records: int = 0
-    topics: Counter = field(default_factory=Counter)
+    topics: Counter[str] = field(default_factory=Counter)
     schemas: dict[str, str] = field(default_factory=dict)
     start_ns: int = 0
     end_ns: int = 0
@@ -100,7 +100,7 @@ class Summary:
     def robot_id(self) -> str:
         return self.metadata.get("rob6", {}).get("robot_id", "")
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return {
             "file": self.path, "complete": self.complete,
             "unfinished_reason": None if self.complete else self.truncated_error,
@@ -117,7 +117,7 @@ class Summary:
         }
 
 
-def summarize(path: str | os.PathLike, max_failures: int = 20) -> Summary:
+def summarize(path: str | os.PathLike[str], max_failures: int = 20) -> Summary:
     reader = RecordingReader(path)
     summary = Summary(path=str(path))
     pending: dict[tuple[str, str], tuple[int, str]] = {}  # (session, cid) -> (t, text)
@@ -215,7 +215,7 @@ def _strip_nl(text: str) -> str:
     return text[:-1] if text.endswith("\n") else text
 
 
-def export_csv(path: str | os.PathLike, outdir: str | os.PathLike) -> dict[str, int]:
+def export_csv(path: str | os.PathLike[str], outdir: str | os.PathLike[str]) -> dict[str, int]:
     """Write ``commands.csv``, ``joint_states.csv`` and ``log.csv`` into ``outdir``.
 
     commands.csv: time (ISO UTC), log_time_ns, session, direction (in|out), cid,
@@ -261,11 +261,11 @@ def export_csv(path: str | os.PathLike, outdir: str | os.PathLike) -> dict[str, 
     return counts
 
 
-def _records(path) -> Iterator[Record]:
+def _records(path: str | os.PathLike[str]) -> Iterator[Record]:
     yield from RecordingReader(path).records()
 
 
-def session_topics(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
+def session_topics(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
     """Sessions found in a recording -> counts of lines (used by replay)."""
     found: dict[str, dict[str, Any]] = defaultdict(lambda: {"lines": 0})
     for rec in RecordingReader(path).records():

@@ -16,6 +16,7 @@ import struct
 import sys
 import zlib
 from array import array
+from collections.abc import Iterable
 from typing import IO
 
 import zstandard
@@ -30,6 +31,7 @@ from mcap.records import (
     DataEnd,
     Footer,
     Header,
+    McapRecord,
     Metadata,
     MetadataIndex,
     Schema,
@@ -57,7 +59,7 @@ class LeanWriter:
         self._chunk_msgs = 0
         self._chunk_start = 0
         self._chunk_end = 0
-        self._index: dict[int, array] = {}  # channel -> [log_time, offset, ...] in this chunk
+        self._index: dict[int, array[int]] = {}  # channel -> [log_time, offset, ...] in this chunk
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._chunk_indexes: list[ChunkIndex] = []
@@ -77,10 +79,11 @@ class LeanWriter:
         self._pos += len(data)
 
     @staticmethod
-    def _record(rec) -> bytes:
+    def _record(rec: McapRecord) -> bytes:
         builder = RecordBuilder()
         rec.write(builder)
-        return builder.end()
+        data: bytes = builder.end()
+        return data
 
     def tell(self) -> int:
         """Bytes in the file plus the open chunk (uncompressed)."""
@@ -214,7 +217,7 @@ class LeanWriter:
         builder = RecordBuilder()
         offsets: list[SummaryOffset] = []
 
-        def group(opcode: Opcode, records) -> None:
+        def group(opcode: Opcode, records: Iterable[McapRecord]) -> None:
             start = builder.count
             for rec in records:
                 rec.write(builder)

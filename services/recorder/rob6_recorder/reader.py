@@ -16,7 +16,7 @@ import os
 import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, BinaryIO
 
 import msgspec
 from mcap.data_stream import ReadDataStream
@@ -73,7 +73,7 @@ class ScanReport:
     error: str = ""
 
 
-def scan(path: str | os.PathLike, report: ScanReport | None = None,
+def scan(path: str | os.PathLike[str], report: ScanReport | None = None,
          validate_crcs: bool = True) -> Iterator[Any]:
     """Yield every record of the data section in file order (chunks broken up).
 
@@ -149,7 +149,7 @@ def scan(path: str | os.PathLike, report: ScanReport | None = None,
                 yield record
 
 
-def _check_footer(fh, size: int, report: ScanReport) -> None:
+def _check_footer(fh: BinaryIO, size: int, report: ScanReport) -> None:
     if size < 8 + 9 + 20 + 8:
         return
     fh.seek(size - 8 - 29)
@@ -157,7 +157,7 @@ def _check_footer(fh, size: int, report: ScanReport) -> None:
     report.complete = tail[-8:] == MAGIC and tail[0] == Opcode.FOOTER
 
 
-def is_complete(path: str | os.PathLike) -> bool:
+def is_complete(path: str | os.PathLike[str]) -> bool:
     """True when the file ends with a footer and the closing magic (the writer finished)."""
     try:
         with open(path, "rb") as fh:
@@ -191,7 +191,7 @@ _decoder = msgspec.json.Decoder()
 class RecordingReader:
     """Messages, metadata and attachments of one recording (finished or unfinished)."""
 
-    def __init__(self, path: str | os.PathLike, validate_crcs: bool = True):
+    def __init__(self, path: str | os.PathLike[str], validate_crcs: bool = True):
         self.path = str(path)
         self.validate_crcs = validate_crcs
         self.report = ScanReport()
@@ -232,6 +232,6 @@ class RecordingReader:
                 self.header = rec
 
 
-def read_records(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Iterator[Record]:
+def read_records(path: str | os.PathLike[str], topics: Iterable[str] | None = None) -> Iterator[Record]:
     """Decoded records of a recording in write order (works on unfinished files)."""
     yield from RecordingReader(path).records(topics)

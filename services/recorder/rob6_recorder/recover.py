@@ -64,7 +64,7 @@ class RecoverResult:
         return "\n".join(lines)
 
 
-def recover(path: str | os.PathLike, out_path: str | os.PathLike, *,
+def recover(path: str | os.PathLike[str], out_path: str | os.PathLike[str], *,
             chunk_size: int = 1 << 20, compression: str = "zstd") -> RecoverResult:
     """Write to ``out_path`` an indexed MCAP file with everything readable in ``path``."""
     path, out_path = str(path), str(out_path)
@@ -135,7 +135,7 @@ def recover(path: str | os.PathLike, out_path: str | os.PathLike, *,
     return result
 
 
-def recover_in_place(path: str | os.PathLike, keep: bool = True) -> RecoverResult:
+def recover_in_place(path: str | os.PathLike[str], keep: bool = True) -> RecoverResult:
     """Rebuild ``path`` itself; the original is kept as ``<path>.unfinished`` if ``keep``."""
     path = str(path)
     tmp = path + ".recovering"
@@ -147,7 +147,7 @@ def recover_in_place(path: str | os.PathLike, keep: bool = True) -> RecoverResul
     return result
 
 
-def recover_unfinished(directory: str | os.PathLike, min_age_s: float = 5.0,
+def recover_unfinished(directory: str | os.PathLike[str], min_age_s: float = 5.0,
                        keep: bool = True) -> list[RecoverResult]:
     """Recover every unfinished ``*.mcap`` in ``directory`` not modified for ``min_age_s``.
 

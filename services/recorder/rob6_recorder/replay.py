@@ -98,7 +98,7 @@ class ReplayResult:
 
 
 # --------------------------------------------------------------------------- loading
-def load_script(path: str | os.PathLike, session: str | None = None,
+def load_script(path: str | os.PathLike[str], session: str | None = None,
                 robot: str | None = None) -> list[Script]:
     """Scripts of a recording (one per session, or only ``session``) or a transcript."""
     p = Path(path)
@@ -111,10 +111,10 @@ def load_script(path: str | os.PathLike, session: str | None = None,
     return load_recording(p, session)
 
 
-def load_recording(path: str | os.PathLike, session: str | None = None) -> list[Script]:
+def load_recording(path: str | os.PathLike[str], session: str | None = None) -> list[Script]:
     reader = RecordingReader(path)
-    ins: dict[str, list[tuple[int, dict]]] = {}
-    outs: dict[str, list[tuple[int, dict]]] = {}
+    ins: dict[str, list[tuple[int, dict[str, Any]]]] = {}
+    outs: dict[str, list[tuple[int, dict[str, Any]]]] = {}
     order: list[str] = []
     for rec in reader.records():
         parts = rec.topic.split("/")
@@ -161,7 +161,7 @@ def load_recording(path: str | os.PathLike, session: str | None = None) -> list[
     return scripts
 
 
-def load_transcript(path: str | os.PathLike) -> list[Script]:
+def load_transcript(path: str | os.PathLike[str]) -> list[Script]:
     """Conformance transcript (JSON Lines) -> one script per connection.
 
     A record with ``no_reply_within_ms`` and the record after it are not judged (the
@@ -213,13 +213,13 @@ def compare_reply(command: str, expected: str, got: str, tolerance: float = 1e-5
     if len(exp_lines) != len(got_lines):
         return (f"expected {expected.count(chr(10))} line(s), got {got.count(chr(10))}"
                 + ("" if got else " (no reply)"))
-    for ln, (e, g) in enumerate(zip(exp_lines, got_lines), 1):
+    for ln, (e, g) in enumerate(zip(exp_lines, got_lines, strict=True), 1):
         if e == g:
             continue
         et, gt = _SPLIT.split(e), _SPLIT.split(g)
         if len(et) != len(gt):
             return f"line {ln}: expected {e!r}, got {g!r}"
-        for fi, (a, b) in enumerate(zip(et, gt)):
+        for fi, (a, b) in enumerate(zip(et, gt, strict=True)):
             if a == b:
                 continue
             if a.isspace() or b.isspace() or not a or not b:
@@ -247,7 +247,8 @@ class _Conn(asyncio.Protocol):
         self._event = asyncio.Event()
 
     # protocol callbacks
-    def connection_made(self, transport) -> None:
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)  # a TCP connection
         self.transport = transport
         sock = transport.get_extra_info("socket")
         if sock is not None:
@@ -266,7 +267,7 @@ class _Conn(asyncio.Protocol):
         self._event.set()
         return False
 
-    def connection_lost(self, exc) -> None:
+    def connection_lost(self, exc: Exception | None) -> None:
         self.eof = True
         self._event.set()
 
@@ -436,7 +437,7 @@ def format_report(result: ReplayResult, limit: int = 50) -> str:
 
 
 # --------------------------------------------------------------------------- joints
-def replay_joints(path: str | os.PathLike, publish: Callable[[dict], Any], *,
+def replay_joints(path: str | os.PathLike[str], publish: Callable[[dict[str, Any]], Any], *,
                   speed: float | None = 1.0, topic: str = "/driver/joint_state",
                   stop: Callable[[], bool] | None = None,
                   sleep: Callable[[float], Any] = time.sleep,

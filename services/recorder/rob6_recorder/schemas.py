@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import dataclass
+from typing import Any
 
 _TIME = {
     "type": "object",
@@ -247,7 +248,7 @@ GENERIC = {"title": "rob6.Record", "type": "object"}
 @dataclass(frozen=True)
 class SchemaSpec:
     name: str
-    schema: dict
+    schema: dict[str, Any]
 
     @property
     def data(self) -> bytes:
@@ -255,7 +256,7 @@ class SchemaSpec:
 
 
 #: (regular expression on the topic, schema). First match wins.
-TOPIC_SCHEMAS: list[tuple[re.Pattern, SchemaSpec]] = [
+TOPIC_SCHEMAS: list[tuple[re.Pattern[str], SchemaSpec]] = [
     (re.compile(r"^/session/[^/]+/client_in$"), SchemaSpec("rob6.ClientLine", CLIENT_LINE)),
     (re.compile(r"^/session/[^/]+/client_out$"), SchemaSpec("rob6.ClientReply", CLIENT_REPLY)),
     (re.compile(r"^/session/[^/]+/event$"), SchemaSpec("rob6.SessionEvent", SESSION_EVENT)),
@@ -286,12 +287,12 @@ LOG_LEVELS = {"NOTSET": 0, "TRACE": 1, "DEBUG": 1, "INFO": 2, "WARN": 3, "WARNIN
               "ERROR": 4, "CRITICAL": 5, "FATAL": 5}
 
 
-def stamp(ns: int) -> dict:
+def stamp(ns: int) -> dict[str, Any]:
     """A Foxglove ``time`` from nanoseconds."""
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
-def to_foxglove_log(record: dict, log_time_ns: int) -> dict:
+def to_foxglove_log(record: dict[str, Any], log_time_ns: int) -> dict[str, Any]:
     """Map a rob6 log record (``level, name, message, service, time|t``) to foxglove.Log.
 
     Records that already look like foxglove.Log (``timestamp`` dict, int level) pass

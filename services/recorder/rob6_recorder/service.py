@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
+from typing import Any
 
 import msgspec
 
@@ -31,7 +32,7 @@ TOPICS = {"driver/state": "/driver/joint_state", "driver/link": "/driver/link", 
 
 
 class RecorderService:
-    def __init__(self, bus: Bus, robot: RobotModel, directory: str, **options):
+    def __init__(self, bus: Bus, robot: RobotModel, directory: str, **options: Any) -> None:
         self.bus = bus
         self.recorder = Recorder(directory, robot.name, bus.settings.robot_id,
                                  urdf=(URDF_DIR / f"{robot.geometry}.urdf").read_text(), **options)

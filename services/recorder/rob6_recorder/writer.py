@@ -46,7 +46,7 @@ from typing import Any
 import msgspec
 
 from . import __version__
-from .geometry import TfDeriver, flange_message
+from .geometry import Fk, TfDeriver, flange_message
 from .mcapwriter import LeanWriter
 from .schemas import schema_for, to_foxglove_log
 
@@ -89,7 +89,7 @@ class McapFile:
     Not thread safe: used by the recorder's writer thread (or a tool) only.
     """
 
-    def __init__(self, path: str | os.PathLike, *, start_ns: int | None = None,
+    def __init__(self, path: str | os.PathLike[str], *, start_ns: int | None = None,
                  urdf: str | None = None, metadata: dict[str, dict[str, str]] | None = None,
                  chunk_size: int = 1 << 20, compression: str = "zstd"):
         self.path = Path(path)
@@ -207,8 +207,8 @@ class Recorder:
       so late bus traces of its last command still land in it.
     """
 
-    def __init__(self, directory: str | os.PathLike, robot: str, robot_id: str, *,
-                 urdf: str | None = None, fk: Callable | None = None,
+    def __init__(self, directory: str | os.PathLike[str], robot: str, robot_id: str, *,
+                 urdf: str | None = None, fk: Fk | None = None,
                  joint_map: Sequence[tuple[float, float]] | None = None,
                  system: bool = True, sessions: bool = True,
                  rotate_bytes: int = 256 << 20, rotate_seconds: float = 3600.0,
@@ -245,7 +245,7 @@ class Recorder:
                 self._tf = TfDeriver(urdf, joint_map)
             except Exception as exc:  # a bad URDF must not stop the recording
                 log.warning("URDF not usable for /tf (%s); recording without /tf", exc)
-        self._queue: collections.deque = collections.deque()
+        self._queue: collections.deque[Any] = collections.deque()
         self._wake = threading.Event()
         self._idle = False
         self._stop = False
@@ -285,7 +285,7 @@ class Recorder:
     def __enter__(self) -> "Recorder":
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def close(self, timeout: float | None = 30.0) -> None:
@@ -294,6 +294,7 @@ class Recorder:
             self.start()  # write whatever was queued before start()
         self._stop = True
         self._wake.set()
+        assert self._thread is not None  # started above
         self._thread.join(timeout)
         if self._thread.is_alive():
             log.error("recorder writer did not finish within %s s (%d records queued)",
@@ -430,7 +431,7 @@ class Recorder:
                     self._wake.wait(min(self.chunk_interval, 0.25))
                 self._idle = False
 
-    def _error(self, fmt: str, *args) -> None:
+    def _error(self, fmt: str, *args: object) -> None:
         self._errors += 1
         now = time.monotonic()
         if now - self._last_error_log >= 1.0:
@@ -603,7 +604,7 @@ class Recorder:
         self._sessions.clear()
         self._system = None
 
-    def _metadata(self, kind: str, start_ns: int, session: str | None) -> dict:
+    def _metadata(self, kind: str, start_ns: int, session: str | None) -> dict[str, Any]:
         info = {"robot": self.robot, "robot_id": self.robot_id, "kind": kind,
                 "started": utc_stamp(start_ns), "start_ns": str(start_ns),
                 "host": socket.gethostname(), "recorder": __version__}
