@@ -30,16 +30,20 @@ import socket
 import sys
 import time
 from dataclasses import dataclass, field
+from itertools import pairwise
 from pathlib import Path
+from typing import cast
+
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from rob6.bus import Bus
+from rob6.status import STATUS_WORDS as _CATEGORIES
+from rob6.testing import System
+from rob6_gateway.args import Args, ParseError
+from rob6_gateway.commands import COMMANDS, Close, Gateway, Options, _split_command
+from rob6_gateway.framing import Framer, _clean
 
 ROOT = Path(__file__).resolve().parents[1]
-
-from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
-
-from rob6.robots import STATUS_WORDS as _CATEGORIES  # noqa: E402
-from rob6_gateway.args import Args, ParseError  # noqa: E402
-from rob6_gateway.commands import COMMANDS, Close, Gateway, Options, _split_command  # noqa: E402
-from rob6_gateway.framing import Framer, _clean  # noqa: E402
 
 COMMAND_NAMES = sorted(COMMANDS)
 STATUS_WORDS = [word for category in _CATEGORIES for word in category]
@@ -96,7 +100,7 @@ def command_line_strategy():
                      st.text(st.characters(min_codepoint=1, max_codepoint=255, blacklist_characters="\n"),
                              max_size=12))
     lead = st.sampled_from(["", "", "", " ", "\t", "\r"])
-    plain = st.builds(lambda l, n, a: l + n + a, lead, name, _args_strategy())
+    plain = st.builds(lambda lead_, n, a: lead_ + n + a, lead, name, _args_strategy())
     truncated = st.builds(lambda s, f: s[:int(len(s) * f)], plain, st.floats(0, 1))
     with_nul = st.builds(lambda s, i: s[:i] + "\x00" + s[i:], plain, st.integers(0, 40))
     raw = st.binary(max_size=64).map(lambda b: b.replace(b"\n", b"").decode("latin-1"))
@@ -165,7 +169,7 @@ def check_framer(stream: bytes, cuts: list[int], max_line: int) -> None:
     framer = Framer(max_line)
     got = []
     points = sorted({min(max(c, 0), len(stream)) for c in cuts} | {0, len(stream)})
-    for a, b in zip(points, points[1:]):
+    for a, b in pairwise(points):
         got += framer.feed(stream[a:b])
         assert len(framer._buffer) <= max_line, "framer buffer above max_line"
     got += framer.flush()
@@ -222,7 +226,7 @@ def make_dead_gateway(robot: str = "kr16"):
     from rob6.robots import get_robot
     from rob6_gateway.state import Session
     logging.getLogger("rob6").setLevel(logging.CRITICAL)  # every call fails: thousands of warnings
-    gateway = Gateway(_DeadBus(), get_robot(robot), Options())
+    gateway = Gateway(cast(Bus, _DeadBus()), get_robot(robot), Options())  # the part of a Bus it uses
     return gateway, Session(number=1, peer="fuzz")
 
 
@@ -264,7 +268,7 @@ class FuzzClient:
 
     def until_pong(self, pongs: int = 1) -> list[bytes]:
         """Every line before the ``pongs``-th ``PONG`` line."""
-        lines = []
+        lines: list[bytes] = []
         while True:
             line = self.read_line()
             if line == PONG:
@@ -304,8 +308,8 @@ def _blocking_ping(text: str) -> bool:
 class TcpFuzzer:
     """Drives one session of a running system; counts and checks everything it sends."""
 
-    system: object
-    client: FuzzClient | None = None
+    system: System
+    _client: FuzzClient | None = None
     gateway_pid: int = 0
     inputs: int = 0
     hangs: int = 0
@@ -316,9 +320,14 @@ class TcpFuzzer:
     limit_violations: int = 0
     moves_ok: int = 0
 
+    @property
+    def client(self) -> FuzzClient:
+        assert self._client is not None, "start() first"
+        return self._client
+
     def start(self):
         self.gateway_pid = self.system.pids()["gateway"]
-        self.client = FuzzClient(self.system.port)
+        self._client = FuzzClient(self.system.port)
         self._update_envelope()
 
     def ask(self, command: str) -> list[bytes]:
@@ -332,12 +341,12 @@ class TcpFuzzer:
 
     def _update_envelope(self):
         lo, hi = self._numbers("GetJointsMaxTurnMin"), self._numbers("GetJointsMaxTurnMax")
-        self.turn_lo = lo if not self.turn_lo else [min(a, b) for a, b in zip(self.turn_lo, lo)]
-        self.turn_hi = hi if not self.turn_hi else [max(a, b) for a, b in zip(self.turn_hi, hi)]
+        self.turn_lo = lo if not self.turn_lo else [min(a, b) for a, b in zip(self.turn_lo, lo, strict=True)]
+        self.turn_hi = hi if not self.turn_hi else [max(a, b) for a, b in zip(self.turn_hi, hi, strict=True)]
 
     def check_position(self):
         q = self._numbers("GetPositionJoints")
-        if not all(lo - 1e-6 <= x <= hi + 1e-6 for lo, x, hi in zip(self.turn_lo, q, self.turn_hi)):
+        if not all(lo - 1e-6 <= x <= hi + 1e-6 for lo, x, hi in zip(self.turn_lo, q, self.turn_hi, strict=True)):
             self.limit_violations += 1
             self.problems.append(("limit", q, self.turn_lo, self.turn_hi))
 
@@ -354,14 +363,14 @@ class TcpFuzzer:
         moved = 0
         for _ in range(count):
             self.inputs += 1
-            q = [rng.uniform(a - 8, b + 8) for a, b in zip(lo, hi)]
+            q = [rng.uniform(a - 8, b + 8) for a, b in zip(lo, hi, strict=True)]
             reply = self.ask("MovePTPJoints " + " ".join("%.3f" % x for x in q))
-            inside = all(a < x < b for a, x, b in zip(lo, q, hi))
+            inside = all(a < x < b for a, x, b in zip(lo, q, hi, strict=True))
             if reply != ([b"true"] if inside else [b"false"]):
                 self.problems.append(("narrowed move", q, reply))
             moved += reply == [b"true"]
             position = self._numbers("GetPositionJoints")
-            if not all(a - 1e-6 <= x <= b + 1e-6 for a, x, b in zip(lo, position, hi)):
+            if not all(a - 1e-6 <= x <= b + 1e-6 for a, x, b in zip(lo, position, hi, strict=True)):
                 self.limit_violations += 1
                 self.problems.append(("limit", position, lo, hi))
         self.moves_ok += moved
@@ -385,11 +394,11 @@ class TcpFuzzer:
         self.client.sock.sendall(raw + b"\nCM_PING\n")
         try:
             if name == "Quit":
-                reply = self.client.read_line()
-                if reply != b"bye!":
-                    self.problems.append((text, "Quit reply", reply))
+                bye = self.client.read_line()
+                if bye != b"bye!":
+                    self.problems.append((text, "Quit reply", bye))
                 self.client.close()
-                self.client = FuzzClient(self.system.port)
+                self._client = FuzzClient(self.system.port)
                 self.reconnects += 1
                 return
             lines = self.client.until_pong(2 if name == "CM_PING" else 1)
@@ -418,7 +427,7 @@ class TcpFuzzer:
         except OSError:
             pass
         time.sleep(0.2)
-        self.client = FuzzClient(self.system.port)
+        self._client = FuzzClient(self.system.port)
         self.reconnects += 1
 
     def oversized(self, size: int = 1 << 20, terminated: bool = True) -> None:
@@ -448,7 +457,7 @@ class TcpFuzzer:
         self.inputs += 1
         raw = text.encode("latin-1") + b"\n"
         points = sorted({min(max(c, 0), len(raw)) for c in cuts} | {0, len(raw)})
-        for a, b in zip(points, points[1:]):
+        for a, b in pairwise(points):
             self.client.sock.sendall(raw[a:b])
         self.client.sock.sendall(b"CM_PING\n")
         try:
@@ -588,7 +597,7 @@ def main(argv=None) -> int:
     faults = None
     if not opts.skip_faults:
         sys.path.insert(0, str(ROOT / "tests" / "reliability"))
-        from faults import run_fault_campaign  # noqa: E402
+        from faults import run_fault_campaign
         faults = run_fault_campaign()
     t3 = time.monotonic()
 

@@ -2,7 +2,8 @@
 
 Every number here is from ``../shared/robots.md`` (measured on the original to 5e-7).
 Units on the wire and here: millimetres and degrees; speeds in degrees per 12 ms
-controller cycle, accelerations in degrees per cycle squared (the original's units).
+controller cycle, accelerations in degrees per cycle squared (the original's units; their
+SI equivalents: ``rob6.units``).
 
 This module is pure Python (no numpy) so that every service, the gateway included,
 can use it.
@@ -11,10 +12,11 @@ can use it.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
-#: The unit cycle of the protocol's speed/acceleration figures (not the driver rate).
-UNIT_CYCLE_S = 0.012
+from .status import Status, status_flags, status_words
 
 # Standard DH chain shared by all robots (robots.md "Kinematic chain"):
 # theta_i = s_i * q_i + o_i, twists alpha_i; T = A1..A6 * Ry(180 deg).
@@ -23,23 +25,11 @@ DH_OFFSETS_DEG = (0.0, 0.0, -90.0, 0.0, 0.0, 0.0)
 DH_ALPHA_DEG = (-90.0, 0.0, -90.0, 90.0, -90.0, 0.0)
 
 
-#: Status words per category (hand, elbow, arm): the two explicit words, then the
-#: word for "may change" and the word for "keep the current one".
-STATUS_WORDS = (
-    ("flip", "noflip", "toggleHand", "noToggleHand"),
-    ("up", "down", "toggleElbow", "noToggleElbow"),
-    ("lefty", "righty", "toggleArm", "noToggleArm"),
-)
-TOGGLE_ALL = ("toggleHand", "toggleElbow", "toggleArm")
-NO_TOGGLE_ALL = ("noToggleHand", "noToggleElbow", "noToggleArm")
-#: MovePTPHomRowWise takes no status: it chooses among these (the transcripts show it
-#: never picks righty)
-PTP_HOM_PATTERN = ("toggleHand", "toggleElbow", "lefty")
 
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RobotModel:
-    """One robot type as the original knew it."""
+    """One robot type as the original knew it (built by keyword: a dozen numbers that
+    must not be confused)."""
 
     name: str  # type name as given on the command line (kr16, kr16rt, ...)
     geometry: str  # which geometry/URDF it uses (kr16rt -> kr16)
@@ -78,7 +68,7 @@ class RobotModel:
 
     @property
     def default_max_change(self) -> tuple[float, ...]:
-        return tuple(hi - lo for lo, hi in zip(self.turn_min, self.turn_max))
+        return tuple(hi - lo for lo, hi in zip(self.turn_min, self.turn_max, strict=True))
 
     @property
     def hw_min(self) -> tuple[float, ...]:
@@ -122,67 +112,62 @@ class RobotModel:
     def is_kr16(self) -> bool:
         return self.geometry == "kr16"
 
-    # ---- status flags (robots.md "Status flags") ----------------------------
-    def status(self, q: tuple[float, ...] | list[float]) -> tuple[str, str, str]:
+    # ---- status flags (robots.md "Status flags"; the formulas: rob6.status) -------
+    def status(self, q: Sequence[float]) -> Status:
         """Configuration of joints q (degrees): (flip|noflip, up|down, lefty|righty)."""
-        q2, q3, q5 = (math.radians(q[1]), math.radians(q[2]), q[4])
-        hand = "flip" if q5 < 0 else "noflip"
-        elbow = "up" if self.d4 * math.sin(q3) - self.a3 * math.cos(q3) > 0 else "down"
-        reach = (
-            self.a1
-            + self.a2 * math.cos(q2)
-            + self.d4 * math.cos(q2 + q3)
-            + self.a3 * math.sin(q2 + q3)
-        )
-        arm = "lefty" if reach > 0 else "righty"
-        return hand, elbow, arm
+        return status_words(*status_flags(self, math.radians(q[1]), math.radians(q[2]), q[4]))
 
 
-def _kuka(name, geometry, rt, dh, tmin, tmax, hw_j2, speed, cycle):
-    return RobotModel(name, geometry, "kuka", rt, *dh, tmin, tmax, hw_j2, speed, cycle)
+def _kuka(name: str, geometry: str, *, rt: bool, cycle_s: float) -> RobotModel:
+    """A KUKA type: its geometry's numbers, its own name, variant and cycle."""
+    return RobotModel(name=name, vendor="kuka", rt=rt, cycle_s=cycle_s, **_KUKA_GEOMETRIES[geometry])
 
 
-_KR16 = dict(
-    dh=(675.0, 260.0, 680.0, -35.0, 670.0, 158.0),
-    tmin=(-185.0, -155.0, -130.0, -350.0, -125.0, -350.0),
-    tmax=(185.0, 20.0, 154.0, 350.0, 125.0, 350.0),
-    hw_j2=35.0,
-    speed=(0.1872, 0.1872, 0.1872, 0.396, 0.396, 0.738),
-)
-_KR3 = dict(
-    dh=(350.0, 100.0, 265.0, 0.0, 270.0, 75.0),
-    tmin=(-180.0, -135.0, -135.0, -180.0, -135.0, -350.0),
-    tmax=(180.0, 20.0, 135.0, 180.0, 135.0, 350.0),
-    hw_j2=45.0,
-    speed=(0.288, 0.252, 0.288, 0.45, 0.36, 0.45),
-)
+_KUKA_GEOMETRIES: dict[str, dict[str, Any]] = {
+    "kr16": dict(
+        geometry="kr16",
+        d1=675.0, a1=260.0, a2=680.0, a3=-35.0, d4=670.0, d6=158.0,
+        turn_min=(-185.0, -155.0, -130.0, -350.0, -125.0, -350.0),
+        turn_max=(185.0, 20.0, 154.0, 350.0, 125.0, 350.0),
+        hw_j2_max=35.0,
+        default_speed=(0.1872, 0.1872, 0.1872, 0.396, 0.396, 0.738),
+    ),
+    "kr3": dict(
+        geometry="kr3",
+        d1=350.0, a1=100.0, a2=265.0, a3=0.0, d4=270.0, d6=75.0,
+        turn_min=(-180.0, -135.0, -135.0, -180.0, -135.0, -350.0),
+        turn_max=(180.0, 20.0, 135.0, 180.0, 135.0, 350.0),
+        hw_j2_max=45.0,
+        default_speed=(0.288, 0.252, 0.288, 0.45, 0.36, 0.45),
+    ),
+}
 
 ROBOTS: dict[str, RobotModel] = {
-    "kr16": _kuka("kr16", "kr16", False, cycle=0.012, **_KR16),
+    "kr16": _kuka("kr16", "kr16", rt=False, cycle_s=0.012),
     # KUKA RSI real-time variants run a 4 ms interpolation cycle
-    "kr16rt": _kuka("kr16rt", "kr16", True, cycle=0.004, **_KR16),
-    "kr3": _kuka("kr3", "kr3", False, cycle=0.012, **_KR3),
-    "kr3rt": _kuka("kr3rt", "kr3", True, cycle=0.004, **_KR3),
+    "kr16rt": _kuka("kr16rt", "kr16", rt=True, cycle_s=0.004),
+    "kr3": _kuka("kr3", "kr3", rt=False, cycle_s=0.012),
+    "kr3rt": _kuka("kr3rt", "kr3", rt=True, cycle_s=0.004),
     # Adept Viper s850: V+ trajectory generator runs at 16 ms (ALTER period)
     "ad850": RobotModel(
-        "ad850", "ad850", "adept", False,
-        335.0, 75.0, 365.0, 90.0, 405.0, 80.0,
-        (-170.0, -190.0, -119.0, -190.0, -120.0, -360.0),
-        (170.0, 20.0, 169.0, 190.0, 120.0, 360.0),
-        45.0,
-        (0.3, 0.3, 0.3, 0.45, 0.45, 0.72),
-        0.016,
+        name="ad850", geometry="ad850", vendor="adept", rt=False,
+        d1=335.0, a1=75.0, a2=365.0, a3=90.0, d4=405.0, d6=80.0,
+        turn_min=(-170.0, -190.0, -119.0, -190.0, -120.0, -360.0),
+        turn_max=(170.0, 20.0, 169.0, 190.0, 120.0, 360.0),
+        hw_j2_max=45.0,
+        default_speed=(0.3, 0.3, 0.3, 0.45, 0.45, 0.72),
+        cycle_s=0.016,
     ),
     # Kawasaki FS03N: self-consistent a2 = +250 geometry (robots.md explains why);
     # E-controller interpolation runs at 16 ms
     "kaw_fs": RobotModel(
-        "kaw_fs", "kaw_fs", "kawasaki", False,
-        250.0, 120.0, 250.0, 0.0, 250.0, 80.0,
-        (-160.0, -60.0, -150.0, -360.0, -135.0, -360.0),
-        (160.0, 20.0, 120.0, 360.0, 135.0, 360.0),
-        150.0,
-        (0.432, 0.3, 0.27, 0.648, 0.27, 0.648),
-        0.016,
+        name="kaw_fs", geometry="kaw_fs", vendor="kawasaki", rt=False,
+        d1=250.0, a1=120.0, a2=250.0, a3=0.0, d4=250.0, d6=80.0,
+        turn_min=(-160.0, -60.0, -150.0, -360.0, -135.0, -360.0),
+        turn_max=(160.0, 20.0, 120.0, 360.0, 135.0, 360.0),
+        hw_j2_max=150.0,
+        default_speed=(0.432, 0.3, 0.27, 0.648, 0.27, 0.648),
+        cycle_s=0.016,
     ),
 }
 

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rob6_kinematics.calc import Kinematics, parse_pattern
+from rob6.status import parse_status
+from rob6_kinematics.calc import Kinematics
 
 _NUM = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 
@@ -101,7 +102,7 @@ def answer(st: State, line: str) -> str | None:
         if len(nums) < 12:
             return "ERROR: incorrect matrix\nfalse\n"
         try:
-            pattern = parse_pattern(rest.split())
+            pattern = parse_status(rest.split())
         except ValueError:
             return "ERROR: incorrect status\nfalse\n"
         q = k.backward_calc(nums, pattern, st.q, st.turn_min, st.turn_max, st.max_change)
@@ -141,7 +142,7 @@ def same(expected: str, got: str) -> bool:
     el, gl = expected.rstrip("\n").split("\n"), got.rstrip("\n").split("\n")
     if len(el) != len(gl):
         return False
-    for e, g in zip(el, gl):
+    for e, g in zip(el, gl, strict=True):
         et, gt = e.split(), g.split()
         if len(et) != len(gt):
             return False
@@ -207,7 +208,7 @@ class Result:
 
 def replay(kin: Kinematics, path: Path, judge=JUDGED) -> list[Result]:
     st = State(kin)
-    records = [json.loads(l) for l in path.read_text().splitlines() if l.strip()]
+    records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     out: list[Result] = []
     skip_next = False
     for i, rec in enumerate(records):

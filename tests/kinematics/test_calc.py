@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from rob6.robots import get_robot
-from rob6_kinematics.calc import TIE_ORDER, Kinematics, parse_pattern
+from rob6_kinematics.calc import TIE_ORDER, Kinematics
 from rob6_kinematics.opw import BRANCHES
 
 K = {r: Kinematics(get_robot(r)) for r in ("kr16", "kr3", "ad850", "kaw_fs")}
@@ -55,17 +54,6 @@ def test_kaw_fs_forward_calc_is_plus_250():
 
 
 # ------------------------------------------------------------------ patterns
-def test_parse_pattern():
-    assert parse_pattern("lefty up noflip") == ("noflip", "up", "lefty")
-    assert parse_pattern("noflip up") == ("noflip", "up", "toggleArm")
-    assert parse_pattern(["noflip"]) == ("noflip", "toggleElbow", "toggleArm")
-    assert parse_pattern("toggleArm toggleElbow toggleHand") == ("toggleHand", "toggleElbow", "toggleArm")
-    assert parse_pattern("noflip up lefty extra") == ("noflip", "up", "lefty")
-    for bad in ("NOFLIP UP LEFTY", "Flip down righty", "foo up lefty", "flip flip righty", ""):
-        with pytest.raises(ValueError):
-            parse_pattern(bad)
-
-
 def test_no_toggle_keeps_current_status():
     k = K["kr16"]
     cur = [-84, -75, -41, -60, 27, 38]  # noflip down lefty

@@ -24,22 +24,27 @@ import math
 from functools import lru_cache
 
 import pytest
+from system import CONFORMANCE
+
 from rob6.robots import get_robot
+from rob6.status import PTP_HOM_PATTERN, TOGGLE_ALL, Status, parse_status, status_matches
 from rob6_kinematics import opw
 from rob6_kinematics.selection import (
-    PTP_HOM_PATTERN,
     STATUS_ORDER,
-    TOGGLE_ALL,
     _nearest_in_limits,
     branches_of,
     joint_move_allowed,
-    normalize_pattern,
-    pattern_matches,
     select,
     select_from_solutions,
 )
 
-from system import CONFORMANCE
+
+def _pattern(words: list[str]) -> Status | None:
+    """The pattern of status words, None where the protocol answers ``incorrect status``."""
+    try:
+        return parse_status(words)
+    except ValueError:
+        return None
 
 
 FILES = ("motion_minchange", "motion_ptp", "motion_routetest", "session")
@@ -149,7 +154,7 @@ def replay(robot: str, name: str):
         elif cmd == "ResetMinChangeWeights":
             st["weights"] = DEFAULT_WEIGHTS[:]
         elif cmd == "SetAllowedStatus":
-            pat = normalize_pattern(args)
+            pat = _pattern(args)
             if pat is not None:
                 st["allowed"] = pat
         elif cmd == "ResetAllowedStatus":
@@ -183,11 +188,11 @@ def replay(robot: str, name: str):
                 if ok:
                     st[key] = q
         elif cmd == "MovePTPJointsStatus" and not reply.startswith("ERROR"):
-            q, pat = _floats(args, 6), normalize_pattern(args[6:])
+            q, pat = _floats(args, 6), _pattern(args[6:])
             if q is not None and pat is not None and key == "pos":
                 ok = joint_move_allowed(
                     q, st[key], st["tmin"], st["tmax"], st["mc"], st["allowed"], status
-                ) and pattern_matches(pat, status(q), status(st[key]))
+                ) and status_matches(pat, status(q), status(st[key]))
                 if ok == (reply == "true"):
                     matched["joints"] += 1
                 else:
@@ -200,7 +205,7 @@ def replay(robot: str, name: str):
                 continue
             pose = _floats(args, 12)
             words = args[12:]
-            pattern = PTP_HOM_PATTERN if cmd == "MovePTPHomRowWise" else normalize_pattern(words)
+            pattern = PTP_HOM_PATTERN if cmd == "MovePTPHomRowWise" else _pattern(words)
             got = select_from_solutions(
                 _branches(robot, tuple(pose)),
                 pattern,
@@ -218,7 +223,7 @@ def replay(robot: str, name: str):
                 exp_q = [float(x) for x in recs[i + 1]["reply"].split()]
             good = (got is not None) == exp_ok
             if good and got is not None and exp_q is not None:
-                err = [abs(a - b) for a, b in zip(got, exp_q)]
+                err = [abs(a - b) for a, b in zip(got, exp_q, strict=True)]
                 good = max(err[:5]) <= 1e-5 and err[5] <= 5e-3
             if good:
                 matched["cartesian"] += 1
@@ -302,14 +307,7 @@ def test_nearest_in_limits():
     assert _nearest_in_limits(60.5, -119.5, -360.0, 360.0) == 60.5
 
 
-def test_patterns():
-    assert normalize_pattern(["righty", "down", "flip"]) == ("flip", "down", "righty")
-    assert normalize_pattern(["noflip"]) == ("noflip", "toggleElbow", "toggleArm")
-    assert normalize_pattern(["flip", "flip", "righty"]) is None
-    assert normalize_pattern(["Flip", "down", "righty"]) is None
-    cur = ("noflip", "down", "lefty")
-    assert pattern_matches(("noToggleHand", "up", "toggleArm"), ("noflip", "up", "righty"), cur)
-    assert not pattern_matches(("noToggleHand", "up", "toggleArm"), ("flip", "up", "righty"), cur)
+def test_status_order():
     assert len(set(STATUS_ORDER)) == 8 and STATUS_ORDER[0] == ("flip", "up", "lefty")
 
 
@@ -354,7 +352,7 @@ def replay_backward_calc(robot: str):
         elif cmd == "ResetJointsMaxTurn":
             tmin, tmax = list(model.turn_min), list(model.turn_max)
         elif cmd in IK_COMMANDS and not reply.startswith("ERROR"):
-            pose, pattern = _floats(args, 12), normalize_pattern(args[12:])
+            pose, pattern = _floats(args, 12), _pattern(args[12:])
             got = select_from_solutions(
                 _branches(robot, tuple(pose)), pattern, pos, tmin, tmax, mc,
                 DEFAULT_WEIGHTS, None, model.status, shift_360=False,
@@ -364,7 +362,7 @@ def replay_backward_calc(robot: str):
             else:
                 good = (got is None) == (reply == "false")
                 if good and got is not None:
-                    err = [abs(a - float(b)) for a, b in zip(got, reply.split())]
+                    err = [abs(a - float(b)) for a, b in zip(got, reply.split(), strict=True)]
                     good = max(err[:5]) <= 1e-5 and err[5] <= 5e-3
             if good:
                 matched += 1

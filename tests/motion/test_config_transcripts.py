@@ -16,11 +16,10 @@ import re
 from pathlib import Path
 
 import pytest
-
-from rob6_planner.config import MotionConfig, normalise_status
-
 from system import CONFORMANCE
 
+from rob6.status import parse_status
+from rob6_planner.config import MotionConfig
 
 ROBOTS = ("kr16", "kr16rt", "kr3rt", "ad850", "kaw_fs")
 SCRIPTS = ("limits", "limits_bounds", "misc")
@@ -84,7 +83,11 @@ def parse(cmd: str, rest: str):
         return None if n is None else ([n], [])
     if cmd == "SetAllowedStatus":
         words = rest.split()
-        return None if normalise_status(words) is None else ([], words)
+        try:
+            parse_status(words)
+        except ValueError:
+            return None
+        return [], words
     return [], []
 
 

@@ -5,11 +5,16 @@ import math
 import numpy as np
 import pytest
 
-from rob6.robots import ROBOT_TYPES, UNIT_CYCLE_S
+from rob6.robots import ROBOT_TYPES
+from rob6.units import JERK_RAMP_S, UNIT_CYCLE_S
 from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionConfig
-from rob6_planner.trajectory import (JERK_RAMP_S, TrajectoryPlanner, check_target,
-                                     finite_difference_violations, sample_at_time)
+from rob6_planner.trajectory import (
+    TrajectoryPlanner,
+    check_target,
+    finite_difference_violations,
+    sample_at_time,
+)
 
 
 def analytic_time(d: float, v: float, a: float, j: float) -> float:

@@ -9,7 +9,8 @@ import time
 import numpy as np
 from system import running
 
-from rob6.robots import UNIT_CYCLE_S, get_robot
+from rob6.robots import get_robot
+from rob6.units import UNIT_CYCLE_S
 from rob6_recorder.reader import read_records
 
 TOL = 1e-6

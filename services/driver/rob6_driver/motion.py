@@ -10,8 +10,8 @@ commands are refused with ``Offline`` until ``online(q_actual)`` resumes from wh
 robot really is, at rest.
 
 Units: degrees, seconds (``qd`` deg/s, ``qdd`` deg/s^2). Limits are given in the
-protocol's units (deg per 12 ms cycle, deg per cycle^2) and converted like the
-planner does: ``v = speed / 0.012``, ``a = accel / 0.012**2``, ``j = a / 0.048``.
+protocol's units (deg per 12 ms cycle, deg per cycle^2) and converted by ``rob6.units``,
+as the planner's are: ``v = speed / 0.012``, ``a = accel / 0.012**2``, ``j = a / 0.048``.
 
 Nothing here sleeps: ``step()`` advances exactly one controller cycle. The links call
 it in real time; tests call it in fast-forward.
@@ -54,6 +54,7 @@ widened just enough to contain that stop (reported), and close again at rest.
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 from collections import deque
@@ -63,13 +64,12 @@ from dataclasses import dataclass
 import numpy as np
 import ruckig
 
-from rob6.robots import UNIT_CYCLE_S, RobotModel, get_robot
+from rob6.robots import RobotModel, get_robot
+from rob6.units import JERK_RAMP_S, accel_si, jerk_si, speed_si
 
 log = logging.getLogger(__name__)
 
 N_JOINTS = 6
-#: acceleration ramp time defining the jerk limit (same as the planner)
-JERK_RAMP_S = 0.048
 RTOL = 1e-6
 ATOL_V = 1e-9
 ATOL_A = 1e-6
@@ -97,10 +97,9 @@ class Limits:
     @classmethod
     def from_protocol(cls, turn_min, turn_max, max_speed, max_accel,
                       jerk_ramp_s: float = JERK_RAMP_S) -> "Limits":
-        v = np.asarray(max_speed, float) / UNIT_CYCLE_S
-        a = np.asarray(max_accel, float) / UNIT_CYCLE_S**2
+        a = accel_si(max_accel)
         return cls(np.asarray(turn_min, float).copy(), np.asarray(turn_max, float).copy(),
-                   v, a, a / jerk_ramp_s)
+                   np.array(speed_si(max_speed)), np.array(a), np.array(jerk_si(a, jerk_ramp_s)))
 
     @classmethod
     def defaults(cls, robot: RobotModel) -> "Limits":
@@ -176,7 +175,7 @@ class Motion:
             self.ok, self.reason, self.final, self.error = ok, reason, state, error
             self.done.set()
             callbacks, self._callbacks = self._callbacks, []
-        return [lambda fn=fn: fn(self) for fn in callbacks]
+        return [functools.partial(fn, self) for fn in callbacks]
 
     def __repr__(self) -> str:
         return f"Motion({self.kind}, done={self.done.is_set()}, ok={self.ok}, reason={self.reason!r})"
@@ -356,10 +355,10 @@ class MotionCore:
                 if turn_max is not None:
                     new.turn_max = _six(turn_max)
                 if max_speed is not None:
-                    new.vmax = _six(max_speed) / UNIT_CYCLE_S
+                    new.vmax = np.array(speed_si(_six(max_speed)))
                 if max_accel is not None:
-                    new.amax = _six(max_accel) / UNIT_CYCLE_S**2
-                    new.jmax = new.amax / JERK_RAMP_S
+                    a = accel_si(_six(max_accel))
+                    new.amax, new.jmax = np.array(a), np.array(jerk_si(a))
             except ValueError as exc:
                 return False, str(exc)
             if np.any(new.vmax < 0) or np.any(new.amax < 0):
@@ -759,7 +758,9 @@ class MotionCore:
 
     def _step_trajectory(self) -> None:
         k = self._k
-        qn = self._samples[k]
+        samples = self._samples
+        assert samples is not None  # following a trajectory
+        qn = samples[k]
         bad = self._check(qn)
         if bad is not None:
             kind, j, value, limit = bad
@@ -772,7 +773,7 @@ class MotionCore:
         qdd = None if self._samples_qdd is None else self._samples_qdd[k]
         self._apply(qn, qd, qdd)
         self._k = k + 1
-        if self._k >= len(self._samples):
+        if self._k >= len(samples):
             self._finish_trajectory(True, "")
             self._finish_stop_if_any()
 
@@ -893,11 +894,11 @@ class MotionCore:
             return
         if self._settle == 0:
             return  # only the turn bounds are widened: they close at rest
-        within = (self._mode == "alter" and self._gen is not None and self._gen_kind == "alter"
-                  and self._gen_version == self._lim_version and not self._target_pending
-                  and np.all(np.abs(self._v_fd) <= lim.vmax * (1 + RTOL) + ATOL_V)
-                  and np.all(np.abs(self._qd) <= lim.vmax * (1 + RTOL) + ATOL_V)
-                  and np.all(np.abs(self._qdd) <= lim.amax * (1 + RTOL) + ATOL_A))
+        within = bool(self._mode == "alter" and self._gen is not None and self._gen_kind == "alter"
+                      and self._gen_version == self._lim_version and not self._target_pending
+                      and np.all(np.abs(self._v_fd) <= lim.vmax * (1 + RTOL) + ATOL_V)
+                      and np.all(np.abs(self._qd) <= lim.vmax * (1 + RTOL) + ATOL_V)
+                      and np.all(np.abs(self._qdd) <= lim.amax * (1 + RTOL) + ATOL_A))
         if within:
             # a joint frozen by a zero limit must be exactly at rest before the monitor
             # takes the zero limit
@@ -990,7 +991,7 @@ def trajectory_extrema(traj: ruckig.Trajectory, t_from: float = 0.0) -> tuple[np
         else:
             head = ([0.0, 0.0],) * 5
         body = (prof.t, prof.p[:7], prof.v[:7], prof.a[:7], prof.j)
-        rows.append([list(h) + list(b) for h, b in zip(head, body)])
+        rows.append([list(h) + list(b) for h, b in zip(head, body, strict=True)])
     seg = np.array(rows)  # (dofs, 5, 9)
     dur, p, v, a, j = np.moveaxis(seg, 1, 0)
     ts = np.zeros_like(dur)

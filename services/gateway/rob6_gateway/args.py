@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import re
 
-from rob6.robots import STATUS_WORDS, TOGGLE_ALL
+from rob6.status import parse_status
 
 WHITESPACE = " \t\r\n\v\f"
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?)")
@@ -108,7 +108,7 @@ class Args:
 
     def leading_doubles(self, limit: int) -> list[float]:
         """As many numbers as parse, up to ``limit`` (ForwardCalc never fails on format)."""
-        values = []
+        values: list[float] = []
         while len(values) < limit:
             value = self.double()
             if value is None:
@@ -123,19 +123,13 @@ class Args:
         fourth word is ignored. No word at all is an error too (the original waited
         for the next message).
         """
-        chosen: list[str | None] = [None, None, None]
-        count = 0
-        while count < 3 and not self.at_end():
+        words: list[str] = []
+        while len(words) < 3 and not self.at_end():
             word = self.word()
-            for slot, category in enumerate(STATUS_WORDS):
-                if word in category:
-                    if chosen[slot] is not None:
-                        raise ParseError("status")
-                    chosen[slot] = word
-                    break
-            else:
+            if word is None:
                 raise ParseError("status")
-            count += 1
-        if count == 0:
-            raise ParseError("status")
-        return [word or TOGGLE_ALL[slot] for slot, word in enumerate(chosen)]
+            words.append(word)
+        try:
+            return list(parse_status(words))
+        except ValueError:
+            raise ParseError("status") from None

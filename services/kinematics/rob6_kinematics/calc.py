@@ -15,60 +15,24 @@ No networking here; the gateway parses the text, this module computes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import replace
 from functools import cached_property
 
 import numpy as np
 
-from rob6.robots import STATUS_WORDS
+from rob6.status import Status, parse_status, status_flags, status_matches, status_words
 
 from . import opw
 from .opw import BRANCH_INDEX, BRANCHES, DEG, Geometry
+from .selection import STATUS_ORDER
 
-#: per category: word -> the explicit status it asks for, "toggle" (any) or "keep" (current)
-_CATEGORY = [{a: a, b: b, toggle: "toggle", keep: "keep"} for a, b, toggle, keep in STATUS_WORDS]
 #: Min-change weights the original starts with (GetMinChangeWeights).
 DEFAULT_WEIGHTS = np.array([4.0, 1.0, 1.0, 1.0, 1.0, 1.0])
 #: Tie-break order of the branches (indices into BRANCHES): flip before noflip, up
 #: before down, lefty before righty -- selection.STATUS_ORDER.
-TIE_ORDER = [BRANCH_INDEX[f"{h} {e} {a}"] for h in ("flip", "noflip") for e in ("up", "down")
-             for a in ("lefty", "righty")]
+TIE_ORDER = [BRANCH_INDEX[" ".join(status)] for status in STATUS_ORDER]
 TIE_EPS = 1e-9
-
-_CANONICAL = [
-    {"toggle": "toggleHand", "keep": "noToggleHand"},
-    {"toggle": "toggleElbow", "keep": "noToggleElbow"},
-    {"toggle": "toggleArm", "keep": "noToggleArm"},
-]
-
-
-def parse_pattern(words: str | Sequence[str]) -> tuple[str, str, str]:
-    """Normalise 1-3 status words (any order) to (hand, elbow, arm) words.
-
-    Missing categories become ``toggle…``; words beyond the third are ignored (as
-    the original does).  Unknown words or two words of one category raise
-    ``ValueError`` (the gateway answers ``ERROR: incorrect status``).
-    """
-    if isinstance(words, str):
-        words = words.split()
-    words = list(words)[:3]
-    if not words:
-        raise ValueError("no status words")
-    out: list[str | None] = [None, None, None]
-    for w in words:
-        for i, table in enumerate(_CATEGORY):
-            if w in table:
-                if out[i] is not None:
-                    raise ValueError(f"two {('hand', 'elbow', 'arm')[i]} words")
-                out[i] = w
-                break
-        else:
-            raise ValueError(f"unknown status word {w!r}")
-    for i in range(3):
-        if out[i] is None:
-            out[i] = _CANONICAL[i]["toggle"]
-    return out[0], out[1], out[2]  # type: ignore[return-value]
 
 
 class Kinematics:
@@ -120,23 +84,16 @@ class Kinematics:
         """Status words of joints q (deg), e.g. ``"noflip up lefty"``."""
         return " ".join(self.robot_status(q))
 
-    def robot_status(self, q) -> tuple[str, str, str]:
+    def robot_status(self, q) -> Status:
+        """Status words of joints q (deg) in this kinematics' geometry."""
         q = [float(x) for x in np.asarray(q, dtype=float).reshape(6)]
-        g = self.g
-        if g == Geometry.of(self.robot):
-            return self.robot.status(q)
-        return replace(self.robot, d1=g.d1, a1=g.a1, a2=g.a2, a3=g.a3, d4=g.d4, d6=g.d6).status(q)
+        return status_words(*status_flags(self.g, math.radians(q[1]), math.radians(q[2]), q[4]))
 
     def status_batch(self, q) -> np.ndarray:
         """Vectorised status as branch indices (N,) (index into ``BRANCHES``)."""
         q = opw.as_joints(q)
-        g = self.g
-        q2, q3 = q[:, 1] * DEG, q[:, 2] * DEG
-        flip = q[:, 4] < 0
-        down = ~(g.d4 * np.sin(q3) - g.a3 * np.cos(q3) > 0)
-        reach = g.a1 + g.a2 * np.cos(q2) + g.d4 * np.cos(q2 + q3) + g.a3 * np.sin(q2 + q3)
-        righty = ~(reach > 0)
-        return 4 * flip + 2 * down + righty
+        flip, up, lefty = status_flags(self.g, q[:, 1] * DEG, q[:, 2] * DEG, q[:, 4], sin=np.sin, cos=np.cos)
+        return 4 * flip + 2 * ~up + ~lefty
 
     # ------------------------------------------------------------------ ForwardCalc
     def partial_frame(self, q_deg, n: int) -> np.ndarray:
@@ -177,20 +134,9 @@ class Kinematics:
     def resolve_pattern(self, pattern, current_q) -> list[int]:
         """Branch indices (``BRANCHES`` order) admitted by a status pattern at the
         current joints (``noToggle…`` = the current status' word)."""
-        hand, elbow, arm = parse_pattern(pattern)
+        pat = parse_status(pattern.split() if isinstance(pattern, str) else pattern)
         cur = self.robot_status(current_q)
-        words = []
-        for i, (w, opts) in enumerate(
-            zip((hand, elbow, arm), (opw.HANDS, opw.ELBOWS, opw.ARMS))
-        ):
-            kind = _CATEGORY[i][w]
-            if kind == "keep":
-                words.append([cur[i]])
-            elif kind == "toggle":
-                words.append(list(opts))
-            else:
-                words.append([kind])
-        return [BRANCH_INDEX[f"{h} {e} {a}"] for h in words[0] for e in words[1] for a in words[2]]
+        return [i for i, branch in enumerate(BRANCHES) if status_matches(pat, branch.split(), cur)]
 
     def backward_calc(
         self,
@@ -205,7 +151,7 @@ class Kinematics:
         """``BackwardCalc`` / ``GetJointsRowWise``: -> list of 6 joints (deg) or None.
 
         ``matrix``: 12 row-wise numbers (or (3,4)); ``pattern``: 1-3 status words
-        (string or list, any order, see ``parse_pattern``); ``current_q``: the
+        (string or list, any order, see ``rob6.status.parse_status``); ``current_q``: the
         robot's current joints; limits, max change and min-change weights default
         to the robot's defaults (weights ``4 1 1 1 1 1``).
 

@@ -54,7 +54,7 @@ Per command (what the transcripts show)
   with allowed ``… righty`` it answers ``false``.
 - ``MovePTPJoints`` / ``RoutetestJoints``: ``joint_move_allowed`` (strict turn limits, inclusive
   max change, allowed status of the target joints with ``noToggle…`` = current status).
-  ``MovePTPJointsStatus``: the same and ``pattern_matches(pattern, status(q), status(current))``.
+  ``MovePTPJointsStatus``: the same and ``status_matches(pattern, status(q), status(current))``.
 - ``BackwardCalc``/``GetJointsRowWise``/``IsPossible`` pick their branch by the same rule but
   with the IK's own values (each joint shifted once by ∓360° only if outside the limits,
   ``shift_360=False``) and without the allowed status: this reproduces every answer of
@@ -73,55 +73,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 
-from rob6.robots import NO_TOGGLE_ALL, PTP_HOM_PATTERN, TOGGLE_ALL  # noqa: F401 (re-exported)
+from rob6.status import STATUS_WORDS, TOGGLE_ALL, Status, parse_status, status_matches
 
-Status = tuple[str, str, str]
-
-HANDS = ("flip", "noflip")
-ELBOWS = ("up", "down")
-ARMS = ("lefty", "righty")
-
-#: Tie-break order of the IK branches (earlier wins on equal cost).
-STATUS_ORDER: tuple[Status, ...] = tuple((h, e, a) for h in HANDS for e in ELBOWS for a in ARMS)
-
-
-_CATEGORY = {
-    "flip": 0, "noflip": 0, "toggleHand": 0, "noToggleHand": 0,
-    "up": 1, "down": 1, "toggleElbow": 1, "noToggleElbow": 1,
-    "lefty": 2, "righty": 2, "toggleArm": 2, "noToggleArm": 2,
-}  # fmt: skip
+#: Tie-break order of the IK branches (earlier wins on equal cost): flip before noflip, up
+#: before down, lefty before righty (each category's explicit words in STATUS_WORDS order).
+STATUS_ORDER: tuple[Status, ...] = tuple(
+    (h, e, a) for h in STATUS_WORDS[0][:2] for e in STATUS_WORDS[1][:2] for a in STATUS_WORDS[2][:2])
 
 #: Two costs closer than this are a tie (the original's ties are exact: same-arm
 #: branches share J1 bit for bit; this only absorbs float noise of a different IK).
 TIE_EPS = 1e-9
-
-
-def normalize_pattern(words: Sequence[str]) -> tuple[str, str, str] | None:
-    """Status words in any order (1–3 used, extras ignored) → hand/elbow/arm pattern.
-
-    Missing categories become ``toggle…``. ``None`` for an unknown word or two words of
-    the same category (the protocol's ``ERROR: incorrect status``).
-    """
-    pat: list[str | None] = [None, None, None]
-    for w in list(words)[:3]:
-        c = _CATEGORY.get(w)
-        if c is None or pat[c] is not None:
-            return None
-        pat[c] = w
-    hand, elbow, arm = (p if p is not None else d for p, d in zip(pat, TOGGLE_ALL))
-    return hand, elbow, arm
-
-
-def pattern_matches(pattern: Sequence[str], status: Sequence[str], current: Sequence[str]) -> bool:
-    """Does ``status`` satisfy ``pattern``? ``noToggle…`` means "equal to ``current``"."""
-    for i in range(3):
-        w = pattern[i]
-        if w.startswith("toggle"):
-            continue
-        want = current[i] if w.startswith("noToggle") else w
-        if status[i] != want:
-            return False
-    return True
 
 
 def _nearest_in_limits(v: float, c: float, lo: float, hi: float) -> float | None:
@@ -171,7 +132,7 @@ def select_from_solutions(
     best_cost = math.inf
     for label in STATUS_ORDER:
         q = solutions.get(label)
-        if q is None or not pattern_matches(pattern, label, cur_status):
+        if q is None or not status_matches(pattern, label, cur_status):
             continue
         cand: list[float] = []
         for j in range(6):
@@ -188,11 +149,11 @@ def select_from_solutions(
                 break
             cand.append(x)
         else:
-            if allowed_pattern is not None and not pattern_matches(
+            if allowed_pattern is not None and not status_matches(
                 allowed_pattern, tuple(status_fn(cand)), cur_status
             ):
                 continue
-            cost = max(w * abs(x - c) for w, x, c in zip(weights, cand, cur))
+            cost = max(w * abs(x - c) for w, x, c in zip(weights, cand, cur, strict=True))
             if cost < best_cost - TIE_EPS:
                 best, best_cost = cand, cost
     return best
@@ -217,7 +178,7 @@ def joint_move_allowed(
             return False
     if allowed_pattern is None:
         return True
-    return pattern_matches(allowed_pattern, tuple(status_fn(target_q)), tuple(status_fn(current_q)))
+    return status_matches(allowed_pattern, tuple(status_fn(target_q)), tuple(status_fn(current_q)))
 
 
 def branches_of(kin, pose12: Sequence[float]) -> dict[Status, list[float] | None]:
@@ -236,10 +197,10 @@ def branches_of(kin, pose12: Sequence[float]) -> dict[Status, list[float] | None
     arr = arr.reshape(-1, 8, 6)[0]
     labels = getattr(kin, "BRANCHES", None) or opw.BRANCHES
     out: dict[Status, list[float] | None] = {}
-    for label, q in zip(labels, arr):
-        key = tuple(label.split()) if isinstance(label, str) else tuple(label)
+    for label, q in zip(labels, arr, strict=True):
+        hand, elbow, arm = label.split() if isinstance(label, str) else label
         ok = bool(np.all(np.isfinite(q)))
-        out[key] = [float(x) for x in q] if ok else None  # type: ignore[index]
+        out[(hand, elbow, arm)] = [float(x) for x in q] if ok else None
     return out
 
 
@@ -248,7 +209,8 @@ def _status_tuple(fn: Callable) -> Callable[[Sequence[float]], Status]:
 
     def status(q: Sequence[float]) -> Status:
         st = fn(q)
-        return tuple(st.split()) if isinstance(st, str) else tuple(st)  # type: ignore[return-value]
+        hand, elbow, arm = st.split() if isinstance(st, str) else st
+        return hand, elbow, arm
 
     return status
 
@@ -281,10 +243,11 @@ def select(
         status_fn = getattr(kin, "robot_status", None)  # calc.Kinematics (geometry-aware)
     if status_fn is None:
         status_fn = getattr(getattr(kin, "robot", None), "status", None) or kin.status
-    pat = normalize_pattern(pattern)
-    allowed = None if allowed_pattern is None else normalize_pattern(allowed_pattern)
-    if pat is None or (allowed_pattern is not None and allowed is None):
-        raise ValueError(f"incorrect status pattern {pattern!r} / {allowed_pattern!r}")
+    try:
+        pat = parse_status(pattern)
+        allowed = None if allowed_pattern is None else parse_status(allowed_pattern)
+    except ValueError as exc:
+        raise ValueError(f"incorrect status pattern {pattern!r} / {allowed_pattern!r}: {exc}") from None
     return select_from_solutions(
         branches_of(kin, T12),
         pat,

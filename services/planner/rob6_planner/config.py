@@ -30,7 +30,8 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 
-from rob6.robots import STATUS_WORDS, TOGGLE_ALL, RobotModel, get_robot
+from rob6.robots import RobotModel, get_robot
+from rob6.status import TOGGLE_ALL, parse_status, status_matches
 
 N_JOINTS = 6
 MAX_ACCEL_BOUND = 0.02
@@ -71,48 +72,6 @@ def _six(values) -> list[float] | None:
             return None
         out.append(float(v))
     return out
-
-
-def normalise_status(words: Iterable[str]) -> list[str] | None:
-    """1..3 status words in any order -> [hand, elbow, arm] (missing -> toggle), or None.
-
-    Unknown/wrong-case words, two words of one category or no word at all -> None.
-    A 4th word is ignored (as the original).
-    """
-    chosen: list[str | None] = [None, None, None]
-    count = 0
-    for word in words:
-        if count == 3:
-            break
-        for slot, category in enumerate(STATUS_WORDS):
-            if word in category:
-                if chosen[slot] is not None:
-                    return None
-                chosen[slot] = word
-                break
-        else:
-            return None
-        count += 1
-    if count == 0:
-        return None
-    return [w or TOGGLE_ALL[slot] for slot, w in enumerate(chosen)]
-
-
-def status_matches(pattern: Sequence[str], target: Sequence[str], current: Sequence[str]) -> bool:
-    """Does a target status (flip|noflip, up|down, lefty|righty) satisfy a pattern?
-
-    Explicit words must match, ``toggle…`` admits anything, ``noToggle…`` requires the
-    target's value to equal the current one (REFERENCE.md 6.4).
-    """
-    for word, tgt, cur in zip(pattern, target, current):
-        if word.startswith("toggle"):
-            continue
-        if word.startswith("noToggle"):
-            if tgt != cur:
-                return False
-        elif word != tgt:
-            return False
-    return True
 
 
 class MotionConfig:
@@ -249,10 +208,10 @@ class MotionConfig:
         return True
 
     def set_allowed(self, words: Iterable[str]) -> bool:
-        pattern = normalise_status(words)
-        if pattern is None:
+        try:
+            self.allowed = list(parse_status(words))
+        except ValueError:
             return False
-        self.allowed = pattern
         return True
 
     def set_rt_speed_control(self, n) -> bool:
@@ -279,7 +238,7 @@ class MotionConfig:
 
     def within_turn_limits(self, q: Sequence[float]) -> int | None:
         """Index (0-based) of the first joint not strictly inside its turn limits, or None."""
-        for i, (lo, x, hi) in enumerate(zip(self.turn_min, q, self.turn_max)):
+        for i, (lo, x, hi) in enumerate(zip(self.turn_min, q, self.turn_max, strict=True)):
             if not lo < x < hi:
                 return i
         return None
@@ -349,10 +308,10 @@ class MotionConfig:
                     raise ValueError(f"{key}: expected {N_JOINTS} values, got {len(values)}")
                 setattr(self, key, values)
         if "allowed" in data:
-            pattern = normalise_status(data["allowed"])
-            if pattern is None:
-                raise ValueError(f"allowed: bad status pattern {data['allowed']!r}")
-            self.allowed = pattern
+            try:
+                self.allowed = list(parse_status(data["allowed"]))
+            except ValueError as exc:
+                raise ValueError(f"allowed: bad status pattern {data['allowed']!r}") from exc
         if "rt_speed_control" in data:
             self.rt_speed_control = int(data["rt_speed_control"])
 

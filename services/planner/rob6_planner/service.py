@@ -13,7 +13,7 @@ import threading
 
 import numpy as np
 
-from rob6.bus import Bus, BusError
+from rob6.bus import Bus, BusError, Context
 from rob6.messages import (
     Ack,
     AlterMode,
@@ -32,8 +32,9 @@ from rob6.messages import (
     SelectRequest,
     Trajectory,
 )
-from rob6.robots import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN, RobotModel
+from rob6.robots import RobotModel
 from rob6.state import JointStateMirror
+from rob6.status import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN
 
 from .config import MotionConfig
 from .trajectory import TrajectoryPlanner, plan_lin
@@ -50,6 +51,13 @@ LIMIT_FIELDS = ("speed", "accel", "turn_min", "turn_max")
 
 class Refused(Exception):
     """A motion refused before it started (the client gets ``false``)."""
+
+
+def _given(value: list[float] | None, what: str, kind: str) -> list[float]:
+    """A field the motion needs (the gateway always sends it with that kind)."""
+    if value is None:
+        raise Refused(f"{kind} without {what}")
+    return value
 
 
 class PlannerService:
@@ -72,10 +80,10 @@ class PlannerService:
     def _message(self) -> ConfigMessage:
         return ConfigMessage(**self.config.to_dict(), version=self._version)
 
-    def get_config(self, _req: Empty, _ctx) -> ConfigMessage:
+    def get_config(self, _req: Empty, _ctx: Context) -> ConfigMessage:
         return self._message()
 
-    def config_change(self, req: ConfigChange, ctx) -> ConfigReply:
+    def config_change(self, req: ConfigChange, ctx: Context) -> ConfigReply:
         if req.command in ADEPT_SETTINGS:
             return ConfigReply(ok=self._adept_setting(req.command, req.args), config=self._message())
         before = self.config.to_dict()
@@ -127,7 +135,7 @@ class PlannerService:
         return scaled
 
     # ------------------------------------------------------------------ modes
-    def mode(self, req: ModeRequest, ctx) -> Ack:
+    def mode(self, req: ModeRequest, ctx: Context) -> Ack:
         command = req.command
         if command == "EnableAdeptAlter" and not self.robot.is_adept:
             return Ack(ok=False, reason="EnableAdeptAlter is for the Adept only")
@@ -147,7 +155,7 @@ class PlannerService:
             return Ack(ok=True)
         return Ack(ok=False, reason=f"unknown mode command {command}")
 
-    def session_end(self, _req: Empty, ctx) -> Ack:
+    def session_end(self, _req: Empty, ctx: Context) -> Ack:
         """The client left: real-time motion must not go on without it."""
         if self.alter:
             self.alter = False
@@ -155,7 +163,7 @@ class PlannerService:
         return Ack(ok=True)
 
     # ------------------------------------------------------------------ motion
-    def move(self, req: MoveRequest, ctx) -> MoveReply:
+    def move(self, req: MoveRequest, ctx: Context) -> MoveReply:
         try:
             if req.kind in ALTER_MOVES:
                 return self._alter_move(req, ctx.cid)
@@ -178,7 +186,7 @@ class PlannerService:
         if self.lin and not req.dry_run:
             raise Refused("LIN mode is on: point-to-point moves are refused (DisableLin first)")
         if req.kind in JOINT_MOVES:
-            target = list(req.joints)
+            target = list(_given(req.joints, "joints", req.kind))
         elif req.kind in POSE_MOVES:
             pattern = PTP_HOM_PATTERN if req.kind == "MovePTPHomRowWise" else req.pattern
             target = self._select(req.pose, pattern, start, cid)
@@ -240,9 +248,9 @@ class PlannerService:
             raise Refused("Alter mode is off (EnableAlter first)")
         current = self._current()
         if req.kind == "MoveRTJoints":
-            target = list(req.joints)
+            target = list(_given(req.joints, "joints", req.kind))
         elif req.kind == "DoAlterJoint":
-            target = [q + d for q, d in zip(current, req.joints)]
+            target = [q + d for q, d in zip(current, _given(req.joints, "joints", req.kind), strict=True)]
         elif req.kind == "DoAlterCart":
             target = self._select(_shifted_pose(self._pose(current, cid), req.pose), KEEP_CONFIGURATION,
                                   current, cid)
@@ -250,9 +258,9 @@ class PlannerService:
             pattern = req.pattern if req.kind == "MoveRTHomRowWiseStatus" else KEEP_CONFIGURATION
             target = self._select(req.pose, pattern, current, cid)
         c = self.config
-        if not all(lo < q < hi for lo, q, hi in zip(c.turn_min, target, c.turn_max)):
+        if not all(lo < q < hi for lo, q, hi in zip(c.turn_min, target, c.turn_max, strict=True)):
             raise Refused("Alter target outside the turn limits")
-        if any(abs(q - s) > m for q, s, m in zip(target, current, c.max_change)):
+        if any(abs(q - s) > m for q, s, m in zip(target, current, c.max_change, strict=True)):
             raise Refused("Alter target beyond the max change")
         reply = self.bus.request("driver", "alter_target", AlterTarget(
             q=target, synchronized=c.rt_speed_control == 0), cid=cid)

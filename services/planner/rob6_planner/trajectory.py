@@ -3,7 +3,7 @@
 Units
 -----
 Inside this module: degrees, seconds. The protocol's limits are per 12 ms *unit* cycle
-(``rob6.robots.UNIT_CYCLE_S``) whatever the driver rate:
+(``rob6.units``, which the driver's limit monitor converts with too) whatever the driver rate:
 
 * ``v [deg/s]   = speed / 0.012``
 * ``a [deg/s^2] = accel / 0.012**2``
@@ -28,11 +28,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import ruckig
 
-from rob6.robots import UNIT_CYCLE_S, RobotModel, get_robot
+from rob6.robots import RobotModel, get_robot
+from rob6.rotations import quat_from_matrix
+from rob6.status import reach_term, status_flags, status_matches
+from rob6.units import JERK_RAMP_S, accel_si, jerk_si, speed_si
 
 N_JOINTS = 6
-#: time for the acceleration to go from 0 to its maximum (defines the jerk limit)
-JERK_RAMP_S = 0.048
 #: max-change comparison tolerance (deg); the check is inclusive
 MAX_CHANGE_EPS = 1e-9
 #: positions closer than this are "the same" (deg)
@@ -55,18 +56,12 @@ class JointLimits:
     @classmethod
     def from_protocol(cls, speed: Sequence[float], accel: Sequence[float],
                       jerk_ramp_s: float = JERK_RAMP_S) -> "JointLimits":
-        v = np.asarray(speed, dtype=float) / UNIT_CYCLE_S
-        a = np.asarray(accel, dtype=float) / UNIT_CYCLE_S**2
-        return cls(v, a, a / jerk_ramp_s)
+        a = accel_si(accel)
+        return cls(np.array(speed_si(speed)), np.array(a), np.array(jerk_si(a, jerk_ramp_s)))
 
     @classmethod
     def from_config(cls, config) -> "JointLimits":
         return cls.from_protocol(config.speed, config.accel)
-
-
-def protocol_to_si(speed, accel):
-    """(deg/cycle, deg/cycle^2) -> (deg/s, deg/s^2)."""
-    return (np.asarray(speed, float) / UNIT_CYCLE_S, np.asarray(accel, float) / UNIT_CYCLE_S**2)
 
 
 # ====================================================================== results
@@ -254,8 +249,6 @@ def check_target(q0, q1, config, pattern=None) -> str:
     robot = getattr(config, "robot", None)
     allowed = getattr(config, "allowed", None)
     if robot is not None and (allowed is not None or pattern is not None):
-        from .config import status_matches
-
         target = robot.status(tuple(q1))
         current = robot.status(tuple(q0))
         for name, pat in (("allowed status", allowed), ("status", pattern)):
@@ -418,21 +411,7 @@ def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
     if np.linalg.det(R) < 0:
         u[:, -1] *= -1
         R = u @ vt
-    tr = np.trace(R)
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
-        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
-    elif R[1, 1] > R[2, 2]:
-        s = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
-        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
-    else:
-        s = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
-        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    return q / np.linalg.norm(q)
+    return np.array(quat_from_matrix(R.tolist()))
 
 
 def _matrix_from_quats(q: np.ndarray) -> np.ndarray:
@@ -544,8 +523,7 @@ def _validate_joint_path(robot: RobotModel, q0, Q: np.ndarray, s: np.ndarray, pa
     if near.any():
         k = int(np.argmax(near))
         problems.append((k, f"elbow singularity (arm stretched) {at(k)}"))
-    reach = (robot.a1 + robot.a2 * np.cos(q2) + robot.d4 * np.cos(q2 + q3)
-             + robot.a3 * np.sin(q2 + q3))
+    reach = reach_term(robot, q2, q3, sin=np.sin, cos=np.cos)
     near = np.abs(reach) < opts.shoulder_margin_mm
     if near.any():
         k = int(np.argmax(near))
@@ -558,8 +536,7 @@ def _validate_joint_path(robot: RobotModel, q0, Q: np.ndarray, s: np.ndarray, pa
             problems.append((k, f"near singularity (manipulability {m[k]:.3g} < {opts.manip_min:g}) {at(k)}"))
     # configuration must not change (robots.md status formulas, vectorised)
     if len(Qv):
-        flags = np.stack([Qv[:, 4] < 0, robot.d4 * np.sin(q3) - robot.a3 * np.cos(q3) > 0,
-                          reach > 0], axis=1)
+        flags = np.stack(status_flags(robot, q2, q3, Qv[:, 4], sin=np.sin, cos=np.cos), axis=1)
         changed = (flags != flags[0]).any(axis=1)
         if changed.any():
             k = int(np.argmax(changed))
@@ -611,7 +588,6 @@ def plan_lin(planner: TrajectoryPlanner, q0, pose0, pose1, config, ik_fn, *,
         return PlanResult(False, reason)
     allowed = getattr(config, "allowed", None)
     if allowed is not None:
-        from .config import status_matches
 
         target, current = robot.status(tuple(Q[-1])), robot.status(tuple(q0))
         if not status_matches(allowed, target, current):

@@ -21,10 +21,15 @@ import math
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
+
+from rob6.rotations import quat_from_matrix
 
 from .schemas import stamp
 
 Quat = tuple[float, float, float, float]  # x, y, z, w
+#: forward kinematics: joints (degrees) -> the pose (12 numbers, 3x4 row-wise, mm) or None
+Fk = Callable[[list[float]], Sequence[Any] | None]
 
 
 def quat_from_rpy(r: float, p: float, y: float) -> Quat:
@@ -50,28 +55,6 @@ def quat_mul(a: Quat, b: Quat) -> Quat:
             aw * by - ax * bz + ay * bw + az * bx,
             aw * bz + ax * by - ay * bx + az * bw,
             aw * bw - ax * bx - ay * by - az * bz)
-
-
-def quat_from_matrix(m: Sequence[Sequence[float]]) -> Quat:
-    """Quaternion of a 3x3 rotation matrix (rows)."""
-    m00, m01, m02 = m[0][0], m[0][1], m[0][2]
-    m10, m11, m12 = m[1][0], m[1][1], m[1][2]
-    m20, m21, m22 = m[2][0], m[2][1], m[2][2]
-    tr = m00 + m11 + m22
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        q = ((m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s)
-    elif m00 > m11 and m00 > m22:
-        s = math.sqrt(1.0 + m00 - m11 - m22) * 2
-        q = (0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s)
-    elif m11 > m22:
-        s = math.sqrt(1.0 + m11 - m00 - m22) * 2
-        q = ((m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s)
-    else:
-        s = math.sqrt(1.0 + m22 - m00 - m11) * 2
-        q = ((m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s)
-    n = math.sqrt(sum(c * c for c in q)) or 1.0
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
 @dataclass(frozen=True)
@@ -103,8 +86,17 @@ class UrdfModel:
 def _floats(text: str | None, default: tuple[float, float, float]) -> tuple[float, float, float]:
     if not text:
         return default
-    parts = [float(v) for v in text.split()]
-    return (parts + list(default))[:3] if len(parts) < 3 else (parts[0], parts[1], parts[2])
+    padded = [float(v) for v in text.split()] + list(default)  # missing values from the default
+    return (padded[0], padded[1], padded[2])
+
+
+def _link_of(joint: ET.Element, which: str) -> str:
+    """The ``link`` of a joint's ``<parent>`` or ``<child>``."""
+    el = joint.find(which)
+    link = el.get("link") if el is not None else None
+    if link is None:
+        raise ValueError(f"URDF joint {joint.get('name')!r} has no {which} link")
+    return link
 
 
 def parse_urdf(text: str) -> UrdfModel:
@@ -115,8 +107,7 @@ def parse_urdf(text: str) -> UrdfModel:
     for el in root.findall("joint"):
         origin = el.find("origin")
         axis = el.find("axis")
-        parent = el.find("parent").get("link")  # type: ignore[union-attr]
-        child = el.find("child").get("link")  # type: ignore[union-attr]
+        parent, child = _link_of(el, "parent"), _link_of(el, "child")
         rpy = _floats(origin.get("rpy") if origin is not None else None, (0.0, 0.0, 0.0))
         joint = UrdfJoint(
             name=el.get("name", ""), type=el.get("type", "fixed"), parent=parent, child=child,
@@ -125,7 +116,7 @@ def parse_urdf(text: str) -> UrdfModel:
             axis=_floats(axis.get("xyz") if axis is not None else None, (1.0, 0.0, 0.0)))
         joints[joint.name] = joint
         children.setdefault(parent, []).append(joint)
-    links = [el.get("name") for el in root.findall("link")]
+    links = [el.get("name", "") for el in root.findall("link")]
     child_links = {j.child for j in joints.values()}
     roots = [name for name in links if name not in child_links] or \
         [j.parent for j in joints.values() if j.parent not in child_links]
@@ -155,7 +146,7 @@ class TfDeriver:
     def root_frame(self) -> str:
         return self.prefix + self.model.root
 
-    def transforms(self, q_deg: Sequence[float], t_ns: int) -> dict:
+    def transforms(self, q_deg: Sequence[float], t_ns: int) -> dict[str, Any]:
         ts = stamp(t_ns)
         out = []
         for joint in self.model.joints:
@@ -187,7 +178,7 @@ class TfDeriver:
         return {"transforms": out}
 
 
-def pose_from_fk(result) -> tuple[tuple[float, float, float], Quat] | None:
+def pose_from_fk(result: Sequence[Any] | None) -> tuple[tuple[float, float, float], Quat] | None:
     """(position in m, orientation) from an FK result: 12 numbers (3x4 row-wise, mm),
     16 numbers (4x4), a nested 3x4/4x4 list, or ``None`` (unreachable)."""
     if result is None:
@@ -203,10 +194,11 @@ def pose_from_fk(result) -> tuple[tuple[float, float, float], Quat] | None:
         return None
     rows = [flat[0:4], flat[4:8], flat[8:12]]
     pos = (rows[0][3] / 1000.0, rows[1][3] / 1000.0, rows[2][3] / 1000.0)
-    return pos, quat_from_matrix([r[:3] for r in rows])
+    w, x, y, z = quat_from_matrix([r[:3] for r in rows])
+    return pos, (x, y, z, w)
 
 
-def flange_message(fk: Callable, q_deg: Sequence[float], t_ns: int, frame_id: str) -> dict | None:
+def flange_message(fk: Fk, q_deg: Sequence[float], t_ns: int, frame_id: str) -> dict[str, Any] | None:
     pose = pose_from_fk(fk(list(q_deg)))
     if pose is None:
         return None
