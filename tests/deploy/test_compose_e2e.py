@@ -5,7 +5,8 @@
 Builds offline (deploy/build-base.sh: reused when rob6/base:bookworm exists; deploy/wheelhouse.sh;
 `compose build` with the build network off), starts the stack under a unique project name,
 replays a conformance subset through the gateway port, kills kinematics mid-session, scales
-it, stops everything and reads the MCAP recordings from the volume; then the secure profile:
+it, stops everything and reads the MCAP recordings from the volume; then the rsi profile (the
+driver on RSI drives the stand-in KR C4 container); then the secure profile:
 the router container's TLS and ACL are probed with zenoh-python (tests/deploy/zenoh_probe.py)
 and the system must still work through it. Every project is removed (`down -v`) at the end.
 
@@ -85,6 +86,7 @@ class Stack:
     settings: dict[str, str] = field(default_factory=dict)
     port: int = field(default_factory=free_port)
     zenoh_port: int = field(default_factory=free_port)
+    profiles: tuple[str, ...] = ()
 
     def __post_init__(self):
         # an empty env file: a developer's .env must not change the test
@@ -97,7 +99,8 @@ class Stack:
 
     def compose(self, *args: str, timeout: float = 900, check: bool = True) -> subprocess.CompletedProcess:
         files = [a for f in self.files for a in ("-f", str(REPO / f))]
-        return _run([*COMPOSE, "-p", self.project, *files, "--env-file", str(self.env_file), *args],
+        profiles = [a for p in self.profiles for a in ("--profile", p)]
+        return _run([*COMPOSE, "-p", self.project, *files, "--env-file", str(self.env_file), *profiles, *args],
                     timeout=timeout, check=check, env=self.env, cwd=REPO)
 
     def containers(self, service: str | None = None) -> list[str]:
@@ -481,6 +484,48 @@ print(json.dumps(out))
     assert result["files"] >= 1 and result["messages"] > 0, result
     assert not result["unclosed"], result
     assert any("kinematics" in topic for topic in result["topics"]), result["topics"]
+
+
+# ---------------------------------------------------------------------- tests: rsi profile
+def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
+    """`ROB6_LINK=rsi ROB6_ROBOT=kr16rt compose --profile rsi up`: the driver drives the
+    stand-in KR C4 (its own container on the robot network) over RSI in real time; the
+    controller's axes end where the client moved them, without a trip."""
+    require(entry_points, *SERVICES)
+    control_port = free_port()
+    stack = Stack(f"rob6e2ersi{os.getpid()}", settings={
+        "ROB6_ROBOT": "kr16rt", "ROB6_LINK": "rsi", "ROB6_DUMMY": "0",
+        "ROB6_KUKA_SIM_CONTROL_PORT": str(control_port)}, profiles=("rsi",))
+    try:
+        t = time.monotonic()
+        stack.compose("build", "kuka-rsi-sim", timeout=900)
+        stack.compose("up", "-d", "--no-build")
+        stack.wait_healthy(("router", *SERVICES, "kuka-rsi-sim"))
+        REPORT["rsi: build the controller image, up until all healthy"] = f"{time.monotonic() - t:.0f} s"
+        control = socket.create_connection(("127.0.0.1", control_port), timeout=10).makefile("rwb")
+
+        def kuka() -> dict:
+            control.write(b'{"cmd": "status"}\n')
+            control.flush()
+            return json.loads(control.readline())
+
+        # the KR C4 sends from the moment it is up; until the driver answers, RSI times out
+        # and the stand-in operator (--auto-ack) restarts it, as on a real controller
+        deadline = time.monotonic() + 90
+        while not ((before := kuka())["state"] == "running" and before["replies_ok"] >= 250):
+            assert time.monotonic() < deadline, f"the driver never answered the KR C4 container: {before}"
+            time.sleep(0.5)
+        target = [10.0, -80.0, 100.0, 0.0, 30.0, 0.0]
+        with connect(stack.port) as client:
+            assert client.ask("MovePTPJoints " + " ".join(f"{x:g}" for x in target), timeout=60) == "true\n"
+            assert [float(x) for x in client.ask("GetPositionJoints").split()] == target
+            status = kuka()
+        control.close()
+        assert status["state"] == "running" and status["trips"] == before["trips"], status  # no trip in the move
+        assert all(abs(a - b) < 2e-4 for a, b in zip(status["aipos"], target, strict=True)), status["aipos"]
+        REPORT["rsi: controller after the move"] = {k: status[k] for k in ("cycle_ms", "late_total", "rtt_ms")}
+    finally:
+        stack.down()
 
 
 # ---------------------------------------------------------------------- tests: secure profile
