@@ -51,6 +51,7 @@ from .messages import (
     OWNER_SERVICES,
     SCHEMA_VERSION,
     ErrorBody,
+    ErrorCode,
     ReplyEnvelope,
     RequestEnvelope,
 )
@@ -65,7 +66,7 @@ _encoder = msgspec.json.Encoder()
 class BusError(Exception):
     """A request that failed: ``code`` is machine-readable, ``message`` is for humans."""
 
-    def __init__(self, code: str, message: str):
+    def __init__(self, code: ErrorCode, message: str):
         super().__init__(message)
         self.code = code
         self.message = message
@@ -445,7 +446,7 @@ class _Request:
         self.tried.add(target)
         remaining = self.remaining()
         if not self.retry or len(self.tried) >= 2 or remaining <= 0:
-            code = "timeout" if remaining <= 0 else "unavailable"
+            code: ErrorCode = "timeout" if remaining <= 0 else "unavailable"
             raise BusError(code, f"{self.service} unavailable ({exc})") from None
         log.warning("retrying %s.%s on another instance: %s", self.service, self.op, exc)
 

@@ -16,7 +16,7 @@ hand/elbow/arm order (explicit, ``toggle…`` or ``noToggle…``).
 
 from __future__ import annotations
 
-from typing import Generic, NamedTuple, TypeVar
+from typing import Generic, Literal, NamedTuple, TypeVar, get_args
 
 import msgspec
 
@@ -28,6 +28,30 @@ Joints = list[float]  # 6 values, degrees
 Pose = list[float]  # 12 values, row-wise 3x4
 Pattern = list[str]  # 3 words, hand/elbow/arm
 
+#: A failed request's ``code``: no live instance, no answer in time, a bad argument, a
+#: refusal, a crash in the handler, an operation the service does not have, a payload that
+#: does not fit the schema, an answer from an instance that was not asked.
+ErrorCode = Literal["unavailable", "timeout", "invalid", "rejected", "internal", "unknown_op", "schema",
+                    "foreign"]
+
+#: ``MoveRequest.kind``: the protocol command of a motion (RoutetestJoints travels as a
+#: dry-run MovePTPJoints). The decoder refuses any other word, so a typo fails at once.
+MotionKind = Literal[
+    "MovePTPJoints",
+    "MovePTPJointsStatus",
+    "MovePTPHomRowWise",
+    "MovePTPHomRowWiseStatusTurn",
+    "MoveMinChangeRowWiseStatus",
+    "RoutetestRowWiseStatus",
+    "MoveLINHomRowWise",
+    "MoveRTJoints",
+    "MoveRTHomRowWise",
+    "MoveRTHomRowWiseStatus",
+    "DoAlterJoint",
+    "DoAlterCart",
+]
+MOTION_KINDS: tuple[MotionKind, ...] = get_args(MotionKind)
+
 
 class Struct(msgspec.Struct, kw_only=True, omit_defaults=True):
     """Base of every message body."""
@@ -35,7 +59,7 @@ class Struct(msgspec.Struct, kw_only=True, omit_defaults=True):
 
 # ---------------------------------------------------------------- envelopes
 class ErrorBody(Struct):
-    code: str  # unavailable | timeout | invalid | rejected | internal | unknown_op | schema | foreign
+    code: ErrorCode
     message: str
 
 
@@ -248,7 +272,7 @@ class ConfigReply(Struct):
 class MoveRequest(Struct):
     """A motion command. ``kind`` is the protocol command name."""
 
-    kind: str
+    kind: MotionKind
     joints: Joints | None = None
     pose: Pose | None = None
     pattern: Pattern | None = None

@@ -317,3 +317,21 @@ def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk():
         P = opw.fk(opw.Geometry.of(get_robot("kr16")), q)[0]
         assert np.allclose(T[:3, 3] * 1000, P[:, 3], atol=1e-6)
         assert np.allclose(T[:3, :3], P[:, :3], atol=1e-9)
+
+
+def test_schemas_of_bus_messages_are_generated_from_their_structs():
+    """The joint state, link event and gripper state are recorded as the bus carries them:
+    their schemas come from the Structs and name every field (the hand-written one had
+    lost ``missed``)."""
+    import msgspec
+
+    from rob6.messages import GripperState, JointState, LinkEvent
+
+    for topic, struct in (("/driver/joint_state", JointState), ("/driver/link", LinkEvent),
+                          ("/gripper/state", GripperState)):
+        spec = schema_for(topic)
+        assert spec.name == f"rob6.{struct.__name__}"
+        assert set(spec.schema["properties"]) == set(struct.__struct_fields__)
+        assert spec.schema["type"] == "object" and "$ref" not in spec.schema
+        msgspec.json.decode(spec.data)  # stored as JSON
+    assert "missed" in schema_for("/driver/joint_state").schema["properties"]

@@ -28,6 +28,7 @@ from rob6.messages import (
     GripperCommand,
     ModeRequest,
     MotionConfig,
+    MotionKind,
     MoveRequest,
     SessionEvent,
     Verbosity,
@@ -299,10 +300,12 @@ def _config_getter(field: str):
     return handler
 
 
-for _name, _field in (("GetJointsMaxSpeed", "speed"), ("GetJointsMaxAcceleration", "accel"),
-                      ("GetJointsMaxChange", "max_change"), ("GetJointsMaxTurnMax", "turn_max"),
-                      ("GetJointsMaxTurnMin", "turn_min"), ("GetMinChangeWeights", "weights")):
-    command(_name)(_config_getter(_field))
+command("GetJointsMaxSpeed")(_config_getter("speed"))
+command("GetJointsMaxAcceleration")(_config_getter("accel"))
+command("GetJointsMaxChange")(_config_getter("max_change"))
+command("GetJointsMaxTurnMax")(_config_getter("turn_max"))
+command("GetJointsMaxTurnMin")(_config_getter("turn_min"))
+command("GetMinChangeWeights")(_config_getter("weights"))
 
 
 async def _change(gw, session, name: str, values=(), words=()) -> bool:
@@ -332,15 +335,23 @@ def _reset(name):
     return handler
 
 
-for _name in ("SetJointsMaxSpeed", "SetJointsMaxAcceleration", "SetJointsMaxChange",
-              "SetJointsMaxTurnMax", "SetJointsMaxTurnMin", "SetMinChangeWeights"):
-    command(_name)(_six(_name))
-for _name in ("SetSingleJointMaxSpeed", "SetSingleJointMaxAcceleration", "SetSingleJointMaxChange",
-              "SetSingleJointMaxTurnMax", "SetSingleJointMaxTurnMin"):
-    command(_name)(_single(_name))
-for _name in ("ResetJointsMaxSpeed", "ResetJointsMaxAcceleration", "ResetJointsMaxChange",
-              "ResetJointsMaxTurn", "ResetMinChangeWeights", "ResetAllowedStatus"):
-    command(_name)(_reset(_name))
+command("SetJointsMaxSpeed")(_six("SetJointsMaxSpeed"))
+command("SetJointsMaxAcceleration")(_six("SetJointsMaxAcceleration"))
+command("SetJointsMaxChange")(_six("SetJointsMaxChange"))
+command("SetJointsMaxTurnMax")(_six("SetJointsMaxTurnMax"))
+command("SetJointsMaxTurnMin")(_six("SetJointsMaxTurnMin"))
+command("SetMinChangeWeights")(_six("SetMinChangeWeights"))
+command("SetSingleJointMaxSpeed")(_single("SetSingleJointMaxSpeed"))
+command("SetSingleJointMaxAcceleration")(_single("SetSingleJointMaxAcceleration"))
+command("SetSingleJointMaxChange")(_single("SetSingleJointMaxChange"))
+command("SetSingleJointMaxTurnMax")(_single("SetSingleJointMaxTurnMax"))
+command("SetSingleJointMaxTurnMin")(_single("SetSingleJointMaxTurnMin"))
+command("ResetJointsMaxSpeed")(_reset("ResetJointsMaxSpeed"))
+command("ResetJointsMaxAcceleration")(_reset("ResetJointsMaxAcceleration"))
+command("ResetJointsMaxChange")(_reset("ResetJointsMaxChange"))
+command("ResetJointsMaxTurn")(_reset("ResetJointsMaxTurn"))
+command("ResetMinChangeWeights")(_reset("ResetMinChangeWeights"))
+command("ResetAllowedStatus")(_reset("ResetAllowedStatus"))
 
 
 @command("GetAllowedStatus")
@@ -385,8 +396,10 @@ def _adept_setting(name):
     return handler
 
 
-for _name in ("SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoarse"):
-    command(_name)(_adept_setting(_name))
+command("SetAdeptSpeed")(_adept_setting("SetAdeptSpeed"))
+command("SetAdeptAccel")(_adept_setting("SetAdeptAccel"))
+command("SetAdeptFine")(_adept_setting("SetAdeptFine"))
+command("SetAdeptCoarse")(_adept_setting("SetAdeptCoarse"))
 
 
 # ====================================================================== kinematics
@@ -425,7 +438,7 @@ async def is_possible(gw, session, args):
 
 
 # ====================================================================== motion
-async def _move(gw, session, kind: str, **fields) -> str:
+async def _move(gw, session, kind: MotionKind, **fields) -> str:
     if session.routetest is not None:  # real moves are refused while route testing
         return FALSE
     reply = await gw.call(session, "planner", "move", MoveRequest(kind=kind, **fields))
@@ -454,15 +467,15 @@ async def move_ptp_hom(gw, session, args):
     return await _move(gw, session, "MovePTPHomRowWise", pose=args.matrix())
 
 
-def _pose_status_move(kind):
+def _pose_status_move(kind: MotionKind):
     async def handler(gw, session, args):
         pose = args.matrix()
         return await _move(gw, session, kind, pose=pose, pattern=args.status())
     return handler
 
 
-for _name in ("MovePTPHomRowWiseStatusTurn", "MoveMinChangeRowWiseStatus"):
-    command(_name)(_pose_status_move(_name))
+command("MovePTPHomRowWiseStatusTurn")(_pose_status_move("MovePTPHomRowWiseStatusTurn"))
+command("MoveMinChangeRowWiseStatus")(_pose_status_move("MoveMinChangeRowWiseStatus"))
 
 
 # ---------------------------------------------------------------------- route test
@@ -518,11 +531,14 @@ def _mode(name):
     return handler
 
 
-for _name in ("EnableAlter", "DisableAlter", "EnableAdeptAlter", "EnableLin", "DisableLin"):
-    command(_name)(_mode(_name))
+command("EnableAlter")(_mode("EnableAlter"))
+command("DisableAlter")(_mode("DisableAlter"))
+command("EnableAdeptAlter")(_mode("EnableAdeptAlter"))
+command("EnableLin")(_mode("EnableLin"))
+command("DisableLin")(_mode("DisableLin"))
 
 
-def _alter_move(kind, parse):
+def _alter_move(kind: MotionKind, parse):
     async def handler(gw, session, args):
         if not gw.alter:  # the original answers false without reading the arguments
             return FALSE

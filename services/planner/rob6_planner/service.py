@@ -27,6 +27,7 @@ from rob6.messages import (
     LimitsUpdate,
     ModeRequest,
     MotionConfig as ConfigMessage,
+    MotionKind,
     MoveReply,
     MoveRequest,
     SelectRequest,
@@ -41,10 +42,11 @@ from .trajectory import TrajectoryPlanner, plan_lin
 
 log = logging.getLogger("rob6.planner")
 
-POSE_MOVES = {"MovePTPHomRowWise", "MovePTPHomRowWiseStatusTurn", "MoveMinChangeRowWiseStatus",
-              "RoutetestRowWiseStatus"}
-JOINT_MOVES = {"MovePTPJoints", "MovePTPJointsStatus"}
-ALTER_MOVES = {"MoveRTJoints", "MoveRTHomRowWise", "MoveRTHomRowWiseStatus", "DoAlterJoint", "DoAlterCart"}
+POSE_MOVES: frozenset[MotionKind] = frozenset({
+    "MovePTPHomRowWise", "MovePTPHomRowWiseStatusTurn", "MoveMinChangeRowWiseStatus", "RoutetestRowWiseStatus"})
+JOINT_MOVES: frozenset[MotionKind] = frozenset({"MovePTPJoints", "MovePTPJointsStatus"})
+ALTER_MOVES: frozenset[MotionKind] = frozenset({
+    "MoveRTJoints", "MoveRTHomRowWise", "MoveRTHomRowWiseStatus", "DoAlterJoint", "DoAlterCart"})
 ADEPT_SETTINGS = {"SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoarse"}
 LIMIT_FIELDS = ("speed", "accel", "turn_min", "turn_max")
 

@@ -87,11 +87,6 @@ class SampledTrajectory:
     def end(self) -> np.ndarray:
         return self.q[-1]
 
-    def to_message(self) -> dict:
-        """Plain dict for the bus (``rob6.messages.Trajectory`` has dt and q; qd/qdd extra)."""
-        return {"dt": self.dt, "q": self.q.tolist(), "qd": self.qd.tolist(),
-                "qdd": self.qdd.tolist()}
-
     @classmethod
     def still(cls, q, dt) -> "SampledTrajectory":
         q = np.asarray(q, float).reshape(1, N_JOINTS)

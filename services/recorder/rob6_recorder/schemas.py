@@ -20,6 +20,10 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+import msgspec
+
+from rob6.messages import GripperState, JointState, LinkEvent
+
 _TIME = {
     "type": "object",
     "title": "time",
@@ -39,7 +43,6 @@ _QUAT = {
     "properties": {"x": {"type": "number"}, "y": {"type": "number"},
                    "z": {"type": "number"}, "w": {"type": "number"}},
 }
-_JOINTS = {"type": "array", "items": {"type": "number"}, "minItems": 6, "maxItems": 6}
 
 FOXGLOVE_LOG = {
     "title": "foxglove.Log",
@@ -170,60 +173,28 @@ BUS_REPLY = {
     "required": ["cid"],
 }
 
-JOINT_STATE = {
-    "title": "rob6.JointState",
-    "description": "Driver state every cycle; degrees and degrees/s. Plot q[0]..q[5]. "
-                   "Fields at their default are left out (link connected, late 0...).",
-    "type": "object",
-    "properties": {
-        "t": {"type": "number", "description": "driver clock, s"},
-        "cycle": {"type": "integer"},
-        "q": {**_JOINTS, "description": "setpoint, deg (KUKA: axis angles A1..A6)"},
-        "qd": _JOINTS,
-        "moving": {"type": "boolean"},
-        "mode": {"type": "string", "description": "idle | trajectory | alter | stopping"},
-        "missed": {"type": "integer", "description": "controller cycles missed so far"},
-        "instance": {"type": "string", "description": "the driver instance that published it"},
-        "link": {"type": "string", "enum": ["connected", "lost", "waiting"],
-                 "description": "the link to the robot; absent: connected. While not connected the "
-                                "state is repeated (same cycle) a few times a second"},
-        "late": {"type": "integer", "description": "late packets the controller counted so far (RSI Delay)"},
-        "q_actual": {**_JOINTS, "description": "where the robot reports it is (RSI AIPos), deg; "
-                                               "absent in the simulation"},
-    },
-    "required": ["q"],
-}
+def struct_schema(struct: type[msgspec.Struct], title: str) -> dict[str, Any]:
+    """The JSON schema of a bus message recorded as it is, generated from its msgspec Struct
+    (``msgspec.json.schema``), so the recording's contract cannot drift from the bus's.
 
-LINK_EVENT = {
-    "title": "rob6.LinkEvent",
-    "description": "An event of the driver's link to the robot: waiting, run_start, restart, late, "
-                   "lost, back, trip, stop_sent, garbage.",
-    "type": "object",
-    "properties": {
-        "t": {"type": "number", "description": "wall time, epoch s"},
-        "event": {"type": "string", "enum": ["waiting", "run_start", "restart", "late", "lost", "back",
-                                             "trip", "stop_sent", "garbage"]},
-        "message": {"type": "string"},
-        "link": {"type": "string", "description": "rsi (absent: rsi)"},
-        "cycle": {"type": "integer", "description": "driver cycle it happened at"},
-        "late": {"type": "integer", "description": "late packets so far, all runs"},
-        "start_pose": {**_JOINTS, "description": "RSI ASPos of the new run, deg"},
-        "q_actual": {**_JOINTS, "description": "RSI AIPos at the event, deg"},
-    },
-    "required": ["event", "message"],
-}
+    The Struct's own definition is inlined at the top (Foxglove reads a plain object
+    schema); the definitions of nested Structs, if any, stay under ``$defs``.
+    """
+    schema = msgspec.json.schema(struct)
+    defs: dict[str, Any] = schema.pop("$defs", {})
+    name = schema["$ref"].rsplit("/", 1)[-1]
+    out: dict[str, Any] = {**defs.pop(name), "title": title}
+    if defs:
+        out["$defs"] = defs
+    return out
 
-GRIPPER_STATE = {
-    "title": "rob6.GripperState",
-    "type": "object",
-    "properties": {
-        "position": {"type": "number", "description": "m"},
-        "velocity": {"type": "number", "description": "m/s"},
-        "current": {"type": "number", "description": "A"},
-        "mode": {"type": "string"},
-        "error": {"type": "string"},
-    },
-}
+
+#: Driver state every cycle (``/driver/joint_state``); degrees and degrees/s. Plot q[0]..q[5].
+#: Fields at their default are left out (link connected, late 0...).
+JOINT_STATE = struct_schema(JointState, "rob6.JointState")
+#: An event of the driver's link to the robot (``/driver/link``).
+LINK_EVENT = struct_schema(LinkEvent, "rob6.LinkEvent")
+GRIPPER_STATE = struct_schema(GripperState, "rob6.GripperState")
 
 RECORDER_STATUS = {
     "title": "rob6.RecorderStatus",
