@@ -17,17 +17,13 @@ from __future__ import annotations
 import argparse
 import asyncio
 import shutil
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-# the replay target is the test suite's fake rob6 server (tests/recording/rec_helpers.py)
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "recording"))
-from rec_helpers import FakeServer
-
 from rob6_recorder.replay import load_script, replay
 from rob6_recorder.writer import Recorder
+from tests.recording.rec_helpers import FakeServer  # the replay target: the test suite's fake rob6 server
 
 
 def _state(i: int) -> dict:

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import pytest
-from conformance import replay
-from system import CONFORMANCE, SHARED, running
+
+from tests.conformance import replay
+from tests.system import CONFORMANCE, SHARED, running
 
 ROBOTS = ("kr16", "ad850", "kaw_fs", "kr3rt", "kr16rt", "kr3")
 

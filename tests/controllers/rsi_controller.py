@@ -6,8 +6,7 @@
         kuka.restart(start=[0, -90, 90, 0, 45, 0]); kuka.vanish(2.0)
         kuka.wait_for(lambda st: st["state"] == "running")
 
-From any test module: ``from controllers.rsi_controller import RsiController`` (pytest puts
-tests/ on sys.path for tests/conftest.py).
+From any test module: ``from tests.controllers.rsi_controller import RsiController``.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ import time
 
 import pytest
 
-from .adept_controller import AdeptController
+from tests.controllers.adept_controller import AdeptController
 
 ORDER = {"big": ">", "little": "<"}
 JOINT_POSITION, JOINT_TRAJ_PT, STATUS = 10, 11, 13

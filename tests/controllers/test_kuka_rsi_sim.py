@@ -20,7 +20,7 @@ from itertools import pairwise
 
 import pytest
 
-from .rsi_controller import RsiController, RsiControllerError
+from tests.controllers.rsi_controller import RsiController, RsiControllerError
 
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
 SLOW = ("--cycle-ms", "40")  # for tests that need every answer on time

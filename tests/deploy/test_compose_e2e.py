@@ -29,9 +29,9 @@ from pathlib import Path
 
 import pytest
 
-import zenoh_probe
-from conformance import load, same
-from system import CONFORMANCE, Client
+from tests.conformance import load, same
+from tests.deploy import zenoh_probe
+from tests.system import CONFORMANCE, Client
 
 pytestmark = pytest.mark.docker
 

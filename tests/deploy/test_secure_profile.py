@@ -14,8 +14,9 @@ from pathlib import Path
 
 import pytest
 import zenoh
-import zenoh_probe
-from zenoh_probe import free_port, local_router, localize_config, secure_profile_checks
+
+from tests.deploy import zenoh_probe
+from tests.deploy.zenoh_probe import free_port, local_router, localize_config, secure_profile_checks
 
 REPO = Path(__file__).resolve().parents[2]
 ZENOH_DIR = REPO / "deploy" / "zenoh"

@@ -8,7 +8,8 @@ import socket
 import time
 
 import pytest
-from system import Client, running
+
+from tests.system import Client, running
 
 GATEWAY_AND_DRIVER = ("driver", "gateway")
 

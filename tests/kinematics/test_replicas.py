@@ -11,11 +11,11 @@ import threading
 import time
 
 import msgspec
-from system import running
 
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import FkRequest, IkBatchRequest
+from tests.system import running
 
 
 def _replica(system) -> subprocess.Popen:

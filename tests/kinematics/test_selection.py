@@ -24,7 +24,6 @@ import math
 from functools import lru_cache
 
 import pytest
-from system import CONFORMANCE
 
 from rob6.robots import get_robot
 from rob6.status import PTP_HOM_PATTERN, TOGGLE_ALL, Status, parse_status, status_matches
@@ -37,6 +36,7 @@ from rob6_kinematics.selection import (
     select,
     select_from_solutions,
 )
+from tests.system import CONFORMANCE
 
 
 def _pattern(words: list[str]) -> Status | None:

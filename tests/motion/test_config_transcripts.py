@@ -16,10 +16,10 @@ import re
 from pathlib import Path
 
 import pytest
-from system import CONFORMANCE
 
 from rob6.status import parse_status
 from rob6_planner.config import MotionConfig
+from tests.system import CONFORMANCE
 
 ROBOTS = ("kr16", "kr16rt", "kr3rt", "ad850", "kaw_fs")
 SCRIPTS = ("limits", "limits_bounds", "misc")

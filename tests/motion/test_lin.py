@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
-from motion_kin import fk, make_ik
 
 from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import LinOptions, TrajectoryPlanner, finite_difference_violations
+from tests.motion.motion_kin import fk, make_ik
 
 
 def rot_z(deg):

@@ -7,11 +7,11 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from system import running
 
 from rob6.robots import get_robot
 from rob6.units import UNIT_CYCLE_S
 from rob6_recorder.reader import read_records
+from tests.system import running
 
 TOL = 1e-6
 

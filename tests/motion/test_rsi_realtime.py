@@ -14,15 +14,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from controllers.rsi_controller import RsiController
-from system import running
-from test_realtime_system import assert_within_limits
 
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
+from tests.controllers.rsi_controller import RsiController
+from tests.motion.test_realtime_system import assert_within_limits
+from tests.system import running
 
 pytestmark = pytest.mark.slow
 

@@ -10,9 +10,9 @@ import sys
 import time
 
 import pytest
-from system import Client, System, free_port
 
 from rob6_recorder.reader import read_records
+from tests.system import Client, System, free_port
 
 pytestmark = pytest.mark.slow
 

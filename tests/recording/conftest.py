@@ -1,6 +1,6 @@
 import pytest
 
-from .rec_helpers import URDF
+from tests.recording.rec_helpers import URDF
 
 
 @pytest.fixture

@@ -17,8 +17,7 @@ from mcap.reader import make_reader
 from rob6_recorder.cli import main as cli
 from rob6_recorder.reader import RecordingReader, is_complete
 from rob6_recorder.recover import recover, recover_unfinished
-
-from .rec_helpers import URDF
+from tests.recording.rec_helpers import URDF
 
 CHILD = textwrap.dedent("""
     import sys, time

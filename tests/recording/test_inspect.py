@@ -11,8 +11,7 @@ from click.testing import CliRunner
 from rob6_recorder.cli import main as cli
 from rob6_recorder.inspect import command_word, summarize
 from rob6_recorder.writer import Recorder
-
-from .rec_helpers import SESSION_LINES, record_session
+from tests.recording.rec_helpers import SESSION_LINES, record_session
 
 
 @pytest.fixture

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from system import CONFORMANCE
 
 from rob6_recorder.cli import main as cli
 from rob6_recorder.reader import read_records
@@ -22,8 +21,8 @@ from rob6_recorder.replay import (
     replay_joints,
 )
 from rob6_recorder.writer import Recorder
-
-from .rec_helpers import REPLIES, SESSION_LINES, FakeServer, dict_handler, record_session
+from tests.recording.rec_helpers import REPLIES, SESSION_LINES, FakeServer, dict_handler, record_session
+from tests.system import CONFORMANCE
 
 
 @pytest.fixture

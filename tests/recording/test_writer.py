@@ -16,8 +16,7 @@ from rob6_recorder.mcapwriter import LeanWriter
 from rob6_recorder.reader import RecordingReader, is_complete, read_records
 from rob6_recorder.schemas import schema_for, to_foxglove_log
 from rob6_recorder.writer import Recorder
-
-from .rec_helpers import record_session
+from tests.recording.rec_helpers import record_session
 
 NAME = re.compile(r"^\d{8}T\d{6}Z_kr16_robot1_(session3|system_\d{3})(-\d+)?\.mcap$")
 

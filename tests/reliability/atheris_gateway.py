@@ -3,26 +3,22 @@
 Not part of the test suite (atheris is not a project dependency). To use it:
 
     .tools/bin/uv pip install --python .venv/bin/python atheris
-    .venv/bin/python tests/reliability/atheris_gateway.py -atheris_runs=200000
+    .venv/bin/python -m tests.reliability.atheris_gateway -atheris_runs=200000
 
-The properties are those of ``bench/reliability.py`` (``check_framer``, ``check_args``,
+The properties are those of ``tests/reliability/fuzz.py`` (``check_framer``, ``check_args``,
 ``check_execute``); any assertion failure or exception is a crash that atheris reports
 with the input that caused it.
 """
 
 import asyncio
 import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
+import atheris
 
-import atheris  # noqa: E402
-
-with atheris.instrument_imports():
+with atheris.instrument_imports():  # before anything imports them, so they are instrumented
     from rob6_gateway import args, commands, framing  # noqa: F401
 
-from bench.reliability import COMMAND_NAMES, check_args, check_execute, check_framer, make_dead_gateway  # noqa: E402
+from tests.reliability.fuzz import COMMAND_NAMES, check_args, check_execute, check_framer, make_dead_gateway
 
 GATEWAY, SESSION = make_dead_gateway("kr16")
 LOOP = asyncio.new_event_loop()

@@ -17,8 +17,8 @@ import os
 import signal
 import time
 
-from bench.reliability import FuzzClient
 from rob6.testing import running
+from tests.reliability.fuzz import FuzzClient
 
 # service -> (probe command, is the answer a correct one?)
 PROBES = {

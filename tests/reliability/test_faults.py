@@ -8,10 +8,10 @@ import signal
 import time
 
 import pytest
-from faults import FAULTS, PROBES, SERVICES, _ask, inject
 
-from bench.reliability import FuzzClient
 from rob6.testing import running
+from tests.reliability.faults import FAULTS, PROBES, SERVICES, _ask, inject
+from tests.reliability.fuzz import FuzzClient
 
 
 @pytest.fixture(scope="module")

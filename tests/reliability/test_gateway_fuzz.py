@@ -14,8 +14,8 @@ import os
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from bench.reliability import COMMAND_NAMES, EXTREMES_TCP, TcpFuzzer, command_line_strategy, vm_rss_kib
 from rob6.testing import running
+from tests.reliability.fuzz import COMMAND_NAMES, EXTREMES_TCP, TcpFuzzer, command_line_strategy, vm_rss_kib
 
 TCP = dict(deadline=None, database=None,
                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

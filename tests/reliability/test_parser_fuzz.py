@@ -11,7 +11,9 @@ import asyncio
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from bench.reliability import (
+from rob6_gateway.commands import _split_command
+from rob6_gateway.framing import MAX_LINE, Framer
+from tests.reliability.fuzz import (
     COMMAND_NAMES,
     check_args,
     check_execute,
@@ -20,8 +22,6 @@ from bench.reliability import (
     make_dead_gateway,
     reference_lines,
 )
-from rob6_gateway.commands import _split_command
-from rob6_gateway.framing import MAX_LINE, Framer
 
 FAST = settings(max_examples=1000, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

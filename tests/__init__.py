@@ -1,0 +1,2 @@
+"""The test suite: one package. Helpers are imported as ``tests.<module>`` (``tests.system``,
+``tests.recording.rec_helpers``...); shared fixtures live in the conftest.py files."""
