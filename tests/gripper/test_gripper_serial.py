@@ -11,7 +11,7 @@ import pytest
 from rob6_gripper import smp
 from rob6_gripper.backend import ERROR, GRIPPING, IDLE, MOVING
 from rob6_gripper.fake_device import FakeSmpDevice
-from rob6_gripper.smp import SchunkGripper
+from rob6_gripper.schunk import SchunkGripper
 
 RT = 0.2  # response timeout used in these tests, s
 SCALE = 5.0  # the fake's simulated time runs 5x faster than the wall clock

@@ -28,7 +28,7 @@ def main(settings: BusSettings, log_level: str, serial_port: str | None, baud: i
     """Serve the gripper commands of one robot."""
     backend: GripperBackend
     if serial_port:
-        from .smp import SchunkGripper
+        from .schunk import SchunkGripper
         backend = SchunkGripper(serial_port, baudrate=baud, module_id=module_id)
     else:
         from .sim import SimGripper

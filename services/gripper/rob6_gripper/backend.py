@@ -80,7 +80,7 @@ def check_number(name: str, value: float, unit: str) -> str:
 
 class GripperBackend(ABC):
     """Common interface of :class:`~rob6_gripper.sim.SimGripper` and
-    :class:`~rob6_gripper.smp.SchunkGripper`."""
+    :class:`~rob6_gripper.schunk.SchunkGripper`."""
 
     @abstractmethod
     def has_gripper(self) -> bool:

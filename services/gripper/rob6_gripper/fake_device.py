@@ -1,7 +1,7 @@
 """A fake Schunk SMP module on a pseudo-terminal, for tests and bench runs.
 
 ``FakeSmpDevice().start()`` opens a pty pair (``os.openpty``); :attr:`port` is the
-slave's path, which :class:`~rob6_gripper.smp.SchunkGripper` (pyserial) opens like a
+slave's path, which :class:`~rob6_gripper.schunk.SchunkGripper` (pyserial) opens like a
 real ``/dev/ttyS0``.  A thread reads the master side, parses SMP frames addressed to
 its module id, answers them and drives a :class:`~rob6_gripper.sim.GripperModel`
 (in mm, like a module in its default unit system) in real time, optionally faster
