@@ -3,7 +3,8 @@
 Library API (the service in ``service.py`` feeds ``Recorder``):
 
 * ``rob6_recorder.writer``: ``Recorder`` (non-blocking ``submit``, per-session files,
-  rolling system file), ``McapFile`` (one file).
+  rolling system file); ``files`` routes records to files and rotates them, ``mcapfile``
+  is one file (``McapFile``), ``derive`` the /tf and /flange derived from joint states.
 * ``rob6_recorder.reader``: ``read_records`` / ``scan`` (also unfinished files).
 * ``rob6_recorder.recover``: ``recover(path, out_path)``.
 * ``rob6_recorder.inspect``: ``summarize``, ``export_csv``.

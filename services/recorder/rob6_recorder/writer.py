@@ -23,19 +23,16 @@ SIGKILL the file holds every record up to the last closed chunk (at most about
 with ``rob6_recorder.reader`` and rebuilt into an indexed file by
 ``rob6_recorder.recover.recover``.
 
-File names: ``<UTC start %Y%m%dT%H%M%SZ>_<robot>_<robot_id>_session<n>.mcap`` and
-``..._system_<part>.mcap`` (part 001, 002, ... counts the rotations of this recorder
-run; a ``-2``, ``-3`` suffix if the name exists anyway). The system file is rotated
-when it is ``rotate_seconds`` old or ``rotate_bytes`` large.
+This module is the queue and its writer thread; which file a record goes to, file names
+and rotation are ``files.RecordingFiles``, one file ``mcapfile.McapFile``, the derived
+Foxglove channels (``/tf``, ``/flange``) ``derive.JointStateDerivation``.
 """
 
 from __future__ import annotations
 
 import collections
-import datetime as _dt
 import logging
 import os
-import socket
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -45,120 +42,19 @@ from typing import Any
 
 import msgspec
 
-from . import __version__
-from .geometry import Fk, TfDeriver, flange_message
-from .mcapwriter import LeanWriter
-from .schemas import schema_for, to_foxglove_log
+from .derive import JointStateDerivation
+from .files import RecordingFiles
+from .geometry import Fk
+from .mcapfile import as_dict, encode
+from .schemas import to_foxglove_log
 
 log = logging.getLogger("rob6.recorder")
 
 JOINT_STATE_TOPIC = "/driver/joint_state"
 LOG_TOPIC = "/log"
-TF_TOPIC = "/tf"
-FLANGE_TOPIC = "/flange"
 STATUS_TOPIC = "/recorder/status"
-ROBOT_DESCRIPTION_TOPIC = "/robot_description"
-FK_FLANGE_FRAME = "fk_flange"
 
 _encoder = msgspec.json.Encoder()
-_decoder = msgspec.json.Decoder()
-
-
-def utc_stamp(ns: int) -> str:
-    return _dt.datetime.fromtimestamp(ns / 1e9, _dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-
-
-def _safe(text: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "-" for c in str(text)) or "x"
-
-
-def encode(data: Any) -> bytes:
-    """JSON bytes of a record: dict/list/msgspec Struct, or bytes passed through."""
-    if isinstance(data, (bytes, bytearray, memoryview)):
-        return bytes(data)
-    try:
-        return _encoder.encode(data)
-    except (TypeError, msgspec.EncodeError):
-        import json
-        return json.dumps(data, default=repr).encode()
-
-
-class McapFile:
-    """One MCAP file: lazy channels (one JSON schema per channel type), JSON messages.
-
-    Not thread safe: used by the recorder's writer thread (or a tool) only.
-    """
-
-    def __init__(self, path: str | os.PathLike[str], *, start_ns: int | None = None,
-                 urdf: str | None = None, metadata: dict[str, dict[str, str]] | None = None,
-                 chunk_size: int = 1 << 20, compression: str = "zstd"):
-        self.path = Path(path)
-        self.start_ns = time.time_ns() if start_ns is None else start_ns
-        self.opened = time.monotonic()
-        self._fh = open(self.path, "xb")
-        self._w = LeanWriter(self._fh, chunk_size=chunk_size,
-                             compression="" if compression == "none" else compression)
-        self._w.start(profile="", library=f"rob6-recorder/{__version__}")
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self._seq: dict[int, int] = {}
-        self.messages = 0
-        self.pending = 0  # messages not yet flushed to the OS
-        self.closed = False
-        for name, values in (metadata or {}).items():
-            self._w.add_metadata(name, {k: str(v) for k, v in values.items()})
-        if urdf:
-            self._w.add_attachment(create_time=self.start_ns, log_time=self.start_ns,
-                                   name="robot.urdf", media_type="application/xml",
-                                   data=urdf.encode())
-            self.write(ROBOT_DESCRIPTION_TOPIC, self.start_ns, self.start_ns,
-                       _encoder.encode({"data": urdf}))
-        self.flush()
-
-    def channel(self, topic: str) -> int:
-        ch = self._channels.get(topic)
-        if ch is None:
-            spec = schema_for(topic)
-            sid = self._schemas.get(spec.name)
-            if sid is None:
-                sid = self._schemas[spec.name] = self._w.register_schema(
-                    spec.name, "jsonschema", spec.data)
-            ch = self._channels[topic] = self._w.register_channel(topic, "json", sid)
-            self._seq[ch] = 0
-        return ch
-
-    def write(self, topic: str, log_time: int, publish_time: int, payload: bytes) -> None:
-        ch = self._channels.get(topic) or self.channel(topic)
-        seq = self._seq[ch] = (self._seq[ch] + 1) & 0xFFFFFFFF
-        self._w.add_message(ch, log_time, payload, publish_time, seq)
-        self.messages += 1
-        self.pending += 1
-
-    def add_metadata(self, name: str, values: dict[str, Any]) -> None:
-        self._w.add_metadata(name, {k: str(v) for k, v in values.items()})
-
-    def flush(self, fsync: bool = False) -> None:
-        """Close the open chunk and hand everything to the OS (and the disk if fsync)."""
-        self._w.flush()
-        if fsync:
-            os.fsync(self._fh.fileno())
-        self.pending = 0
-
-    def size(self) -> int:
-        return self._w.tell()
-
-    def close(self, metadata: dict[str, Any] | None = None) -> None:
-        if self.closed:
-            return
-        self.closed = True
-        try:
-            if metadata:
-                self.add_metadata("rob6.end", metadata)
-            self._w.finish()
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
-        finally:
-            self._fh.close()
 
 
 @dataclass
@@ -220,31 +116,11 @@ class Recorder:
                  clock: Callable[[], int] = time.time_ns):
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
-        self.robot = robot
-        self.robot_id = robot_id
-        self.urdf = urdf
-        self.fk = fk
-        self.system = system
-        self.sessions = sessions
-        self.rotate_bytes = rotate_bytes
-        self.rotate_seconds = rotate_seconds
         self.chunk_interval = chunk_interval
-        self.chunk_size = chunk_size
-        self.compression = compression
         self.fsync = fsync
         self.max_backlog = max_backlog
         self.warn_backlog = warn_backlog
-        self.session_linger = session_linger
-        self.tf_period_ns = int(1e9 / tf_max_rate) if tf_max_rate > 0 else 0
-        self.extra_metadata = dict(metadata or {})
         self.clock = clock
-
-        self._tf: TfDeriver | None = None
-        if urdf:
-            try:
-                self._tf = TfDeriver(urdf, joint_map)
-            except Exception as exc:  # a bad URDF must not stop the recording
-                log.warning("URDF not usable for /tf (%s); recording without /tf", exc)
         self._queue: collections.deque[Any] = collections.deque()
         self._wake = threading.Event()
         self._idle = False
@@ -263,16 +139,12 @@ class Recorder:
         self._errors = 0
         self._last_error_log = 0.0
         # writer-thread state
-        self._system: McapFile | None = None
-        self._sessions: dict[str, McapFile] = {}
-        self._finished: collections.OrderedDict[str, None] = collections.OrderedDict()
-        self._closing: dict[str, float] = {}  # session -> monotonic close time
-        self._session_of_topic: dict[str, str | None] = {}
-        self._last_tf_ns = -1 << 62
-        self._fk_failed = False
-        self._fk_pause = 0.0
-        self._files: list[str] = []
-        self._part = 0  # system file part number (sorts chronologically within a second)
+        self._files = RecordingFiles(
+            self.directory, robot, robot_id, urdf=urdf, system=system, sessions=sessions,
+            rotate_bytes=rotate_bytes, rotate_seconds=rotate_seconds, chunk_size=chunk_size,
+            compression=compression, session_linger=session_linger, metadata=dict(metadata or {}),
+            clock=clock, on_error=self._error)
+        self._derived = JointStateDerivation(urdf, fk, joint_map, tf_max_rate)
 
     # ----------------------------------------------------------------- lifecycle
     def start(self) -> "Recorder":
@@ -380,7 +252,7 @@ class Recorder:
             return RecorderStats(
                 submitted=self._written + queued, written=self._written, dropped=self._dropped,
                 dropped_by_topic=dict(self._dropped_by_topic), backlog=len(self._queue),
-                max_backlog_seen=self._max_seen, errors=self._errors, files=list(self._files))
+                max_backlog_seen=self._max_seen, errors=self._errors, files=self._files.paths())
 
     # ----------------------------------------------------------------- writer thread
     def _run(self) -> None:
@@ -416,9 +288,9 @@ class Recorder:
                 self._write_drop_status()
             now = time.monotonic()
             if now - last_flush >= self.chunk_interval:
-                self._flush_all(self.fsync)
+                self._files.flush(self.fsync)
                 try:
-                    self._housekeeping(now)
+                    self._files.housekeeping(now, self._dropped)
                 except Exception as exc:
                     self._error("recorder housekeeping failed: %r", exc)
                 last_flush = time.monotonic()
@@ -438,93 +310,19 @@ class Recorder:
             self._last_error_log = now
             log.error(fmt, *args)
 
-    def _session_key(self, topic: str) -> str | None:
-        try:
-            return self._session_of_topic[topic]
-        except KeyError:
-            key = None
-            if topic.startswith("/session/"):
-                key = topic.split("/", 3)[2] or None
-            self._session_of_topic[topic] = key
-            return key
-
     def _write_record(self, topic: str, log_time: int, publish_time: int, data: Any) -> None:
         if topic == LOG_TOPIC:
-            data = self._as_dict(data)
+            data = as_dict(data)
             if isinstance(data, dict):
                 data = to_foxglove_log(data, log_time)
-        payload = encode(data)
-        session = self._session_key(topic)
-        if session is not None:
-            closing = False
-            if topic.endswith("/event"):
-                ev = self._as_dict(data)
-                closing = isinstance(ev, dict) and str(ev.get("event", "")).lower() in _CLOSE_EVENTS
-            f = self._sessions.get(session)
-            if f is None and self.sessions and (session not in self._finished or (
-                    topic.endswith("/client_in") or (topic.endswith("/event") and not closing))):
-                # late records of a finished session go to the system file only; a new
-                # line or open event with a reused number (gateway restarted) opens a file
-                f = self._open_session(session, log_time)
-            if f is not None:
-                f.write(topic, log_time, publish_time, payload)
-                if closing:
-                    self._closing[session] = time.monotonic() + self.session_linger
-        else:
-            for f in self._sessions.values():
-                f.write(topic, log_time, publish_time, payload)
-        if self.system:
-            f = self._system
-            if f is None:
-                f = self._system = self._open_system(log_time)
-            f.write(topic, log_time, publish_time, payload)
-        if topic == JOINT_STATE_TOPIC and (self._tf is not None or self.fk is not None):
-            self._derive(data, log_time)
-
-    @staticmethod
-    def _as_dict(data: Any) -> Any:
-        if isinstance(data, (bytes, bytearray, memoryview)):
-            try:
-                return _decoder.decode(data)
-            except msgspec.DecodeError:
-                return data
-        if isinstance(data, msgspec.Struct):
-            return msgspec.to_builtins(data)
-        return data
-
-    def _derive(self, data: Any, log_time: int) -> None:
-        """/tf (URDF joints, plus ``fk_flange`` from the FK) and /flange from a joint state."""
-        if log_time - self._last_tf_ns < self.tf_period_ns:
-            return
-        self._last_tf_ns = log_time
-        data = self._as_dict(data)
-        q = data.get("q") if isinstance(data, dict) else None
-        if not q:
-            return
-        root = self._tf.root_frame if self._tf is not None else "base"
-        tf = self._tf.transforms(q, log_time) if self._tf is not None else {"transforms": []}
-        flange = None
-        if self.fk is not None and not self._fk_failed and time.monotonic() >= self._fk_pause:
-            began = time.monotonic()
-            try:
-                flange = flange_message(self.fk, q, log_time, root)
-            except Exception as exc:
-                self._fk_failed = True  # one warning, then no more FK calls
-                log.warning("fk callable failed (%r): no /flange from now on", exc)
-            took = time.monotonic() - began
-            if took > 0.02:  # the writer thread must not wait on a slow FK (a remote call?)
-                self._fk_pause = time.monotonic() + 5.0
-                log.warning("fk callable took %.0f ms: /flange paused for 5 s", took * 1000)
-            if flange is not None:
-                pose = flange["poses"][0]
-                tf["transforms"].append({
-                    "timestamp": flange["timestamp"], "parent_frame_id": root,
-                    "child_frame_id": FK_FLANGE_FRAME, "translation": pose["position"],
-                    "rotation": pose["orientation"]})
-        if tf["transforms"]:
-            self._write_record(TF_TOPIC, log_time, log_time, _encoder.encode(tf))
-        if flange is not None:
-            self._write_record(FLANGE_TOPIC, log_time, log_time, _encoder.encode(flange))
+        closing = False
+        if topic.endswith("/event") and self._files.session_of(topic) is not None:
+            ev = as_dict(data)
+            closing = isinstance(ev, dict) and str(ev.get("event", "")).lower() in _CLOSE_EVENTS
+        self._files.write(topic, log_time, publish_time, encode(data), closing=closing)
+        if topic == JOINT_STATE_TOPIC and self._derived.active:
+            for derived_topic, payload in self._derived.derive(data, log_time):
+                self._write_record(derived_topic, log_time, log_time, payload)
 
     def _write_drop_status(self) -> None:
         with self._lock:
@@ -545,102 +343,17 @@ class Recorder:
     def _handle_control(self, item: _Control) -> None:
         try:
             if item.kind == "flush":
-                self._flush_all(self.fsync)
+                self._files.flush(self.fsync)
             elif item.kind == "open_session":
-                if item.arg not in self._sessions and self.sessions:
-                    self._open_session(item.arg, self.clock())
-                self._closing.pop(item.arg, None)
+                self._files.open_session(item.arg)
             elif item.kind == "close_session":
-                if item.arg in self._sessions:
-                    self._closing[item.arg] = time.monotonic() + self.session_linger
+                self._files.close_session(item.arg)
         except Exception as exc:
             self._error("recorder control %s failed: %r", item.kind, exc)
         finally:
             item.done.set()
 
-    def _flush_all(self, fsync: bool) -> None:
-        for f in self._open_files():
-            if f.pending:
-                try:
-                    f.flush(fsync)
-                except Exception as exc:
-                    self._error("flushing %s failed: %r", f.path, exc)
-
-    def _open_files(self) -> list[McapFile]:
-        files = list(self._sessions.values())
-        if self._system is not None:
-            files.append(self._system)
-        return files
-
-    def _housekeeping(self, now: float) -> None:
-        for session, when in list(self._closing.items()):
-            if now >= when:
-                del self._closing[session]
-                f = self._sessions.pop(session, None)
-                if f is not None:
-                    self._close_file(f)
-                    self._finished[session] = None
-                    while len(self._finished) > 10_000:
-                        self._finished.popitem(last=False)
-        f = self._system
-        if f is not None and (
-                (self.rotate_seconds and now - f.opened >= self.rotate_seconds)
-                or (self.rotate_bytes and f.size() >= self.rotate_bytes)):
-            self._close_file(f)
-            self._system = None  # the next record opens the next part
-
-    def _close_file(self, f: McapFile) -> None:
-        try:
-            f.close({"ended": utc_stamp(self.clock()), "messages": f.messages,
-                     "dropped_total": self._dropped})
-        except Exception as exc:
-            self._error("closing %s failed: %r", f.path, exc)
-
     def _finish_all(self) -> None:
         if self._drops_pending:
             self._write_drop_status()
-        for f in self._open_files():
-            self._close_file(f)
-        self._sessions.clear()
-        self._system = None
-
-    def _metadata(self, kind: str, start_ns: int, session: str | None) -> dict[str, Any]:
-        info = {"robot": self.robot, "robot_id": self.robot_id, "kind": kind,
-                "started": utc_stamp(start_ns), "start_ns": str(start_ns),
-                "host": socket.gethostname(), "recorder": __version__}
-        if session is not None:
-            info["session"] = session
-        info.update(self.extra_metadata)
-        return {"rob6": info}
-
-    def _new_path(self, start_ns: int, suffix: str) -> Path:
-        base = f"{utc_stamp(start_ns)}_{_safe(self.robot)}_{_safe(self.robot_id)}_{suffix}"
-        path = self.directory / f"{base}.mcap"
-        n = 2
-        while path.exists():
-            path = self.directory / f"{base}-{n}.mcap"
-            n += 1
-        return path
-
-    def _open(self, kind: str, start_ns: int, session: str | None) -> McapFile:
-        if session is None:
-            self._part += 1
-            suffix = f"system_{self._part:03d}"
-        else:
-            suffix = f"session{_safe(session)}"
-        path = self._new_path(start_ns, suffix)
-        f = McapFile(path, start_ns=start_ns, urdf=self.urdf,
-                     metadata=self._metadata(kind, start_ns, session),
-                     chunk_size=self.chunk_size, compression=self.compression)
-        with self._lock:
-            self._files.append(str(path))
-        log.info("recording %s to %s", kind if session is None else f"session {session}", path)
-        return f
-
-    def _open_session(self, session: str, start_ns: int) -> McapFile:
-        self._finished.pop(session, None)
-        f = self._sessions[session] = self._open("session", start_ns, session)
-        return f
-
-    def _open_system(self, start_ns: int) -> McapFile:
-        return self._open("system", start_ns, None)
+        self._files.finish(self._dropped)
