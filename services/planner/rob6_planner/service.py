@@ -38,7 +38,8 @@ from rob6.state import JointStateMirror
 from rob6.status import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN
 
 from .config import MotionConfig
-from .trajectory import TrajectoryPlanner, plan_lin
+from .lin import plan_lin
+from .trajectory import TrajectoryPlanner
 
 log = logging.getLogger("rob6.planner")
 
