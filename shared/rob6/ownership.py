@@ -77,10 +77,13 @@ class Claim:
         # session yet (in peer mode the router leaves peers to link to each other); a
         # subscription with history gets it as soon as it arrives, like the claims
         alive: set[str] = set()
+
+        def on_alive(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.PUT:
+                alive.add(str(sample.key_expr).rsplit("/", 1)[-1])
+
         alive_subscriber = liveliness.declare_subscriber(
-            bus.key("alive", self.service, "*"),
-            zenoh.handlers.Callback(lambda sample: alive.add(str(sample.key_expr).rsplit("/", 1)[-1])
-                                    if sample.kind == zenoh.SampleKind.PUT else None), history=True)
+            bus.key("alive", self.service, "*"), zenoh.handlers.Callback(on_alive), history=True)
         self._token = liveliness.declare_token(bus.key("claim", self.service, self.me, str(self.epoch)))
         time.sleep(settle_s)
         alive_subscriber.undeclare()
