@@ -1,4 +1,5 @@
-"""Rotations shared by the services: the unit quaternion of a rotation matrix.
+"""Rotations shared by the services: unit quaternions of a rotation matrix, of roll/pitch/yaw
+angles and of an axis and angle, and their product.
 
 One component order everywhere: ``(w, x, y, z)``, the scalar first. Foxglove messages
 name their fields (``x, y, z, w``), so a writer of them unpacks by name.
@@ -10,6 +11,39 @@ import math
 from collections.abc import Sequence
 
 Quaternion = tuple[float, float, float, float]  # (w, x, y, z)
+
+
+def quat_from_rpy(r: float, p: float, y: float) -> Quaternion:
+    """The rotation of URDF's ``rpy``: about x by r, then y by p, then z by y (fixed axes)."""
+    cr, sr = math.cos(r / 2), math.sin(r / 2)
+    cp, sp = math.cos(p / 2), math.sin(p / 2)
+    cy, sy = math.cos(y / 2), math.sin(y / 2)
+    return (cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy)
+
+
+def quat_axis_angle(axis: Sequence[float], angle: float) -> Quaternion:
+    """The rotation by ``angle`` (rad) about ``axis`` (any length but zero)."""
+    n = math.sqrt(sum(a * a for a in axis)) or 1.0
+    s = math.sin(angle / 2) / n
+    return math.cos(angle / 2), axis[0] * s, axis[1] * s, axis[2] * s
+
+
+def quat_mul(a: Quaternion, b: Quaternion) -> Quaternion:
+    """The product ``a b``: rotation b, then a."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw)
+
+
+def quat_conjugate(q: Quaternion) -> Quaternion:
+    """The inverse rotation of a unit quaternion."""
+    return q[0], -q[1], -q[2], -q[3]
 
 
 def quat_from_matrix(m: Sequence[Sequence[float]]) -> Quaternion:

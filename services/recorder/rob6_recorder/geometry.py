@@ -23,38 +23,19 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from rob6.rotations import quat_from_matrix
+from rob6.rotations import (
+    Quaternion,
+    quat_axis_angle,
+    quat_conjugate,
+    quat_from_matrix,
+    quat_from_rpy,
+    quat_mul,
+)
 
 from .schemas import stamp
 
-Quat = tuple[float, float, float, float]  # x, y, z, w
 #: forward kinematics: joints (degrees) -> the pose (12 numbers, 3x4 row-wise, mm) or None
 Fk = Callable[[list[float]], Sequence[Any] | None]
-
-
-def quat_from_rpy(r: float, p: float, y: float) -> Quat:
-    cr, sr = math.cos(r / 2), math.sin(r / 2)
-    cp, sp = math.cos(p / 2), math.sin(p / 2)
-    cy, sy = math.cos(y / 2), math.sin(y / 2)
-    return (sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-            cr * cp * cy + sr * sp * sy)
-
-
-def quat_axis_angle(axis: Sequence[float], angle: float) -> Quat:
-    n = math.sqrt(sum(a * a for a in axis)) or 1.0
-    s = math.sin(angle / 2) / n
-    return (axis[0] * s, axis[1] * s, axis[2] * s, math.cos(angle / 2))
-
-
-def quat_mul(a: Quat, b: Quat) -> Quat:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz)
 
 
 @dataclass(frozen=True)
@@ -64,7 +45,7 @@ class UrdfJoint:
     parent: str
     child: str
     xyz: tuple[float, float, float]
-    rpy_quat: Quat
+    rpy_quat: Quaternion
     axis: tuple[float, float, float]
 
     @property
@@ -163,9 +144,8 @@ class TfDeriver:
                     n = math.sqrt(sum(a * a for a in joint.axis)) or 1.0
                     local = tuple(a / n * d for a in joint.axis)
                     # rotate the local offset into the parent frame by the origin rotation
-                    lq = quat_mul(quat_mul(rot, (local[0], local[1], local[2], 0.0)),
-                                  (-rot[0], -rot[1], -rot[2], rot[3]))
-                    xyz = (xyz[0] + lq[0], xyz[1] + lq[1], xyz[2] + lq[2])
+                    lq = quat_mul(quat_mul(rot, (0.0, local[0], local[1], local[2])), quat_conjugate(rot))
+                    xyz = (xyz[0] + lq[1], xyz[1] + lq[2], xyz[2] + lq[3])
                 else:
                     rot = quat_mul(rot, quat_axis_angle(joint.axis, math.radians(value)))
             out.append({
@@ -173,12 +153,12 @@ class TfDeriver:
                 "parent_frame_id": self.prefix + joint.parent,
                 "child_frame_id": self.prefix + joint.child,
                 "translation": {"x": xyz[0], "y": xyz[1], "z": xyz[2]},
-                "rotation": {"x": rot[0], "y": rot[1], "z": rot[2], "w": rot[3]},
+                "rotation": {"x": rot[1], "y": rot[2], "z": rot[3], "w": rot[0]},
             })
         return {"transforms": out}
 
 
-def pose_from_fk(result: Sequence[Any] | None) -> tuple[tuple[float, float, float], Quat] | None:
+def pose_from_fk(result: Sequence[Any] | None) -> tuple[tuple[float, float, float], Quaternion] | None:
     """(position in m, orientation) from an FK result: 12 numbers (3x4 row-wise, mm),
     16 numbers (4x4), a nested 3x4/4x4 list, or ``None`` (unreachable)."""
     if result is None:
@@ -194,15 +174,14 @@ def pose_from_fk(result: Sequence[Any] | None) -> tuple[tuple[float, float, floa
         return None
     rows = [flat[0:4], flat[4:8], flat[8:12]]
     pos = (rows[0][3] / 1000.0, rows[1][3] / 1000.0, rows[2][3] / 1000.0)
-    w, x, y, z = quat_from_matrix([r[:3] for r in rows])
-    return pos, (x, y, z, w)
+    return pos, quat_from_matrix([r[:3] for r in rows])
 
 
 def flange_message(fk: Fk, q_deg: Sequence[float], t_ns: int, frame_id: str) -> dict[str, Any] | None:
     pose = pose_from_fk(fk(list(q_deg)))
     if pose is None:
         return None
-    (x, y, z), (qx, qy, qz, qw) = pose
+    (x, y, z), (qw, qx, qy, qz) = pose
     return {"timestamp": stamp(t_ns), "frame_id": frame_id,
             "poses": [{"position": {"x": x, "y": y, "z": z},
                        "orientation": {"x": qx, "y": qy, "z": qz, "w": qw}}]}
