@@ -18,15 +18,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from controllers.adept_controller import AdeptController
-from system import running
-from test_realtime_system import assert_within_limits
 
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
+from tests.controllers.adept_controller import AdeptController
+from tests.motion.test_realtime_system import assert_within_limits
+from tests.system import running
 
 pytestmark = pytest.mark.slow
 
@@ -176,7 +176,7 @@ def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path, order, timing
                 assert client.ask("Quit") == "bye!\n"
             time.sleep(1.0)  # the recorder writes the last states
     t, q = recorded_states(tmp_path)
-    assert len(t) > 1000
+    assert len(t) > 1000, f"{len(t)} joint states recorded"
     assert_within_limits(ROBOT, t, q)  # rob6's setpoints, every cycle, the controller connected or not
     events = [r.data for path in tmp_path.glob("*_system_*.mcap") for r in read_records(path, ["/driver/link"])]
     assert [e["event"] for e in events][:2] == ["waiting", "connected"]
