@@ -1,7 +1,11 @@
 """Alter streaming through the whole system on each robot link: MoveRTJoints at 250 Hz on
 kr16rt (4 ms cycle) with the recorder on, once on the simulation (``--link sim``) and
 once on RSI against the KR C4 simulator (kuka-rsi-sim, a separate process speaking
-RSI over real UDP), so the RSI figures stand beside the simulation's in the same run."""
+RSI over real UDP), so the RSI figures stand beside the simulation's in the same run.
+Then the Adept over simple_message against adept-sm-sim (TCP): PTP moves and Alter
+streaming on ad850 at its 16 ms cycle, once with the simulator honouring the points'
+durations and once ignoring them as the V+ program does: points acknowledged, their
+acknowledgement latency, points merged, and underruns of the controller's queue."""
 
 from __future__ import annotations
 
@@ -17,7 +21,7 @@ import numpy as np
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import Empty, LinkQuery
-from rob6.testing import running
+from rob6.testing import free_port, running
 
 from .latency import percentiles
 
@@ -103,6 +107,112 @@ def stream(link: str, seconds: float) -> dict:
     return result
 
 
+class AdeptSim:
+    """adept-sm-sim as a process, asked for its status on its JSON-lines control channel."""
+
+    def __init__(self, motion: int, state: int, timing: str):
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "adept_sm_sim", "--motion-port", str(motion), "--state-port", str(state),
+             "--control", "127.0.0.1:0", "--timing", timing],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        ready = self.proc.stdout.readline()  # "adept-sm-sim ready: motion ..., state ..., control HOST:PORT"
+        host, port = ready.split("control ", 1)[1].split(",", 1)[0].strip().rsplit(":", 1)
+        self.control = socket.create_connection((host, int(port)), timeout=10).makefile("rwb")
+
+    def status(self) -> dict:
+        self.control.write(b'{"cmd": "status"}\n')
+        self.control.flush()
+        return json.loads(self.control.readline())
+
+    def close(self) -> None:
+        self.control.close()
+        self.proc.terminate()
+        self.proc.wait(10)
+
+
+ADEPT_START = [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]
+ADEPT_PTP = ([30.0, -50.0, 50.0, 10.0, 20.0, -20.0], [-20.0, -70.0, 60.0, -10.0, 40.0, 20.0], ADEPT_START)
+
+
+def adept_stream(timing: str, seconds: float) -> dict:
+    """PTP moves, then MoveRTJoints every 16 ms for ``seconds``, on ad850 over simple_message."""
+    motion, state = free_port(), free_port()
+    extra = {"ROB6_LINK": "simple_message", "ROB6_SM_MOTION_PORT": str(motion), "ROB6_SM_STATE_PORT": str(state)}
+    sim = AdeptSim(motion, state, timing)
+    try:
+        with tempfile.TemporaryDirectory() as logs, \
+                running("ad850", dummy=False, log_dir=logs, extra_env=extra) as system:
+            bus = Bus(BusSettings(robot="ad850", robot_id=system.robot_id,
+                                  connect=(f"tcp/127.0.0.1:{system.router_port}",)), "bench")
+            try:
+                bus.wait_for(["driver"], 10)
+                with system.client() as client:
+                    start = " ".join(map(str, ADEPT_START))
+                    deadline = time.monotonic() + 30
+                    while client.ask("MovePTPJoints " + start, lines=1, timeout=60) != "true\n":
+                        client.read_lines(1, timeout=1)  # the "false" after the ERROR line
+                        assert time.monotonic() < deadline, "the Adept link did not come up"
+                        time.sleep(0.2)
+                    before = sim.status()
+                    bus.request("driver", "link", LinkQuery(reset=True))
+                    moves = []
+                    for target in ADEPT_PTP:
+                        began = time.perf_counter()
+                        assert client.ask("MovePTPJoints " + " ".join(map(str, target)), timeout=60) == "true\n"
+                        moves.append(time.perf_counter() - began)
+                    assert client.ask("EnableAdeptAlter") == "true\n"
+                    period, n = 0.016, int(seconds / 0.016)
+                    began = time.perf_counter()
+                    for k in range(n):
+                        q = list(ADEPT_START)
+                        q[0] = 10.0 * np.sin(2 * np.pi * 0.2 * k * period)
+                        client.send("MoveRTJoints " + " ".join(f"{x:f}" for x in q) + "\n")
+                        client.read_lines(1)
+                        delay = began + (k + 1) * period - time.perf_counter()
+                        if delay > 0:
+                            time.sleep(delay)
+                    time.sleep(0.5)
+                    assert client.ask("DisableAlter", timeout=10) == "true\n"
+                    link = bus.request("driver", "link", LinkQuery())
+                    after = sim.status()
+            finally:
+                bus.close()
+    finally:
+        sim.close()
+    return {"received": after["points_received"] - before["points_received"],
+            "acked": after["points_acknowledged"] - before["points_acknowledged"],
+            "refused": after["points_refused"] - before["points_refused"],
+            "underruns": after["underruns"] - before["underruns"], "merged": link.late,
+            "link_latency_us": link.latency_us or [float("nan")] * 3, "controller_latency": after["ack_latency_ms"],
+            "packets": link.packets, "moves": moves}
+
+
+def adept_table(seconds: float, table) -> None:
+    runs = {timing: adept_stream(timing, seconds) for timing in ("duration", "vplus")}
+
+    def each(fmt):
+        return tuple(fmt(runs[t]) for t in ("duration", "vplus"))
+
+    table(f"The Adept over simple_message: 3 PTP moves, then MoveRTJoints every 16 ms for {seconds:.0f} s "
+          "on ad850 against adept-sm-sim (TCP, state every 0.1 s)",
+          ("measure", "--timing duration (durations honoured)", "--timing vplus (as adept_ros.v2)", "goal"), [
+              ("points sent / acknowledged (controller)", *each(lambda r: f"{r['received']} / {r['acked']}"),
+               "all"),
+              ("points refused / merged (a late acknowledgement)",
+               *each(lambda r: f"{r['refused']} / {r['merged']}"), "0 / 0"),
+              ("underruns of the controller's queue", *each(lambda r: str(r["underruns"])),
+               "0 when durations are honoured"),
+              ("point sent -> acknowledged (driver) p50 / p99 / max, ms",
+               *each(lambda r: " / ".join(f"{x / 1000:.1f}" for x in r["link_latency_us"])),
+               "p99 < 48 (one period)"),
+              ("request in -> reply out (controller, queue wait included) p50 / p99, ms",
+               *each(lambda r: f"{r['controller_latency']['p50']:.1f} / {r['controller_latency']['p99']:.1f}"),
+               ""),
+              ("PTP MovePTPJoints -> true (3 moves), s",
+               *each(lambda r: " / ".join(f"{m:.2f}" for m in r["moves"])), ""),
+          ])
+
+
 def links_table(seconds: float, table) -> None:
     sim, rsi = stream("sim", seconds), stream("rsi", seconds)
     p50s, p99s = sim["rtt"]
@@ -124,3 +234,4 @@ def links_table(seconds: float, table) -> None:
               ("command -> target in the driver p50 / p99, ms", f"{p50s:.3f} / {p99s:.3f}",
                f"{p50r:.3f} / {p99r:.3f}", "p99 <= 4 (one cycle)"),
           ])
+    adept_table(max(5.0, seconds / 3), table)
