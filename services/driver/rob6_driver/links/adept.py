@@ -446,7 +446,7 @@ class AdeptLink(Link):
                     self._report("connected", f"driver: simple_message link up: the robot is at {pose}",
                                  logging.WARNING)
                 else:
-                    self._report("back", f"driver: the robot is ready again ({back} is over); continuing from "
+                    self._report("back", f"driver: the robot is ready again (before: {back}); continuing from "
                                  f"its actual position {pose}", logging.WARNING)
             self._cond.notify_all()
 
