@@ -36,6 +36,7 @@ class KukaSim:
             [sys.executable, "-m", "kuka_rsi_sim", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{rob6_port}",
              "--control", "127.0.0.1:0", "--start-pose", START.replace(" ", ",")],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        assert self.proc.stdout is not None
         ready = self.proc.stdout.readline()  # "kuka-rsi-sim ready: control HOST:PORT, ..."
         host, port = ready.split("control ", 1)[1].split(",", 1)[0].rsplit(":", 1)
         self.control = socket.create_connection((host, int(port)), timeout=10).makefile("rwb")
@@ -101,7 +102,7 @@ def stream(link: str, seconds: float) -> dict:
     result = {"n": n, "rate": n / elapsed, "cycles": after.cycle - before.cycle,
               "missed": after.missed - before.missed, "rtt": percentiles(rtts), "latency_us": status.latency_us,
               "realtime": status.realtime}
-    if controller:
+    if controller and controller_before:
         result.update(late=controller["late_total"] - controller_before["late_total"],
                       trips=len(controller["trips"]), controller_rtt=controller["rtt_ms"])
     return result
@@ -115,6 +116,7 @@ class AdeptSim:
             [sys.executable, "-m", "adept_sm_sim", "--motion-port", str(motion), "--state-port", str(state),
              "--control", "127.0.0.1:0", "--timing", timing],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        assert self.proc.stdout is not None
         ready = self.proc.stdout.readline()  # "adept-sm-sim ready: motion ..., state ..., control HOST:PORT"
         host, port = ready.split("control ", 1)[1].split(",", 1)[0].strip().rsplit(":", 1)
         self.control = socket.create_connection((host, int(port)), timeout=10).makefile("rwb")

@@ -268,10 +268,6 @@ class AdeptLink(Link):
         self._reason = self.waiting_reason
         core.offline(self.waiting_reason)
 
-    @property
-    def missed(self) -> int:
-        return self.runner.stats.missed
-
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
         self._report("waiting", f"driver: waiting for the robot: simple_message motion port {self.motion_name}, "
@@ -296,12 +292,11 @@ class AdeptLink(Link):
         self.runner.stop()
         self._closing.set()
         self._wake()
-        reporter, *workers = self._threads or [None]
-        for thread in workers:
+        for thread in self._threads[1:]:  # the state and motion threads
             thread.join(2.0)
         self._reports.put(None)
-        if reporter is not None:
-            reporter.join(1.0)
+        if self._threads:  # the event reporter
+            self._threads[0].join(1.0)
         self._wake_r.close()
         self._wake_w.close()
         log.info("driver: simple_message link closed: %d points acknowledged, %d merged, %d refused, "
@@ -362,6 +357,7 @@ class AdeptLink(Link):
         with self._cond:
             state = self.core.step()
             self._stream(state)
+        self.missed = self.runner.stats.missed  # cycles the runner skipped (the machine was too busy)
         return state
 
     def _stream(self, state) -> None:
@@ -434,14 +430,16 @@ class AdeptLink(Link):
                         event = "lost" if fault.startswith("simple_message link lost") else "fault"
                         self._report(event, f"driver: {reason}", logging.WARNING if event == "lost" else logging.ERROR)
             elif not self._online and self._at_rest():
+                position = self._position
+                assert position is not None  # at rest: a position was read
                 back = self._reason
                 self._online = self._ready_once = True
                 self.state = "connected"
                 self._reason = ""
                 self._sent_ctrl = None
-                self._rest_q = self._position.copy()
-                self.core.online(self._position, reason="resynchronized with the robot")
-                pose = " ".join(f"{x:.3f}" for x in self._position)
+                self._rest_q = position.copy()
+                self.core.online(position, reason="resynchronized with the robot")
+                pose = " ".join(f"{x:.3f}" for x in position)
                 if back == self.waiting_reason:
                     self._report("connected", f"driver: simple_message link up: the robot is at {pose}",
                                  logging.WARNING)
