@@ -3,7 +3,9 @@
 import os
 from pathlib import Path
 
-from rob6.testing import Client, System, free_port, running  # noqa: F401
+from rob6.testing import Client, System, free_port, running
+
+__all__ = ["CONFORMANCE", "REPO", "SHARED", "Client", "System", "free_port", "running"]
 
 REPO = Path(__file__).resolve().parents[1]
 #: the original server's transcripts, kept with the tests (tests/transcripts/ORIGIN.md)

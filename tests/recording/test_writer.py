@@ -37,7 +37,9 @@ def _checked_summary(path):
 
 
 def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
-    fk = lambda q: [1, 0, 0, 1000.0, 0, 1, 0, 0, 0, 0, 1, 500.0]  # noqa: E731
+    def fk(q):
+        return [1, 0, 0, 1000.0, 0, 1, 0, 0, 0, 0, 1, 500.0]
+
     with Recorder(tmp_path, "kr16", "robot1", urdf=urdf, fk=fk, tf_max_rate=0) as rec:
         submitted = record_session(rec, session=3)
     session_files, system_files = _files(tmp_path, "session"), _files(tmp_path, "system")
@@ -186,7 +188,9 @@ def test_bytes_and_structs_and_unserialisable(tmp_path):
 
 
 def test_fk_without_urdf_gives_tf_and_flange(tmp_path):
-    fk = lambda q: None if q[0] > 100 else [1, 0, 0, q[0], 0, 1, 0, 0, 0, 0, 1, 0]  # noqa: E731
+    def fk(q):
+        return None if q[0] > 100 else [1, 0, 0, q[0], 0, 1, 0, 0, 0, 0, 1, 0]
+
     with Recorder(tmp_path, "kr16", "robot1", fk=fk, tf_max_rate=0) as rec:
         rec.submit("/driver/joint_state", 1, {"q": [500.0] + [0] * 5})  # unreachable: nothing
         rec.submit("/driver/joint_state", 2, {"q": [250.0] + [0] * 5})

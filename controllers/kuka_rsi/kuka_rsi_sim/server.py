@@ -426,7 +426,10 @@ class Simulator:
         state = "vanished" if self.vanished else "running" if rsi.running else "stopped"
         n = min(self.rtt_n, RTT_WINDOW)
         rtts = sorted(self.rtt[:n]) if n else []
-        ms = lambda v: round(v * 1000.0, 3)  # noqa: E731
+
+        def ms(v: float) -> float:
+            return round(v * 1000.0, 3)
+
         return {
             "ok": True,
             "state": state,
