@@ -8,13 +8,13 @@ import sys
 import click
 
 from . import logs
-from .config import LINKS, bus_options
+from .config import LINKS, BusSettings, bus_options
 from .messages import SERVICES
 from .robots import ROBOT_TYPES
 
 
 @click.group()
-def main():
+def main() -> None:
     """rob6: a distributed rob6server (see README.md)."""
 
 
@@ -37,8 +37,8 @@ def main():
               help="Start only these services (repeat).")
 @click.option("--log-level", envvar="ROB6_LOG_LEVEL", default="WARNING", show_default=True,
               type=click.Choice(["DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"], case_sensitive=False))
-def run(robot, robot_id, port, router_port, log_dir, dummy, allow_shutdown, restart, link, services,
-        log_level):
+def run(robot: str, robot_id: str, port: int, router_port: int, log_dir: str, dummy: bool, allow_shutdown: bool,
+        restart: bool, link: str, services: tuple[str, ...], log_level: str) -> None:
     """Start everything on this machine: router, services and gateway."""
     from .launcher import run as run_system
     os.environ["ROB6_LINK"] = link  # the driver reads it
@@ -49,7 +49,7 @@ def run(robot, robot_id, port, router_port, log_dir, dummy, allow_shutdown, rest
 
 @main.command()
 @bus_options
-def router(settings, log_level):
+def router(settings: BusSettings, log_level: str) -> None:
     """Run a Zenoh router (every rob6 process connects to it); --listen defaults to tcp/127.0.0.1:7447."""
     from .router import run as run_router
     logs.configure("router", log_level)
@@ -60,7 +60,7 @@ def router(settings, log_level):
 @bus_options
 @click.argument("service")
 @click.option("--timeout", default=3.0, show_default=True, type=float)
-def health(settings, log_level, service, timeout):
+def health(settings: BusSettings, log_level: str, service: str, timeout: float) -> None:
     """Exit 0 when SERVICE is up: its liveliness token is on the bus.
 
     The gateway declares its token once it listens, so this also covers the gateway

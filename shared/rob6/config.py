@@ -12,7 +12,9 @@ import functools
 import os
 import socket
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
 import click
 
@@ -35,10 +37,10 @@ class BusSettings:
     instance: str = field(default_factory=lambda: default_instance())
 
     @classmethod
-    def from_env(cls, **overrides) -> "BusSettings":
+    def from_env(cls, **overrides: Any) -> "BusSettings":
         """Settings from ROB6_* variables (used by tests and tools without a CLI)."""
         env = os.environ
-        values = dict(
+        values: dict[str, Any] = dict(
             robot=env.get("ROB6_ROBOT", "kr16"),
             robot_id=env.get("ROB6_ROBOT_ID", "robot1"),
             connect=_split(env.get("ROB6_ZENOH_CONNECT", DEFAULT_ROUTER)),
@@ -60,7 +62,10 @@ def _split(text: str) -> tuple[str, ...]:
     return tuple(part.strip() for part in text.split(",") if part.strip())
 
 
-def bus_options(func):
+R = TypeVar("R")
+
+
+def bus_options(func: Callable[..., R]) -> Callable[..., R]:
     """Click options every service shares; passes ``settings: BusSettings``."""
 
     @click.option("--robot", envvar="ROB6_ROBOT", default="kr16", show_default=True,
@@ -83,7 +88,8 @@ def bus_options(func):
                   type=click.Choice(["DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"], case_sensitive=False),
                   help="Initial log level; SetVerbosity changes it at run time [env ROB6_LOG_LEVEL].")
     @functools.wraps(func)
-    def wrapper(*args, robot, robot_id, connect, listen, mode, zenoh_config, log_level, **kwargs):
+    def wrapper(*args: Any, robot: str, robot_id: str, connect: str, listen: str, mode: str,
+                zenoh_config: str | None, log_level: str, **kwargs: Any) -> R:
         settings = BusSettings(
             robot=robot, robot_id=robot_id, connect=_split(connect), listen=_split(listen),
             mode=mode, zenoh_config=zenoh_config,

@@ -22,7 +22,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import click
 
@@ -39,7 +41,7 @@ STOP_ORDER = ((("gateway",), 0.5), (("planner", "driver", "gripper", "kinematics
 class Child:
     name: str
     argv: list[str]
-    process: subprocess.Popen | None = None
+    process: subprocess.Popen[bytes] | None = None  # None until spawned
     restarts: int = 0
     next_start: float = 0.0
     exits: list[int] = field(default_factory=list)
@@ -52,7 +54,7 @@ class StartFailed(Exception):
 class Launcher:
     def __init__(self, *, robot: str, robot_id: str, port: int, router_port: int, log_dir: str,
                  dummy: bool, allow_shutdown: bool, restart: bool, services: tuple[str, ...],
-                 log_level: str, echo=click.echo):
+                 log_level: str, echo: Callable[..., object] = click.echo):
         self.robot, self.port, self.router_port = robot, port, router_port
         self.restart = restart
         self.echo = echo
@@ -110,7 +112,7 @@ class Launcher:
         waiting = [c.name for c in self.children]
         while waiting:
             for child in (self.router, *self.children):
-                code = child.process.poll()
+                code = child.process.poll() if child.process else None
                 if code is not None:
                     raise StartFailed(f"{child.name} failed to start (exit code {code}, see above)")
             if self.stopping.is_set():
@@ -162,13 +164,13 @@ class Launcher:
         self.stopping.set()
         by_name = {c.name: c for c in (*self.children, self.router)}
         for names, grace in STOP_ORDER:
-            group = [by_name[n].process for n in names if n in by_name and by_name[n].process]
+            group = [p for n in names if n in by_name and (p := by_name[n].process) is not None]
             _terminate([p for p in group if p.poll() is None], grace)
         if self.bus is not None:
             self.bus.close()
 
 
-def _terminate(processes: list[subprocess.Popen], grace: float) -> None:
+def _terminate(processes: list[subprocess.Popen[bytes]], grace: float) -> None:
     for process in processes:
         process.send_signal(signal.SIGTERM)
     deadline = time.monotonic() + grace
@@ -196,7 +198,7 @@ def _check_free(kind: int, host: str, port: int, message: str) -> None:
 def _wait_port(port: int, timeout: float, child: Child | None = None) -> bool:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if child is not None and child.process.poll() is not None:
+        if child is not None and child.process is not None and child.process.poll() is not None:
             return False
         try:
             with socket.create_connection(("127.0.0.1", port), timeout=0.2):
@@ -206,7 +208,7 @@ def _wait_port(port: int, timeout: float, child: Child | None = None) -> bool:
     return False
 
 
-def run(**options) -> int:
+def run(**options: Any) -> int:
     launcher = Launcher(**options)
     signal.signal(signal.SIGTERM, lambda *_: launcher.stopping.set())
     signal.signal(signal.SIGINT, lambda *_: launcher.stopping.set())

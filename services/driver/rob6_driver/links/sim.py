@@ -9,7 +9,7 @@ from __future__ import annotations
 from rob6.messages import LinkStatus
 
 from ..loop import CycleRunner
-from ..motion import MotionCore
+from ..motion import CoreState, MotionCore
 from . import Link, Publish
 
 
@@ -18,11 +18,12 @@ class SimLink(Link):
 
     def __init__(self, core: MotionCore, publish: Publish):
         self.core = core
-        self.runner = CycleRunner(core.step, core.dt, publish, name="driver-cycle")
+        self._publish = publish
+        self.runner = CycleRunner(core.step, core.dt, self._cycle_done, name="driver-cycle")
 
-    @property
-    def missed(self) -> int:
-        return self.runner.stats.missed
+    def _cycle_done(self, state: CoreState) -> None:
+        self.missed = self.runner.stats.missed  # cycles the runner skipped (the machine was too busy)
+        self._publish(state)
 
     def start(self) -> None:
         self.runner.start()
