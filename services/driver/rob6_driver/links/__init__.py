@@ -17,14 +17,18 @@ when it can again.
 
 from __future__ import annotations
 
+import logging
+import queue
 from collections.abc import Callable
 
-from rob6.messages import LinkStatus
+from rob6.messages import LinkEvent, LinkStatus
 
 from ..motion import CoreState
 
 #: called with the core's state after every cycle (the service publishes it)
 Publish = Callable[[CoreState], None]
+
+log = logging.getLogger("rob6.driver")
 
 
 class Link:
@@ -54,3 +58,18 @@ class Link:
         "" when it is, else why not (the motion then fails with that error). Links
         whose robot is where the setpoint is (sim, rsi) return at once."""
         return ""
+
+    # ---- events: logged and published off the link's real-time thread
+    on_event: Callable[[LinkEvent], None] | None = None
+    _reports: queue.SimpleQueue[tuple[int, LinkEvent] | None]
+
+    def _report_loop(self) -> None:
+        """Log and publish the events the link queued in ``_reports``, until a None."""
+        while (item := self._reports.get()) is not None:
+            level, event = item
+            log.log(level, "driver: %s", event.message)
+            if self.on_event is not None:
+                try:
+                    self.on_event(event)
+                except Exception:
+                    log.debug("publishing a link event failed", exc_info=True)

@@ -261,7 +261,7 @@ class AdeptLink(Link):
         self._wake_w.setblocking(False)
         self._connect_errors: dict[str, str] = {}
         self._talked = False  # a request went out on the current motion connection
-        self._reports: queue.SimpleQueue = queue.SimpleQueue()
+        self._reports = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
         self.waiting_reason = (f"robot not connected (waiting for simple_message at "
                                f"{host}:{settings.motion_port}/{settings.state_port})")
@@ -735,16 +735,6 @@ class AdeptLink(Link):
         self._reports.put((level, LinkEvent(
             t=time.time(), event=event, message=message.removeprefix("driver: "), link="simple_message",
             cycle=self.core.cycle, late=self.late, q_actual=self.q_actual)))
-
-    def _report_loop(self) -> None:
-        while (item := self._reports.get()) is not None:
-            level, event = item
-            log.log(level, "driver: %s", event.message)
-            if self.on_event is not None:
-                try:
-                    self.on_event(event)
-                except Exception:
-                    log.debug("publishing a link event failed", exc_info=True)
 
 
 def _send_all(sock: socket.socket, data: bytes, timeout: float) -> None:

@@ -156,7 +156,7 @@ class RsiLink(Link):
         self._closing = False
         self._heard = 0.0  # monotonic time of the last answered packet
         self.realtime = False  # the receive thread got real-time scheduling
-        self._reports: queue.SimpleQueue = queue.SimpleQueue()
+        self._reports = queue.SimpleQueue()
         self._thread: threading.Thread | None = None
         self._reporter: threading.Thread | None = None
         self.waiting_reason = f"robot not connected (waiting for RSI on {self.address})"
@@ -387,16 +387,6 @@ class RsiLink(Link):
             t=time.time(), event=event, message=message.removeprefix("driver: "), cycle=self.core.cycle,
             late=self.late, start_pose=list(pkt.aspos) if start and pkt is not None else None,
             q_actual=list(pkt.aipos) if pkt is not None else None)))
-
-    def _report_loop(self) -> None:
-        while (item := self._reports.get()) is not None:
-            level, event = item
-            log.log(level, "driver: %s", event.message)
-            if self.on_event is not None:
-                try:
-                    self.on_event(event)
-                except Exception:
-                    log.debug("publishing a link event failed", exc_info=True)
 
 
 def _realtime_priority() -> bool:
