@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import queue
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 
 from rob6.messages import LinkEvent, LinkStatus
@@ -31,7 +32,7 @@ Publish = Callable[[CoreState], None]
 log = logging.getLogger("rob6.driver")
 
 
-class Link:
+class Link(ABC):
     """The plant as the service sees it."""
 
     kind = ""
@@ -44,14 +45,17 @@ class Link:
     #: where the plant says the robot is (deg), or None when it only follows the setpoint
     q_actual: list[float] | None = None
 
+    @abstractmethod
     def start(self) -> None:
-        raise NotImplementedError
+        """Begin following the plant (its clock drives the core from now on)."""
 
+    @abstractmethod
     def stop(self) -> None:
-        raise NotImplementedError
+        """Stop following the plant and release its sockets and threads."""
 
+    @abstractmethod
     def status(self, reset: bool = False) -> LinkStatus:
-        raise NotImplementedError
+        """The link's state and statistics; ``reset`` starts the latency statistics afresh."""
 
     def settle(self, q_final, timeout: float | None = None) -> str:
         """After a motion ended at ``q_final`` (deg): wait until the robot is there.
