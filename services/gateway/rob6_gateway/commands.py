@@ -598,5 +598,8 @@ async def direct_adept_cmd(gw, session, args):
     if not gw.options.allow_direct_adept_cmd:
         return error("DirectAdeptCmd is disabled on this server (it forwards raw controller "
                      "commands; start the gateway with --allow-direct-adept-cmd)")
-    return error("DirectAdeptCmd: the simulated Adept has no V+ command interpreter")
+    # neither link has a channel for text: the V+ server program's ports carry trajectory
+    # points, state and I/O signals only (deploy/adept/README.md)
+    return error("DirectAdeptCmd: raw V+ commands cannot reach the controller (neither the simulation "
+                 "nor the simple_message link has a V+ command channel); nothing was sent")
 
