@@ -41,6 +41,8 @@ log = logging.getLogger("rob6.ownership")
 
 #: how long a claimant watches for rivals; far above a token's propagation time
 SETTLE_S = 0.3
+#: how long an earlier claim without a live owner may take to vanish (a dead process' claim)
+STALE_CLAIM_S = 2.0
 #: a rival claim older than this is an owner that already runs, not one starting with us
 RUNNING_AFTER_S = 5.0
 #: how long a claimant waits for its first router link
@@ -79,16 +81,28 @@ class Claim:
         alive: set[str] = set()
 
         def on_alive(sample: zenoh.Sample) -> None:
+            instance = str(sample.key_expr).rsplit("/", 1)[-1]
             if sample.kind == zenoh.SampleKind.PUT:
-                alive.add(str(sample.key_expr).rsplit("/", 1)[-1])
+                alive.add(instance)
+            else:
+                alive.discard(instance)
 
         alive_subscriber = liveliness.declare_subscriber(
             bus.key("alive", self.service, "*"), zenoh.handlers.Callback(on_alive), history=True)
         self._token = liveliness.declare_token(bus.key("claim", self.service, self.me, str(self.epoch)))
         time.sleep(settle_s)
+        # an earlier claim without a live owner is a rival still starting (its claim stays) or
+        # the claim of a process that just died, say the one this process restarts (its token
+        # goes within moments): give it STALE_CLAIM_S to show which, or a restart would refuse
+        deadline = time.monotonic() + STALE_CLAIM_S
+        while True:
+            with self._lock:
+                earlier = sorted((e, i) for i, e in self._claims.items()
+                                 if i != self.me and (e, i) < (self.epoch, self.me))
+            if not earlier or alive - {self.me} or time.monotonic() >= deadline:
+                break
+            time.sleep(0.05)
         alive_subscriber.undeclare()
-        with self._lock:
-            earlier = sorted((e, i) for i, e in self._claims.items() if i != self.me and (e, i) < (self.epoch, self.me))
         holder = next(iter(sorted(alive - {self.me})), None) or _live_owner(bus, self.service)
         if holder or earlier:
             self.release()

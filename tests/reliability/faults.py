@@ -56,7 +56,7 @@ def _wait_recovered(system, client, service, old_pid, problems) -> bool:
         if ok(lines) and (old_pid is None or (pid and pid != old_pid)):
             return True
         time.sleep(0.2)
-    problems.append((service, "did not recover", lines))
+    problems.append((service, "did not recover", lines, system.output[-30:]))  # the services' last words
     return False
 
 
