@@ -28,17 +28,16 @@ from .latency import percentiles
 START = "0 -80 100 0 30 0"
 
 
-class KukaSim:
-    """kuka-rsi-sim as a process, asked for its status on its JSON-lines control channel."""
+class ControllerSim:
+    """A stand-in controller (``python -m <module> ... --control 127.0.0.1:0``) as a process,
+    asked for its status on its JSON-lines control channel (address in its ready line)."""
 
-    def __init__(self, rob6_port: int):
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "kuka_rsi_sim", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{rob6_port}",
-             "--control", "127.0.0.1:0", "--start-pose", START.replace(" ", ",")],
-            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    def __init__(self, module: str, *args: str):
+        self.proc = subprocess.Popen([sys.executable, "-m", module, *args, "--control", "127.0.0.1:0"],
+                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         assert self.proc.stdout is not None
-        ready = self.proc.stdout.readline()  # "kuka-rsi-sim ready: control HOST:PORT, ..."
-        host, port = ready.split("control ", 1)[1].split(",", 1)[0].rsplit(":", 1)
+        ready = self.proc.stdout.readline()  # "<name> ready: ... control HOST:PORT ..."
+        host, port = ready.split("control ", 1)[1].split(",", 1)[0].strip().rsplit(":", 1)
         self.control = socket.create_connection((host, int(port)), timeout=10).makefile("rwb")
 
     def status(self) -> dict:
@@ -70,7 +69,8 @@ def stream(link: str, seconds: float) -> dict:
         try:
             bus.wait_for(["driver"], 10)
             if link == "rsi":
-                kuka = KukaSim(udp)
+                kuka = ControllerSim("kuka_rsi_sim", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{udp}",
+                                     "--start-pose", START.replace(" ", ","))
                 while bus.request("driver", "link", LinkQuery()).state != "connected":
                     time.sleep(0.05)
             with system.client() as client:
@@ -108,30 +108,6 @@ def stream(link: str, seconds: float) -> dict:
     return result
 
 
-class AdeptSim:
-    """adept-sm-sim as a process, asked for its status on its JSON-lines control channel."""
-
-    def __init__(self, motion: int, state: int, timing: str):
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "adept_sm_sim", "--motion-port", str(motion), "--state-port", str(state),
-             "--control", "127.0.0.1:0", "--timing", timing],
-            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        assert self.proc.stdout is not None
-        ready = self.proc.stdout.readline()  # "adept-sm-sim ready: motion ..., state ..., control HOST:PORT"
-        host, port = ready.split("control ", 1)[1].split(",", 1)[0].strip().rsplit(":", 1)
-        self.control = socket.create_connection((host, int(port)), timeout=10).makefile("rwb")
-
-    def status(self) -> dict:
-        self.control.write(b'{"cmd": "status"}\n')
-        self.control.flush()
-        return json.loads(self.control.readline())
-
-    def close(self) -> None:
-        self.control.close()
-        self.proc.terminate()
-        self.proc.wait(10)
-
-
 ADEPT_START = [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]
 ADEPT_PTP = ([30.0, -50.0, 50.0, 10.0, 20.0, -20.0], [-20.0, -70.0, 60.0, -10.0, 40.0, 20.0], ADEPT_START)
 
@@ -140,7 +116,8 @@ def adept_stream(timing: str, seconds: float) -> dict:
     """PTP moves, then MoveRTJoints every 16 ms for ``seconds``, on ad850 over simple_message."""
     motion, state = free_port(), free_port()
     extra = {"ROB6_LINK": "simple_message", "ROB6_SM_MOTION_PORT": str(motion), "ROB6_SM_STATE_PORT": str(state)}
-    sim = AdeptSim(motion, state, timing)
+    sim = ControllerSim("adept_sm_sim", "--motion-port", str(motion), "--state-port", str(state),
+                        "--timing", timing)
     try:
         with tempfile.TemporaryDirectory() as logs, \
                 running("ad850", dummy=False, log_dir=logs, extra_env=extra) as system:
