@@ -25,6 +25,7 @@ from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController
+from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
 from tests.system import running
 
@@ -55,25 +56,6 @@ def adept_system(motion: int, state: int, order: str = "big", **kwargs):
 
 def controller(motion: int, state: int, *args: str, order: str = "big") -> AdeptController:
     return AdeptController("--motion-port", str(motion), "--state-port", str(state), *args, byte_order=order)
-
-
-def reply(client, command: str, timeout: float = 30.0) -> str:
-    """The whole reply: one line, or two when the first is an ERROR line."""
-    client.send(command + "\n")
-    text = client.read_lines(1, timeout)
-    return text + client.read_lines(1, timeout) if text.startswith("ERROR") else text
-
-
-def joints(client) -> np.ndarray:
-    return np.array([float(x) for x in client.ask("GetPositionJoints").split()])
-
-
-def wait_until(predicate, timeout: float = 20.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while (result := predicate()) is None or result is False:
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.02)
-    return result
 
 
 def link_status(system):

@@ -21,6 +21,7 @@ from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
+from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
 from tests.system import running
 
@@ -46,25 +47,6 @@ def rsi_system(port: int, **kwargs):
                    **kwargs)
 
 
-def reply(client, command: str, timeout: float = 30.0) -> str:
-    """The whole reply: one line, or two when the first is an ERROR line."""
-    client.send(command + "\n")
-    text = client.read_lines(1, timeout)
-    return text + client.read_lines(1, timeout) if text.startswith("ERROR") else text
-
-
-def joints(client) -> np.ndarray:
-    return np.array([float(x) for x in client.ask("GetPositionJoints").split()])
-
-
-def wait_until(predicate, timeout: float = 10.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while (result := predicate()) is None or result is False:
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.02)
-    return result
-
-
 def connected(client, kuka, system) -> np.ndarray:
     """Wait until rob6 follows the controller: the driver's link is up again and rob6's
     position is the controller's AIPos (a robot holding still shows that already while
@@ -72,8 +54,8 @@ def connected(client, kuka, system) -> np.ndarray:
     def follows():
         q = joints(client)
         return q if np.allclose(q, kuka.status()["aipos"], atol=POSITION_TOL) else None
-    wait_until(lambda: link_status(system).state == "connected", what="the RSI link to be up")
-    return wait_until(follows, what="rob6 to follow the controller")
+    wait_until(lambda: link_status(system).state == "connected", timeout=10.0, what="the RSI link to be up")
+    return wait_until(follows, timeout=10.0, what="rob6 to follow the controller")
 
 
 def assert_no_jump(status: dict) -> None:
@@ -193,7 +175,7 @@ def long_move(client, kuka) -> None:
     """Start a PTP of ~3 s from HOME (A1 0 -> 40) without waiting for its reply."""
     assert reply(client, "MovePTPJoints 0 -90 90 0 0 0") == "true\n"
     client.send("MovePTPJoints 40 -90 90 0 0 0\n")
-    wait_until(lambda: kuka.status()["aipos"][0] > 5.0, what="the robot to move")
+    wait_until(lambda: kuka.status()["aipos"][0] > 5.0, timeout=10.0, what="the robot to move")
 
 
 def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi):
