@@ -10,7 +10,8 @@
 #   wheelhouse/req/numeric.txt   what kinematics, planner and driver share beyond common (numpy)
 #   wheelhouse/req/<svc>-extra.txt  the rest of <svc>.txt (the service's own image layer)
 #   wheelhouse/req/<ctl>.txt     third-party requirements of a stand-in controller (controllers/*:
-#                                kuka-rsi-sim), installed on the bare runtime, without rob6-shared
+#                                kuka-rsi-sim, adept-sm-sim), installed on the bare runtime,
+#                                without rob6-shared
 #   wheelhouse/debs/*.deb        Debian packages some wheels expect from the system (libgomp1)
 #   wheelhouse/SHA256SUMS        checksums of all wheels and debs
 #
@@ -34,13 +35,13 @@ for arg in "$@"; do
     case "$arg" in
         --clean) clean=1 ;;
         --offline) offline=1 ;;
-        -h|--help) sed -n '2,22p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,23p' "$0"; exit 0 ;;
         *) echo "unknown argument: $arg" >&2; exit 2 ;;
     esac
 done
 
 services="gateway kinematics planner driver gripper recorder"
-controllers="kuka-rsi-sim"  # stand-in robot controllers with an image (profile rsi)
+controllers="kuka-rsi-sim adept-sm-sim"  # stand-in robot controllers with an image (profiles rsi, adept)
 system_debs="libgomp1"
 start=$(date +%s)
 [ "$clean" = 1 ] && rm -rf "$out"
