@@ -6,7 +6,8 @@ Builds offline (deploy/build-base.sh: reused when rob6/base:bookworm exists; dep
 `compose build` with the build network off), starts the stack under a unique project name,
 replays a conformance subset through the gateway port, kills kinematics mid-session, scales
 it, stops everything and reads the MCAP recordings from the volume; then the rsi profile (the
-driver on RSI drives the stand-in KR C4 container); then the secure profile:
+driver on RSI drives the stand-in KR C4 container) and the adept profile (the driver on
+simple_message drives the stand-in Adept container); then the secure profile:
 the router container's TLS and ACL are probed with zenoh-python (tests/deploy/zenoh_probe.py)
 and the system must still work through it. Every project is removed (`down -v`) at the end.
 
@@ -524,6 +525,70 @@ def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
         assert status["state"] == "running" and status["trips"] == before["trips"], status  # no trip in the move
         assert all(abs(a - b) < 2e-4 for a, b in zip(status["aipos"], target, strict=True)), status["aipos"]
         REPORT["rsi: controller after the move"] = {k: status[k] for k in ("cycle_ms", "late_total", "rtt_ms")}
+    finally:
+        stack.down()
+
+
+# ---------------------------------------------------------------------- tests: adept profile
+def test_adept_profile_drives_the_adept_container(built, entry_points):
+    """`ROB6_ROBOT=ad850 ROB6_LINK=simple_message compose --profile adept up`: the driver
+    connects to the stand-in Adept controller (its own container on the robot network, found
+    by the compose default ROB6_SM_HOST=adept-sm-sim) and streams a PTP motion to it over
+    simple_message; the move answers true only once the controller's arm is at the target."""
+    require(entry_points, *SERVICES)
+    control_port = free_port()
+    stack = Stack(f"rob6e2eadept{os.getpid()}", settings={
+        "ROB6_ROBOT": "ad850", "ROB6_LINK": "simple_message", "ROB6_DUMMY": "0",
+        "ROB6_ADEPT_SIM_CONTROL_PORT": str(control_port)}, profiles=("adept",))
+    try:
+        t = time.monotonic()
+        stack.compose("build", "adept-sm-sim", timeout=900)
+        stack.compose("up", "-d", "--no-build")
+        stack.wait_healthy(("router", *SERVICES, "adept-sm-sim"))
+        REPORT["adept: build the controller image, up until all healthy"] = f"{time.monotonic() - t:.0f} s"
+        control = socket.create_connection(("127.0.0.1", control_port), timeout=10).makefile("rwb")
+
+        def adept() -> dict:
+            control.write(b'{"cmd": "status"}\n')
+            control.flush()
+            return json.loads(control.readline())
+
+        # the driver is the client of both simple_message ports and retries until they answer
+        deadline = time.monotonic() + 90
+        while not ((before := adept())["clients"]["motion"] and before["clients"]["state"]):
+            assert time.monotonic() < deadline, f"the driver never connected to the Adept container: {before}"
+            time.sleep(0.5)
+        start = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # adept-sm-sim's default start pose (rob6's convention)
+        assert before["position_rob6_deg"] == start and not before["in_motion"], before
+        target = [30.0, -50.0, 50.0, 10.0, 20.0, -20.0]
+        with connect(stack.port) as client:
+            # ready once the controller has reported its position: a move to where the arm
+            # stands is then accepted (until then: ERROR: driver: robot not connected ...)
+            t = time.monotonic()
+            while (reply := client.ask("MovePTPJoints 0 0 0 0 0 0", timeout=30)) != "true\n":
+                reply += client.read_lines(1)  # ERROR: ... then false
+                assert reply.startswith("ERROR: driver: robot not connected") and reply.endswith("\nfalse\n"), reply
+                assert time.monotonic() - t < 30, f"rob6 does not follow the controller: {reply!r}"
+                time.sleep(0.2)
+            assert client.ask("GetPositionJoints") == "0.000000 " * 5 + "0.000000\n"
+            t = time.monotonic()
+            assert client.ask("MovePTPJoints " + " ".join(f"{x:g}" for x in target), timeout=60) == "true\n"
+            moved_s = time.monotonic() - t
+            assert [float(x) for x in client.ask("GetPositionJoints").split()] == target
+            status = adept()
+        control.close()
+        # the controller's own arm is at the target and at rest: true means the robot arrived
+        assert all(abs(a - b) < 2e-4 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
+        assert not status["in_motion"] and status["queue_length"] == 0, status
+        # the motion went over the wire as acknowledged points, none refused or malformed
+        assert status["points_executed"] > before["points_executed"], status
+        assert status["points_acknowledged"] > before["points_acknowledged"], status
+        assert status["points_refused"] == before["points_refused"] == 0, status
+        assert status["malformed_frames"] == 0 and status["error_code"] == 0 and not status["e_stopped"], status
+        assert status["clients"]["motion"] and status["clients"]["state"], status  # still the same link
+        REPORT["adept: controller after the move"] = {
+            "move_s": round(moved_s, 2), **{k: status[k] for k in (
+                "points_received", "points_acknowledged", "points_executed", "underruns", "ack_latency_ms")}}
     finally:
         stack.down()
 
