@@ -1,0 +1,356 @@
+"""The multi-host topology (deploy/multihost/docker-compose.yml) and its faults, for the tests
+and for bench/multihost.py.
+
+A host is a network namespace owned by its holder container (robot-pc, compute1, compute2,
+storage). Faults are made from this machine with the real tools:
+
+- ``netem(host, delay_ms, jitter_ms, loss)``: iptables NFQUEUE rules in the host's namespace
+  for its traffic with the robot PC, and deploy/multihost/nfq_netem.py holding/dropping the
+  queued packets (``tc qdisc ... netem`` where the kernel has sch_netem, else NFQUEUE: both
+  are run with ``nsenter -t <pid> -n``; root needed);
+- ``partition(host)``: ``docker network disconnect`` from the lab network, ``connect`` back
+  with the same address (a pulled cable, not a new machine);
+- ``docker kill`` / ``pause`` of a container (a router, a host).
+
+Images: ``rob6/<service>:<tag>`` as built by tests/deploy/test_compose_e2e.py (``built``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import random
+import shutil
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rob6.testing import Client
+
+REPO = Path(__file__).resolve().parents[3]
+COMPOSE_FILE = REPO / "deploy" / "multihost" / "docker-compose.yml"
+NETEM = REPO / "deploy" / "multihost" / "nfq_netem.py"
+TAG = os.environ.get("ROB6_TAG", "e2e")
+HOSTS = ("robot-pc", "compute1", "compute2", "storage")
+SERVICES = ("router-pc", "gateway", "planner", "driver", "gripper", "router-compute", "kinematics-c1",
+            "kinematics-c2", "recorder")
+REMOTE_KINEMATICS = ("kinematics-c1", "kinematics-c2")
+FK_LINE = "ForwardCalc 10 -20 30 40 50 60"
+JOINTS = (10.0, -20.0, 30.0, 40.0, 50.0, 60.0)
+
+
+def run(cmd: list[str], *, timeout: float = 300, check: bool = True, **kw) -> subprocess.CompletedProcess:
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kw)
+    if check and proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} -> {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return proc
+
+
+def compose_cmd() -> list[str] | None:
+    for cmd in (["docker", "compose"], ["docker-compose"]):
+        if shutil.which(cmd[0]) and subprocess.run([*cmd, "version"], capture_output=True).returncode == 0:
+            return cmd
+    return None
+
+
+def fault_tools_missing() -> str | None:
+    """Why faults cannot be made here (None: they can): root, nsenter, iptables, NFQUEUE."""
+    if os.geteuid() != 0:
+        return "making network faults needs root (nsenter into the containers' namespaces)"
+    for tool in ("nsenter", "iptables"):
+        if not shutil.which(tool):
+            return f"{tool} is not installed on this machine"
+    return None
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def free_subnet() -> str:
+    """A /24 for the lab network that no docker network uses yet."""
+    used = set()
+    for net in run(["docker", "network", "ls", "-q"]).stdout.split():
+        info = json.loads(run(["docker", "network", "inspect", net]).stdout)[0]
+        for cfg in (info.get("IPAM") or {}).get("Config") or []:
+            used.add(cfg.get("Subnet", ""))
+    while True:
+        subnet = f"10.{random.randint(100, 250)}.{random.randint(0, 255)}.0/24"
+        if subnet not in used:
+            return subnet
+
+
+@dataclass
+class Topology:
+    """One project of deploy/multihost/docker-compose.yml."""
+
+    project: str
+    replicas_c1: int = 2
+    local_kinematics: bool = False
+    port: int = field(default_factory=free_port)
+    subnet: str = field(default_factory=free_subnet)
+
+    def __post_init__(self) -> None:
+        cmd = compose_cmd()
+        if cmd is None:
+            raise RuntimeError("no docker compose here")
+        self._compose = cmd
+        self.env_file = Path(os.environ.get("TMPDIR", "/tmp")) / f"{self.project}.env"
+        self.env_file.write_text("")
+        self.env = {**os.environ, "ROB6_TAG": TAG, "ROB6_PORT": str(self.port), "ROB6_LAB_SUBNET": self.subnet,
+                    "ROB6_HEALTH_INTERVAL": "2s"}
+        self._netem: list[tuple[str, subprocess.Popen, list[list[str]]]] = []
+
+    # ------------------------------------------------------------------ compose
+    def compose(self, *args: str, timeout: float = 300, check: bool = True) -> subprocess.CompletedProcess:
+        profiles = ["--profile", "local-kinematics"] if self.local_kinematics else []
+        return run([*self._compose, "-p", self.project, "-f", str(COMPOSE_FILE), "--env-file", str(self.env_file),
+                    *profiles, *args], timeout=timeout, check=check, env=self.env, cwd=REPO)
+
+    def up(self, timeout: float = 240) -> float:
+        """Start everything; seconds until every service is healthy."""
+        start = time.monotonic()
+        services = [*HOSTS, *SERVICES, *(["kinematics-pc"] if self.local_kinematics else [])]
+        self.compose("up", "-d", "--no-build", "--scale", f"kinematics-c1={self.replicas_c1}", *services)
+        self.wait_healthy(timeout=timeout)
+        return time.monotonic() - start
+
+    def containers(self, service: str | None = None) -> list[str]:
+        filters = ["--filter", f"label=com.docker.compose.project={self.project}"]
+        if service:
+            filters += ["--filter", f"label=com.docker.compose.service={service}"]
+        return run(["docker", "ps", "-a", "-q", *filters]).stdout.split()
+
+    def container(self, service: str) -> str:
+        ids = self.containers(service)
+        if not ids:
+            raise RuntimeError(f"no container for {service} in {self.project}")
+        return ids[0]
+
+    def inspect(self, container: str, fmt: str) -> str:
+        return run(["docker", "inspect", "-f", fmt, container]).stdout.strip()
+
+    def wait_healthy(self, services: tuple[str, ...] | None = None, timeout: float = 240) -> None:
+        deadline = time.monotonic() + timeout
+        wanted = services or (*SERVICES, *(["kinematics-pc"] if self.local_kinematics else []))
+        while True:
+            pending = []
+            for service in wanted:
+                ids = self.containers(service)
+                if not ids:
+                    pending.append(f"{service}: no container")
+                for cid in ids:
+                    state = json.loads(self.inspect(cid, "{{json .State}}"))
+                    if (state.get("Health") or {}).get("Status", "none") != "healthy":
+                        pending.append(f"{service} {cid[:12]}: {state['Status']}")
+            if not pending:
+                return
+            if time.monotonic() > deadline:
+                logs = self.compose("logs", "--tail", "20", check=False).stdout
+                raise RuntimeError(f"not healthy after {timeout:.0f} s: {pending}\n{logs[-5000:]}")
+            time.sleep(1)
+
+    def down(self) -> None:
+        for host in list({h for h, _p, _r in self._netem}):
+            self.clear_netem(host)
+        if os.environ.get("ROB6_E2E_KEEP") == "1":
+            print(f"\nROB6_E2E_KEEP=1: project {self.project} left running")
+            return
+        self.compose("down", "-v", "--remove-orphans", "-t", "3", check=False, timeout=180)
+        self.env_file.unlink(missing_ok=True)
+
+    # ------------------------------------------------------------------ hosts
+    @property
+    def lab(self) -> str:
+        return f"{self.project}_lab"
+
+    def pid(self, host: str) -> int:
+        return int(self.inspect(self.container(host), "{{.State.Pid}}"))
+
+    def ip(self, host: str) -> str:
+        return self.inspect(self.container(host), "{{(index .NetworkSettings.Networks \"%s\").IPAddress}}" % self.lab)
+
+    # ------------------------------------------------------------------ faults
+    def netem(self, host: str, *, delay_ms: float = 0.0, jitter_ms: float = 0.0, loss: float = 0.0,
+              peer: str = "robot-pc") -> None:
+        """Delay/jitter/loss on every packet between ``host`` and ``peer``, both ways (so
+        ``delay_ms`` is the added one-way delay), until ``clear_netem(host)``."""
+        self.clear_netem(host)
+        pid, peer_ip = self.pid(host), self.ip(peer)
+        queue = 10 + HOSTS.index(host)
+        ns = ["nsenter", "-t", str(pid), "-n"]
+        rules = [["OUTPUT", "-d", peer_ip], ["INPUT", "-s", peer_ip]]
+        proc = subprocess.Popen([*ns, sys.executable, str(NETEM), "--queue", str(queue), "--delay-ms", str(delay_ms),
+                                 "--jitter-ms", str(jitter_ms), "--loss", str(loss)],
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        line = proc.stdout.readline() if proc.stdout else ""
+        if not line.startswith("nfq_netem: queue"):
+            proc.kill()
+            raise RuntimeError(f"nfq_netem did not start in {host}: {line}")
+        added = []
+        for chain, *match in rules:
+            run([*ns, "iptables", "-I", chain, *match, "-j", "NFQUEUE", "--queue-num", str(queue), "--queue-bypass"])
+            added.append([*ns, "iptables", "-D", chain, *match, "-j", "NFQUEUE", "--queue-num", str(queue),
+                          "--queue-bypass"])
+        self._netem.append((host, proc, added))
+
+    def clear_netem(self, host: str) -> None:
+        for entry in [e for e in self._netem if e[0] == host]:
+            _host, proc, rules = entry
+            for rule in rules:
+                run(rule, check=False)
+            proc.terminate()
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            self._netem.remove(entry)
+
+    @contextlib.contextmanager
+    def partitioned(self, *hosts: str) -> Iterator[None]:
+        """The hosts lose the lab network (cable pulled) until the block ends."""
+        addresses = {h: self.ip(h) for h in hosts}
+        for host in hosts:
+            run(["docker", "network", "disconnect", self.lab, self.container(host)])
+        try:
+            yield
+        finally:
+            for host, address in addresses.items():
+                run(["docker", "network", "connect", "--ip", address, "--alias", host, self.lab, self.container(host)])
+
+    # ------------------------------------------------------------------ the client's side
+    def client(self, attempts: int = 50) -> Client:
+        for _ in range(attempts):
+            try:
+                client = Client(self.port, handshake=False, timeout=15)
+            except OSError:
+                time.sleep(0.2)
+                continue
+            if client.greeting.startswith("ERROR: server busy"):
+                client.close()
+                time.sleep(0.2)
+                continue
+            assert client.ask("Hello Robot") == "accepted\n"
+            return client
+        raise RuntimeError(f"cannot connect to the gateway on port {self.port}")
+
+
+def backward_line(client: Client) -> str:
+    """A BackwardCalc line that succeeds (the pose of FK_LINE and its status)."""
+    pose, status = client.ask(FK_LINE, lines=2, timeout=15).splitlines()
+    return f"BackwardCalc {pose.strip()} {status.strip()}"
+
+
+def correct(reply: str) -> bool:
+    try:
+        values = [float(x) for x in reply.split()]
+    except ValueError:
+        return False
+    return len(values) == 6 and all(abs(a - b) < 1e-3 for a, b in zip(values, JOINTS, strict=True))
+
+
+@dataclass
+class Call:
+    t: float  # monotonic time the call was sent
+    seconds: float
+    reply: str
+
+    @property
+    def ok(self) -> bool:
+        return correct(self.reply)
+
+    @property
+    def error(self) -> bool:
+        return self.reply.startswith("ERROR")
+
+
+def calls(client: Client, line: str, count: int, timeout: float = 10.0) -> list[Call]:
+    out = []
+    for _ in range(count):
+        t = time.monotonic()
+        reply = client.ask(line, timeout=timeout)
+        out.append(Call(t, time.monotonic() - t, reply))
+    return out
+
+
+class Load:
+    """A client calling ``line`` in a loop on its own thread until stopped."""
+
+    def __init__(self, client: Client, line: str, pause: float = 0.01, timeout: float = 10.0):
+        self.client, self.line, self.pause, self.timeout = client, line, pause, timeout
+        self.calls: list[Call] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            t = time.monotonic()
+            reply = self.client.ask(self.line, timeout=self.timeout)
+            self.calls.append(Call(t, time.monotonic() - t, reply))
+            if not reply:  # no answer within the timeout: a hang; stop here
+                return
+            time.sleep(self.pause)
+
+    def __enter__(self) -> "Load":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(self.timeout + 5)
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    if not ordered:
+        return float("nan")
+    return ordered[min(len(ordered) - 1, max(0, round(q / 100 * (len(ordered) - 1))))]
+
+
+def recovery(calls_: list[Call], since: float, streak: int = 20) -> float | None:
+    """Seconds from ``since`` until the start of the first run of ``streak`` successful calls
+    (a lone late reply on a busy machine afterwards does not count as not recovered)."""
+    after = [c for c in calls_ if c.t >= since]
+    run_start, length = None, 0
+    for c in after:
+        if c.ok:
+            run_start = c.t if length == 0 else run_start
+            length += 1
+            if length >= streak and run_start is not None:
+                return max(0.0, run_start - since)
+        else:
+            length = 0
+    return None
+
+
+def ensure_images() -> str:
+    """The rob6 images with tag TAG, as tests/deploy/test_compose_e2e.py builds them (base image
+    reused, wheelhouse offline when complete, `compose build` of docker-compose.yml); returns
+    what it did. Docker's layer cache makes this a few seconds when nothing changed."""
+    base = os.environ.get("ROB6_BASE_IMAGE", "rob6/base:bookworm")
+    start = time.monotonic()
+    if run(["docker", "image", "inspect", base], check=False).returncode != 0:
+        if os.geteuid() != 0:
+            raise RuntimeError(f"{base} missing and deploy/build-base.sh needs root")
+        run(["bash", str(REPO / "deploy" / "build-base.sh")], timeout=1200)
+    if run(["bash", str(REPO / "deploy" / "wheelhouse.sh"), "--offline"], check=False, timeout=600).returncode != 0:
+        run(["bash", str(REPO / "deploy" / "wheelhouse.sh")], timeout=1200)
+    cmd = compose_cmd()
+    assert cmd is not None
+    env_file = Path(os.environ.get("TMPDIR", "/tmp")) / "rob6mhbuild.env"
+    env_file.write_text("")
+    env = {**os.environ, "ROB6_TAG": TAG, "ROB6_BASE_IMAGE": base}
+    services = ("router", "gateway", "kinematics", "planner", "driver", "gripper", "recorder")
+    run([*cmd, "-p", "rob6mhbuild", "-f", str(REPO / "docker-compose.yml"), "--env-file", str(env_file), "build",
+         *services], timeout=1800, env=env, cwd=REPO)
+    env_file.unlink(missing_ok=True)
+    return f"images rob6/*:{TAG} ready in {time.monotonic() - start:.0f} s"
