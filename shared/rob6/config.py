@@ -21,6 +21,8 @@ import click
 from .robots import ROBOT_TYPES
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+#: the live view's port (Foxglove WebSocket, served by the recorder; ROB6_LIVE_PORT, 0 = off)
+DEFAULT_LIVE_PORT = 8765
 #: how the driver reaches the robot: the simulation, a KUKA KR C4 over RSI, or an Adept
 #: V+ controller over ROS-Industrial simple_message (``adept`` is another name for it)
 LINKS = ("sim", "rsi", "simple_message", "adept")

@@ -29,7 +29,7 @@ from typing import Any
 import click
 
 from .bus import Bus
-from .config import BusSettings
+from .config import DEFAULT_LIVE_PORT, BusSettings
 from .ownership import EXIT_REFUSED
 
 #: stop order, and how long each group may take before it is killed
@@ -71,6 +71,7 @@ class Launcher:
         self.children = [Child(name, [sys.executable, "-m", f"rob6_{name}"]) for name in services]
         self.stopping = threading.Event()
         self.bus: Bus | None = None
+        self.live_url: str | None = None  # the live view's address, once preflight checked its port
 
     # ------------------------------------------------------------------ processes
     def _spawn(self, child: Child) -> None:
@@ -84,6 +85,8 @@ class Launcher:
             _check_free(socket.SOCK_STREAM, bind, self.port,
                         f"the client port {bind}:{self.port} is in use: is rob6 (or rob6server) already "
                         f"running? Stop it, or choose another port with ROB6_PORT")
+        if "recorder" in names:
+            self._live_preflight()
         _check_free(socket.SOCK_STREAM, "127.0.0.1", self.router_port,
                     f"the Zenoh router port 127.0.0.1:{self.router_port} is in use: is rob6 already running? "
                     f"Stop it, or choose another port with ROB6_ROUTER_PORT")
@@ -95,6 +98,28 @@ class Launcher:
             _check_free(socket.SOCK_DGRAM, host.strip("[]"), int(port),
                         f"the RSI port udp/{listen} is in use: is another rob6 driving the robot? "
                         f"Stop it, or set ROB6_RSI_LISTEN")
+
+    def _live_preflight(self) -> None:
+        """The recorder serves the live view: its address, or off when its port is taken (a
+        view is not worth refusing to drive the robot for)."""
+        text = self.env.get("ROB6_LIVE_PORT", str(DEFAULT_LIVE_PORT)).strip() or "0"
+        if not text.isdigit():
+            raise StartFailed(f"ROB6_LIVE_PORT={text!r}: expected a port number (0 = no live view)")
+        port = int(text)
+        if port == 0:
+            return
+        bind = self.env.get("ROB6_BIND", "0.0.0.0")
+        try:
+            _check_free(socket.SOCK_STREAM, bind, port, "")
+        except StartFailed:
+            self.echo(f"rob6: live view off: port {bind}:{port} is in use (another rob6?); "
+                      f"choose one with ROB6_LIVE_PORT", err=True)
+            self.env["ROB6_LIVE_PORT"] = "0"
+            return
+        self.env["ROB6_LIVE_PORT"] = str(port)
+        scheme = "wss" if self.env.get("ROB6_LIVE_TLS_CERT") else "ws"
+        host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
+        self.live_url = f"{scheme}://{host}:{port}"
 
     def start(self, ready_timeout: float = 60.0) -> None:
         """Start the router and every service; returns once all are alive, else raises StartFailed."""
@@ -216,6 +241,9 @@ def run(**options: Any) -> int:
         launcher.start()
         click.echo(f"rob6 ready: robot {launcher.robot} on 127.0.0.1:{launcher.port} "
                    f"(Zenoh router {launcher.endpoint}); Ctrl-C stops everything", err=True)
+        if launcher.live_url:
+            click.echo(f"live view: {launcher.live_url} (open in Foxglove: Open connection > "
+                       f"Foxglove WebSocket)", err=True)
         return launcher.supervise()
     except StartFailed as exc:
         click.echo(f"rob6: {exc}", err=True)

@@ -11,6 +11,7 @@ from rob6.bus import Bus
 from rob6.config import BusSettings, bus_options
 from rob6.robots import get_robot
 
+from .live import DEFAULT_PORT, env_tls
 from .service import RecorderService
 
 
@@ -22,11 +23,17 @@ from .service import RecorderService
               help="Start a new system recording after this many MiB.")
 @click.option("--rotate-minutes", envvar="ROB6_ROTATE_MINUTES", default=60, show_default=True, type=int,
               help="Start a new system recording after this many minutes.")
-def main(settings: BusSettings, log_level: str, log_dir: str, rotate_mb: int, rotate_minutes: int) -> None:
-    """Record the robot's bus, client sessions, joint states and logs."""
+@click.option("--live-port", envvar="ROB6_LIVE_PORT", default=DEFAULT_PORT, show_default=True, type=int,
+              help="Port of the live view (Foxglove WebSocket); 0 = off [env ROB6_LIVE_PORT].")
+@click.option("--bind", envvar="ROB6_BIND", default="0.0.0.0", show_default=True,
+              help="Address the live view listens on, like the gateway [env ROB6_BIND].")
+def main(settings: BusSettings, log_level: str, log_dir: str, rotate_mb: int, rotate_minutes: int,
+         live_port: int, bind: str) -> None:
+    """Record the robot's bus, client sessions, joint states and logs; serve the live view."""
 
     def setup(bus: Bus) -> Callable[[], None]:
         recorder = RecorderService(bus, get_robot(settings.robot), log_dir,
+                                   live_port=live_port, live_bind=bind, live_tls=env_tls(),
                                    rotate_bytes=rotate_mb << 20, rotate_seconds=rotate_minutes * 60)
         recorder.start()
         return recorder.stop

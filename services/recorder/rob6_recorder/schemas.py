@@ -237,6 +237,7 @@ TOPIC_SCHEMAS: list[tuple[re.Pattern[str], SchemaSpec]] = [
     (re.compile(r"^/driver/link$"), SchemaSpec("rob6.LinkEvent", LINK_EVENT)),
     (re.compile(r"^/gripper/state$"), SchemaSpec("rob6.GripperState", GRIPPER_STATE)),
     (re.compile(r"^/log$"), SchemaSpec("foxglove.Log", FOXGLOVE_LOG)),
+    (re.compile(r"^/commands$"), SchemaSpec("foxglove.Log", FOXGLOVE_LOG)),  # live view: client lines, replies
     (re.compile(r"^/tf$"), SchemaSpec("foxglove.FrameTransforms", FOXGLOVE_FRAME_TRANSFORMS)),
     (re.compile(r"^/flange$"), SchemaSpec("foxglove.PosesInFrame", FOXGLOVE_POSES_IN_FRAME)),
     (re.compile(r"^/robot_description$"), SchemaSpec("std_msgs/String", STD_STRING)),

@@ -4,6 +4,9 @@ It subscribes to ``rob6/<id>/**``. Services publish a copy of each request/reply
 served (``trace/<service>/<op>``), the gateway a copy of each client line and reply
 (``trace/gateway/session``) and of each session's start and end; states and logs are
 published anyway. ``Recorder.submit`` never blocks, so the Zenoh callback stays short.
+
+With ``live_port`` (not 0) the recorder's writer thread also feeds the live view
+(``live.LiveView``, a Foxglove WebSocket server): the same records, as they are written.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from rob6.messages import ClientExchange, SessionEvent
 from rob6.robots import RobotModel
 
 from .adapters import bus_trace_records
+from .live import LiveView, start_live
 from .writer import Recorder
 
 log = logging.getLogger("rob6.recorder")
@@ -32,10 +36,16 @@ TOPICS = {"driver/state": "/driver/joint_state", "driver/link": "/driver/link", 
 
 
 class RecorderService:
-    def __init__(self, bus: Bus, robot: RobotModel, directory: str, **options: Any) -> None:
+    def __init__(self, bus: Bus, robot: RobotModel, directory: str, *, live_port: int = 0,
+                 live_bind: str = "0.0.0.0", live_tls: tuple[str | None, str | None] = (None, None),
+                 **options: Any) -> None:
         self.bus = bus
-        self.recorder = Recorder(directory, robot.name, bus.settings.robot_id,
-                                 urdf=(URDF_DIR / f"{robot.geometry}.urdf").read_text(), **options)
+        urdf = (URDF_DIR / f"{robot.geometry}.urdf").read_text()
+        self.live: LiveView | None = start_live(
+            urdf, port=live_port, bind=live_bind, settings=bus.settings, tls_cert=live_tls[0],
+            tls_key=live_tls[1], name=f"rob6 {robot.name} {bus.settings.robot_id}")
+        self.recorder = Recorder(directory, robot.name, bus.settings.robot_id, urdf=urdf,
+                                 live=self.live.publish if self.live is not None else None, **options)
         self._prefix = len(bus.prefix) + 1
         self._exchange = msgspec.json.Decoder(ClientExchange)
         self._event = msgspec.json.Decoder(SessionEvent)
@@ -49,6 +59,8 @@ class RecorderService:
         # stop listening first, then write out what is queued: nothing arrives after the close
         self._subscriber.undeclare()
         self.recorder.close()
+        if self.live is not None:
+            self.live.close()
 
     def on_sample(self, key: str, payload: bytes) -> None:
         now = time.time_ns()

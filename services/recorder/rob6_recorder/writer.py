@@ -101,6 +101,9 @@ class Recorder:
       ``max_backlog``: queued records before dropping; ``warn_backlog``: warn above.
       ``session_linger``: keep a session file open this long after its close event
       so late bus traces of its last command still land in it.
+      ``live``: ``live(topic, log_time, data, payload)`` is called on the writer thread
+      after each record (derived ones included) went to the files: the live view
+      (``live.LiveView.publish``). If it raises, it is not called again (one error).
     """
 
     def __init__(self, directory: str | os.PathLike[str], robot: str, robot_id: str, *,
@@ -113,7 +116,8 @@ class Recorder:
                  max_backlog: int = 100_000, warn_backlog: int = 10_000,
                  session_linger: float = 0.5, tf_max_rate: float = 50.0,
                  metadata: dict[str, str] | None = None,
-                 clock: Callable[[], int] = time.time_ns):
+                 clock: Callable[[], int] = time.time_ns,
+                 live: Callable[[str, int, Any, bytes], None] | None = None):
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.chunk_interval = chunk_interval
@@ -145,6 +149,7 @@ class Recorder:
             compression=compression, session_linger=session_linger, metadata=dict(metadata or {}),
             clock=clock, on_error=self._error)
         self._derived = JointStateDerivation(urdf, fk, joint_map, tf_max_rate)
+        self._live = live
 
     # ----------------------------------------------------------------- lifecycle
     def start(self) -> "Recorder":
@@ -319,7 +324,14 @@ class Recorder:
         if topic.endswith("/event") and self._files.session_of(topic) is not None:
             ev = as_dict(data)
             closing = isinstance(ev, dict) and str(ev.get("event", "")).lower() in _CLOSE_EVENTS
-        self._files.write(topic, log_time, publish_time, encode(data), closing=closing)
+        payload = encode(data)
+        self._files.write(topic, log_time, publish_time, payload, closing=closing)
+        if self._live is not None:
+            try:
+                self._live(topic, log_time, data, payload)
+            except Exception as exc:  # the live view must not stop the recording
+                self._live = None
+                self._error("live view failed (%r): no live view from now on", exc)
         if topic == JOINT_STATE_TOPIC and self._derived.active:
             for derived_topic, payload in self._derived.derive(data, log_time):
                 self._write_record(derived_topic, log_time, log_time, payload)

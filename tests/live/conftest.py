@@ -1,0 +1,8 @@
+import pytest
+
+from tests.system import free_port
+
+
+@pytest.fixture
+def live_port() -> int:
+    return free_port()
