@@ -8,6 +8,8 @@
                     [--robot TYPE] [--tolerance 1e-5] [--session N]
     rob6-log replay-joints FILE [--speed X]      (prints JSON lines; the service
                                                   publishes them on the bus)
+    rob6-log play FILE [--port 8765] [--speed X] [--paused] [--loop]
+                                                 (into the live view: watch it in Foxglove)
 
 Until the console script is declared, run it as ``python -m rob6_recorder.cli``.
 Exit codes: 0 ok, 1 differences / damaged file, 2 usage or connection error.
@@ -206,6 +208,44 @@ def replay_joints_cmd(file: str, speed: float, topic: str) -> None:
 
     n = replay_joints(_existing(file), publish, speed=speed or None, topic=topic)
     click.echo(f"{n} joint states", err=True)
+
+
+@main.command()
+@click.argument("file")
+@click.option("--port", envvar="ROB6_LIVE_PORT", default=8765, show_default=True, type=int,
+              help="Live-view port to serve on (0 = any free port) [env ROB6_LIVE_PORT].")
+@click.option("--bind", envvar="ROB6_BIND", default="127.0.0.1", show_default=True,
+              help="Address to listen on [env ROB6_BIND].")
+@click.option("--speed", type=float, default=1.0, show_default=True,
+              help="Pacing factor (Foxglove's speed control changes it).")
+@click.option("--paused", is_flag=True, help="Start paused (press play in Foxglove).")
+@click.option("--loop", is_flag=True, help="Start again at the end.")
+@click.option("--exit-at-end", is_flag=True, help="Stop serving at the end (scripts, tests).")
+def play(file: str, port: int, bind: str, speed: float, paused: bool, loop: bool, exit_at_end: bool) -> None:
+    """Play a recording into the live view (Foxglove WebSocket), seekable from Foxglove."""
+    import signal
+
+    from .play import play as make_player
+
+    if speed <= 0:
+        raise click.UsageError("--speed must be > 0")
+    try:
+        player = make_player(_existing(file), host=bind, port=port, speed=speed, paused=paused, loop=loop)
+    except NotMcap as exc:
+        raise click.ClickException(str(exc)) from exc
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from exc
+    except RuntimeError as exc:  # the port is taken
+        raise click.ClickException(f"cannot serve on {bind}:{port}: {exc}") from exc
+    seconds = (player.end_ns - player.start_ns) / 1e9
+    click.echo(f"live view: {player.view.url} (open in Foxglove: Open connection > Foxglove WebSocket)", err=True)
+    click.echo(f"playing {file}: {len(player.items)} messages, {seconds:.1f} s, at {speed:g}x"
+               f"{' (paused)' if paused else ''}; Ctrl-C stops", err=True)
+    signal.signal(signal.SIGTERM, lambda *_: player.stop())
+    try:
+        player.run(exit_at_end=exit_at_end)
+    except KeyboardInterrupt:
+        player.stop()
 
 
 if __name__ == "__main__":

@@ -53,6 +53,8 @@ log = logging.getLogger("rob6.recorder.live")
 DEFAULT_PORT = DEFAULT_LIVE_PORT
 COMMANDS_TOPIC = "/commands"
 URDF_ASSET = "package://rob6/robot.urdf"
+#: advertised from the start (a panel can subscribe before the first message)
+STANDARD_TOPICS = ("/tf", "/driver/joint_state", "/driver/link", "/gripper/state", "/log", COMMANDS_TOPIC)
 LATCHED = frozenset({ROBOT_DESCRIPTION_TOPIC, "/tf", "/flange", "/driver/joint_state", "/driver/link",
                      "/gripper/state", "/recorder/status"})
 
@@ -185,6 +187,11 @@ class LiveView:
                     message_encoding="json", context=self.context)
             return ch
 
+    def advertise(self, topics: Sequence[str]) -> None:
+        """Create these channels now (clients see them before their first message)."""
+        for topic in topics:
+            self.channel(topic)
+
     def publish(self, topic: str, log_time: int, data: Any, payload: bytes | None = None) -> None:
         """One record (``data`` a dict/Struct/JSON bytes; ``payload`` its JSON if known)."""
         if self.closed:
@@ -248,6 +255,7 @@ def start_live(urdf: str | None, *, port: int, bind: str, settings: BusSettings 
         return None
     try:
         view = LiveView(host=bind, port=port, urdf=urdf, name=name, tls=tls, **options)
+        view.advertise(STANDARD_TOPICS)
     except Exception as exc:  # the port in use, a bad certificate: no live view, recording goes on
         log.error("live view not started on %s:%d: %s", bind, port, exc)
         return None
