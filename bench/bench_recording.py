@@ -10,6 +10,12 @@ at ``rate`` records/s for ``seconds``; reports drops (target 0 at 50,000/s) and 
 peak backlog. Both with a client session open (every record goes to the session
 file *and* the system file) or not. ``bench_replay``: replays a recorded session of
 ``lines`` commands as fast as possible against a local fake server (lines/s).
+
+``bench_writers``: the maintained MCAP writers on their own (foxglove-sdk's, which the
+recorder uses, and the ``mcap`` package's), one file and two (a session open), with
+joint-state payloads already encoded. ``live_table(table)`` (for ``bench/__main__.py``):
+gateway round trips with the live view off and on (a Foxglove client subscribed to every
+channel), same run.
 """
 
 from __future__ import annotations
@@ -20,6 +26,8 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
+
+import msgspec
 
 from rob6_recorder.replay import load_script, replay
 from rob6_recorder.writer import Recorder
@@ -125,6 +133,115 @@ def bench_replay(lines: int = 2000) -> dict:
         shutil.rmtree(d, ignore_errors=True)
 
 
+def bench_writers(n: int = 300_000) -> list[dict]:
+    """Messages/s of foxglove-sdk's and the ``mcap`` package's writers, 1 and 2 files."""
+    import foxglove
+    from foxglove.mcap import MCAPWriteOptions
+    from mcap.writer import CompressionType, Writer
+
+    encoder = msgspec.json.Encoder()
+    payloads = [encoder.encode(_state(i)) for i in range(n)]
+    schema = b'{"type": "object"}'
+    d = Path(tempfile.mkdtemp(prefix="rob6-bench-"))
+    rows = []
+    try:
+        for files in (1, 2):
+            fhs = [open(d / f"mcap{files}_{k}.mcap", "wb") for k in range(files)]
+            writers = [Writer(fh, compression=CompressionType.ZSTD) for fh in fhs]
+            channels = []
+            for w in writers:
+                w.start()
+                channels.append(w.register_channel("/driver/joint_state", "json",
+                                                   w.register_schema("rob6.JointState", "jsonschema", schema)))
+            t = time.time_ns()
+            start = time.perf_counter()
+            for i, p in enumerate(payloads):
+                for w, ch in zip(writers, channels, strict=True):
+                    w.add_message(ch, t + i, p, t + i, i)
+            for w, fh in zip(writers, fhs, strict=True):
+                w.finish()
+                fh.close()
+            rows.append({"writer": "mcap package (Python)", "files": files,
+                         "msgs_per_s": n / (time.perf_counter() - start),
+                         "bytes_per_msg": (d / f"mcap{files}_0.mcap").stat().st_size / n})
+
+            contexts = [foxglove.Context() for _ in range(files)]
+            sinks = [foxglove.open_mcap(d / f"fox{files}_{k}.mcap", context=c,
+                                        writer_options=MCAPWriteOptions(compression_threads=0))
+                     for k, c in enumerate(contexts)]
+            bases = [c._create_channel("/driver/joint_state", message_encoding="json", schema=foxglove.Schema(
+                name="rob6.JointState", encoding="jsonschema", data=schema)) for c in contexts]
+            start = time.perf_counter()
+            last = time.monotonic()
+            for i, p in enumerate(payloads):
+                for b in bases:
+                    b.log(p, t + i)
+                if i % 4096 == 0 and time.monotonic() - last >= 0.5:  # the recorder's chunk_interval
+                    for sink in sinks:
+                        sink.flush()
+                    last = time.monotonic()
+            for sink in sinks:
+                sink.close()
+            rows.append({"writer": "foxglove-sdk (Rust)", "files": files,
+                         "msgs_per_s": n / (time.perf_counter() - start),
+                         "bytes_per_msg": (d / f"fox{files}_0.mcap").stat().st_size / n})
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+    return rows
+
+
+def bench_live(count: int = 2000) -> dict[str, dict[str, list[float]]]:
+    """Gateway round trips (s) with the live view off, then on with a Foxglove client
+    subscribed to every channel the live view advertises."""
+    from bench.latency import measure
+    from rob6.testing import free_port, running
+    from tests.live.ws_client import FoxgloveClient
+
+    commands = {"GetPositionJoints": ("GetPositionJoints", 1), "PingRobot": ("PingRobot 1 0", 1),
+                "ForwardCalc": ("ForwardCalc 10 -20 30 40 50 60", 2),
+                "MovePTPJoints": ("MovePTPJoints 0 -90 90 0 0 0", 1)}
+    results: dict[str, dict[str, list[float]]] = {}
+    for case in ("off", "on"):
+        port = free_port()
+        env = {"ROB6_LIVE_PORT": str(port) if case == "on" else "0"}
+        with tempfile.TemporaryDirectory() as logs, running("kr16", dummy=True, log_dir=logs,
+                                                            extra_env=env) as system:
+            fox = None
+            if case == "on":
+                fox = FoxgloveClient(f"ws://127.0.0.1:{port}")
+                fox.subscribe(*fox.wait_topics(["/tf", "/driver/joint_state"]))
+            try:
+                with system.client() as client:
+                    measure(client, "GetRobot", 1, 50, warmup=0)  # session channels appear
+                    if fox is not None:  # everything advertised by now, bus traffic included
+                        fox.subscribe(*(t for t in fox.topics() if t not in fox._subs.values()))
+                    results[case] = {name: measure(client, cmd, lines, count)
+                                     for name, (cmd, lines) in commands.items()}
+                if fox is not None:
+                    results[case]["_received"] = [float(sum(len(v) for v in fox.messages.values()))]
+            finally:
+                if fox is not None:
+                    fox.close()
+    return results
+
+
+def live_table(table) -> None:
+    """The live view's cost on the real-time path: p50/p99 round trips, off vs on."""
+    from bench.latency import percentiles
+
+    count = 2000
+    r = bench_live(count)
+    rows = []
+    for name in r["off"]:
+        p50_off, p99_off = percentiles(r["off"][name])
+        p50_on, p99_on = percentiles(r["on"][name])
+        rows.append((name, f"{p50_off:.3f}", f"{p50_on:.3f}", f"{(p50_on / p50_off - 1) * 100:+.1f} %",
+                     f"{p99_off:.3f}", f"{p99_on:.3f}"))
+    table(f"Live view cost (gateway round trips, ms, {count} each; on = a Foxglove client subscribed to every "
+          f"channel, {r['on']['_received'][0]:,.0f} messages received)",
+          ("request", "p50 off", "p50 on", "p50 change", "p99 off", "p99 on"), rows)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true")
@@ -138,6 +255,9 @@ def main() -> None:
     for r in rows:
         print(f"{r['case']:<48} {r['submit_us']:>9.2f} {r['msgs_per_s']:>10.0f} "
               f"{r['dropped']:>8} {r['max_backlog']:>11}")
+    print(f"\n{'writer':<24} {'files':>5} {'msgs/s':>10} {'bytes/msg':>9}")
+    for w in bench_writers(100_000 if args.quick else 300_000):
+        print(f"{w['writer']:<24} {w['files']:>5} {w['msgs_per_s']:>10.0f} {w['bytes_per_msg']:>9.1f}")
     rp = bench_replay(1000 if args.quick else 4000)
     print(f"{rp['case']:<48} {'':>9} {rp['lines_per_s']:>10.0f} lines/s, "
           f"{rp['differences']} differences, load {rp['load_s'] * 1000:.0f} ms")

@@ -14,8 +14,9 @@ from collections import defaultdict
 from typing import Any
 
 from websockets.sync.client import connect
+from websockets.typing import Subprotocol
 
-SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]  # the SDK serves the first
+SUBPROTOCOLS = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]  # the SDK serves the first
 
 
 class FoxgloveClient:

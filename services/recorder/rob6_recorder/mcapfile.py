@@ -3,6 +3,13 @@
 ``McapFile`` is a file of the recorder: lazy channels (one JSON schema per channel type,
 from ``schemas.schema_for``), JSON messages, the URDF as an attachment and on
 ``/robot_description``; it is not thread safe (the recorder's writer thread, or a tool).
+
+It writes with foxglove-sdk's MCAP writer (Rust; one ``foxglove.Context`` per file, so a
+file gets exactly the channels it is given): ~900,000 messages/s to one file, ~450,000/s
+to two, against ~316,000/~218,000 for the hand-written ``mcapwriter.LeanWriter`` it replaces
+and ~144,000/~67,000 for the ``mcap`` package's writer (services/recorder/README.md,
+"Writer"). The SDK sets each message's publish time to its log time and numbers each
+channel's messages itself (from 1, like the recorder did).
 """
 
 from __future__ import annotations
@@ -12,10 +19,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+import foxglove
 import msgspec
+from foxglove._foxglove_py import BaseChannel
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-from . import __version__
-from .mcapwriter import LeanWriter
 from .schemas import schema_for
 
 ROBOT_DESCRIPTION_TOPIC = "/robot_description"
@@ -60,57 +68,57 @@ class McapFile:
         self.path = Path(path)
         self.start_ns = time.time_ns() if start_ns is None else start_ns
         self.opened = time.monotonic()
-        self._fh = open(self.path, "xb")
-        self._w = LeanWriter(self._fh, chunk_size=chunk_size,
-                             compression="" if compression == "none" else compression)
-        self._w.start(profile="", library=f"rob6-recorder/{__version__}")
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self._seq: dict[int, int] = {}
+        if compression not in ("zstd", "lz4", "none", ""):
+            raise ValueError("compression must be 'zstd', 'lz4' or 'none'")
+        self._context = foxglove.Context()
+        self._w = foxglove.open_mcap(self.path, context=self._context, writer_options=MCAPWriteOptions(
+            compression={"zstd": MCAPCompression.Zstd, "lz4": MCAPCompression.Lz4}.get(compression),
+            profile="", chunk_size=chunk_size,
+            compression_threads=0))  # on the recorder's writer thread, not on every core
+        self._fd = os.open(self.path, os.O_RDONLY)  # fsync and size; the SDK owns the writing
+        self._channels: dict[str, BaseChannel] = {}
         self.messages = 0
         self.pending = 0  # messages not yet flushed to the OS
         self.closed = False
         for name, values in (metadata or {}).items():
-            self._w.add_metadata(name, {k: str(v) for k, v in values.items()})
+            self.add_metadata(name, values)
         if urdf:
-            self._w.add_attachment(create_time=self.start_ns, log_time=self.start_ns,
-                                   name="robot.urdf", media_type="application/xml",
-                                   data=urdf.encode())
+            self._w.attach(create_time=self.start_ns, log_time=self.start_ns,
+                           name="robot.urdf", media_type="application/xml", data=urdf.encode())
             self.write(ROBOT_DESCRIPTION_TOPIC, self.start_ns, self.start_ns,
                        _encoder.encode({"data": urdf}))
         self.flush()
 
-    def channel(self, topic: str) -> int:
+    def channel(self, topic: str) -> BaseChannel:
         ch = self._channels.get(topic)
         if ch is None:
             spec = schema_for(topic)
-            sid = self._schemas.get(spec.name)
-            if sid is None:
-                sid = self._schemas[spec.name] = self._w.register_schema(
-                    spec.name, "jsonschema", spec.data)
-            ch = self._channels[topic] = self._w.register_channel(topic, "json", sid)
-            self._seq[ch] = 0
+            # the context's own channel (not foxglove.Channel, which registers every channel
+            # in a process-wide table for good: files rotate, their channels must go with them)
+            ch = self._channels[topic] = self._context._create_channel(
+                topic, message_encoding="json",
+                schema=foxglove.Schema(name=spec.name, encoding="jsonschema", data=spec.data))
         return ch
 
     def write(self, topic: str, log_time: int, publish_time: int, payload: bytes) -> None:
-        ch = self._channels.get(topic) or self.channel(topic)
-        seq = self._seq[ch] = (self._seq[ch] + 1) & 0xFFFFFFFF
-        self._w.add_message(ch, log_time, payload, publish_time, seq)
+        """One message; ``publish_time`` is not kept (the SDK writes the log time)."""
+        (self._channels.get(topic) or self.channel(topic)).log(payload, log_time)
         self.messages += 1
         self.pending += 1
 
     def add_metadata(self, name: str, values: dict[str, Any]) -> None:
-        self._w.add_metadata(name, {k: str(v) for k, v in values.items()})
+        self._w.write_metadata(name, {k: str(v) for k, v in values.items()})
 
     def flush(self, fsync: bool = False) -> None:
         """Close the open chunk and hand everything to the OS (and the disk if fsync)."""
         self._w.flush()
         if fsync:
-            os.fsync(self._fh.fileno())
+            os.fsync(self._fd)
         self.pending = 0
 
     def size(self) -> int:
-        return self._w.tell()
+        """Bytes on disk (the open chunk not included)."""
+        return os.fstat(self._fd).st_size
 
     def close(self, metadata: dict[str, Any] | None = None) -> None:
         if self.closed:
@@ -119,8 +127,9 @@ class McapFile:
         try:
             if metadata:
                 self.add_metadata("rob6.end", metadata)
-            self._w.finish()
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
+            for ch in self._channels.values():
+                ch.close()
+            self._w.close()
+            os.fsync(self._fd)
         finally:
-            self._fh.close()
+            os.close(self._fd)
