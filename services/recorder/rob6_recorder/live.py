@@ -199,22 +199,27 @@ class LiveView:
         if payload is None:
             payload = encode(data)
         ch = self._channels.get(topic) or self.channel(topic)
-        if topic == "/driver/joint_state":
-            payload = _complete_joint_state(payload)
         if topic in LATCHED:
             self._last[topic] = (payload, log_time)
-        ch.base.log(payload, log_time)
-        entry = command_log(topic, data, log_time) if topic.startswith("/session/") else None
-        if entry is not None:
-            (self._channels.get(COMMANDS_TOPIC) or self.channel(COMMANDS_TOPIC)).base.log(
-                _encoder.encode(entry), log_time)
+        if not ch.base.has_sinks():  # nobody watches it: no work beyond this check
+            pass
+        elif topic == "/driver/joint_state":
+            ch.base.log(_complete_joint_state(payload), log_time)
+        else:
+            ch.base.log(payload, log_time)
+        if topic.startswith("/session/"):
+            commands = self._channels.get(COMMANDS_TOPIC) or self.channel(COMMANDS_TOPIC)
+            entry = command_log(topic, data, log_time) if commands.base.has_sinks() else None
+            if entry is not None:
+                commands.base.log(_encoder.encode(entry), log_time)
 
     def resend(self, topic: str) -> None:
         """The last message of a latched topic again (a client just subscribed to it)."""
         last = self._last.get(topic)
         ch = self._channels.get(topic)
         if last is not None and ch is not None and not self.closed:
-            ch.base.log(*last)
+            payload, log_time = last
+            ch.base.log(_complete_joint_state(payload) if topic == "/driver/joint_state" else payload, log_time)
 
     def clear_latched(self) -> None:
         """Forget the latched messages (playback seeks), the URDF excepted."""
