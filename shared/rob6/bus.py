@@ -37,8 +37,9 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from queue import SimpleQueue
 from typing import Any, TypeVar
 
 import msgspec
@@ -150,6 +151,11 @@ class Bus:
         self._decoders: dict[Any, msgspec.json.Decoder[Any]] = {}
         self._attachment = self.instance.encode()
         self._foreign_warned: set[tuple[str, str]] = set()
+        # records for the recorder leave from a thread of their own, in order, so a request
+        # never waits for their encoding or for the network (see ``trace``)
+        self._traces: SimpleQueue[tuple[str, object] | None] = SimpleQueue()
+        self._tracer = threading.Thread(target=self._trace_loop, name=f"{service}-traces", daemon=True)
+        self._tracer.start()
         self._live_sub = self.session.liveliness().declare_subscriber(
             self.key("alive", "**"), zenoh.handlers.Callback(self._on_liveliness), history=True)
 
@@ -215,20 +221,35 @@ class Bus:
             return min(ordered, key=lambda i: self._inflight.get(i, 0))
 
     # ------------------------------------------------------------------ serving
-    def serve(self, handlers: Mapping[str, Handler], *, workers: int = 4) -> None:
+    def serve(self, handlers: Mapping[str, Handler], *, workers: int = 4,
+              inline: Iterable[str] = ()) -> None:
         """Answer ``handlers[op](request, ctx)`` for this service and announce it as alive.
 
         Handlers run on ``workers`` threads, so a long request (a motion) does not
-        hold up short ones (a ping).
+        hold up short ones (a ping). ``inline`` ops (quick, never blocking: a ping, a
+        state read, an Alter target, one pose) are answered on Zenoh's callback thread
+        itself, which saves the hand-off to a worker on the latency path.
         """
         unknown = [op for op in handlers if (self.service, op) not in OPS]
         if unknown:
             raise ValueError(f"operations not in rob6.messages.OPS: {unknown}")
-        queryable = self.session.declare_queryable(
-            self.key(self.service, self.instance, "*"), zenoh.handlers.FifoChannel(1024))
-        self._declared.append(queryable)
+        quick = frozenset(inline)
+        queue: SimpleQueue[zenoh.Query | None] = SimpleQueue()
+
+        def on_query(query: zenoh.Query) -> None:
+            if str(query.key_expr).rsplit("/", 1)[-1] in quick:
+                self._answer(query, handlers)
+            else:
+                queue.put(query)
+
+        def on_close() -> None:  # the session is going away: the workers end
+            for _ in range(workers):
+                queue.put(None)
+
+        self._declared.append(self.session.declare_queryable(
+            self.key(self.service, self.instance, "*"), zenoh.handlers.Callback(on_query, on_close)))
         for n in range(workers):
-            thread = threading.Thread(target=self._serve_loop, args=(queryable, handlers),
+            thread = threading.Thread(target=self._serve_loop, args=(queue, handlers),
                                       name=f"{self.service}-worker-{n}", daemon=True)
             thread.start()
             self._workers.append(thread)
@@ -239,17 +260,9 @@ class Bus:
         self._declared.append(self.session.liveliness().declare_token(
             self.key("alive", self.service, self.instance)))
 
-    def _serve_loop(self, queryable: zenoh.Queryable[zenoh.handlers.Handler[zenoh.Query]],
-                    handlers: Mapping[str, Handler]) -> None:
-        while not self._closed.is_set():
-            try:
-                query = queryable.recv()
-            except Exception:  # channel closed: the session is going away
-                return
-            try:
-                self._answer(query, handlers)
-            except Exception:
-                log.exception("failed to answer a query")
+    def _serve_loop(self, queue: "SimpleQueue[zenoh.Query | None]", handlers: Mapping[str, Handler]) -> None:
+        while (query := queue.get()) is not None:
+            self._answer(query, handlers)
 
     def _answer(self, query: zenoh.Query, handlers: Mapping[str, Handler]) -> None:
         started = time.time()
@@ -279,11 +292,8 @@ class Bus:
         payload = _encoder.encode(reply)
         query.reply(query.key_expr, payload)
         query.drop()
-        # after the reply: the recorder's copy stays off the request's latency path
-        self.publish(f"trace/{self.service}/{op}",
-                     b'{"t":%.6f,"dt":%.6f,"instance":"%s","request":%s,"reply":%s}' % (
-                         started, time.time() - started, self.instance.encode(),
-                         raw or b"null", payload), reliable=True)
+        self.trace(f"trace/{self.service}/{op}", b'{"t":%.6f,"dt":%.6f,"instance":"%s","request":%s,"reply":%s}' % (
+            started, time.time() - started, self.instance.encode(), raw or b"null", payload))
 
     def _decoder(self, typ: Any) -> msgspec.json.Decoder[Any]:
         decoder = self._decoders.get(typ)
@@ -374,6 +384,18 @@ class Bus:
                 self.key(suffix), congestion_control=congestion)
         publisher.put(data if isinstance(data, bytes) else _encoder.encode(data), attachment=self._attachment)
 
+    def trace(self, suffix: str, data: object) -> None:
+        """Publish a record for the recorder (reliably, in order) from the trace thread:
+        the caller, usually a request on its latency path, does not wait for it."""
+        self._traces.put((suffix, data))
+
+    def _trace_loop(self) -> None:
+        while (item := self._traces.get()) is not None:
+            try:
+                self.publish(*item, reliable=True)
+            except Exception:
+                log.exception("could not publish %s", item[0])
+
     def subscribe(self, suffix: str, on_message: Callable[[str, bytes], None], *,
                   owner: str | None = None) -> zenoh.Subscriber[None]:
         """Call ``on_message(key, payload)`` for every sample; it must not block.
@@ -411,6 +433,8 @@ class Bus:
     def close(self) -> None:
         if self._closed.is_set():
             return
+        self._traces.put(None)  # what was traced before the close still goes out
+        self._tracer.join(5.0)
         self._closed.set()
         try:
             self.session.close()
@@ -475,6 +499,7 @@ class _Waiter:
         self.loop = loop
         self.future: asyncio.Future[bytes] | concurrent.futures.Future[bytes] = (
             loop.create_future() if loop is not None else concurrent.futures.Future())
+        self._settled = False  # the first outcome wakes the waiting loop; later ones cost nothing
 
     def result(self, timeout: float) -> bytes:
         assert isinstance(self.future, concurrent.futures.Future)  # made without a loop
@@ -484,11 +509,14 @@ class _Waiter:
             raise _InstanceLost("no reply in time") from None
 
     async def aresult(self, timeout: float) -> bytes:
-        assert isinstance(self.future, asyncio.Future)  # made with the running loop
+        assert isinstance(self.future, asyncio.Future) and self.loop is not None  # made with the running loop
+        # a timer on the loop, not asyncio.wait_for: that costs a task switch per request
+        timer = self.loop.call_later(timeout, self._complete_in_loop, self.future.set_exception,
+                                     _InstanceLost("no reply in time"))
         try:
-            return await asyncio.wait_for(self.future, timeout)
-        except TimeoutError:
-            raise _InstanceLost("no reply in time") from None
+            return await self.future
+        finally:
+            timer.cancel()
 
     def resolve(self, value: bytes) -> None:
         self._complete(self.future.set_result, value)
@@ -497,6 +525,9 @@ class _Waiter:
         self._complete(self.future.set_exception, exc)
 
     def _complete(self, setter: Callable[[Any], None], value: object) -> None:
+        if self._settled:
+            return
+        self._settled = True
         if self.loop is None:
             try:
                 setter(value)

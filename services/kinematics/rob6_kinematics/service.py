@@ -62,4 +62,5 @@ class KinematicsService:
 
     def serve(self, bus: Bus) -> None:
         bus.serve({"fk": self.fk, "forward_calc": self.forward_calc, "backward_calc": self.backward_calc,
-                   "ik_batch": self.ik_batch, "select": self.select}, workers=2)
+                   "ik_batch": self.ik_batch, "select": self.select}, workers=2,
+                  inline=("forward_calc", "backward_calc", "select"))
