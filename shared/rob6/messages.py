@@ -139,11 +139,16 @@ class LimitsUpdate(Struct):
     turn_max: Joints
     max_speed: Joints  # deg per 12 ms cycle
     max_accel: Joints  # deg per cycle^2
+    max_change: Joints  # deg: how far one Alter target may be from where the robot is
 
 
 class AlterTarget(Struct):
+    """A real-time (Alter) target; the driver checks it: Alter mode on, strictly inside the
+    turn limits, at most max change from where the robot is."""
+
     q: Joints
     synchronized: bool = False  # RTSpeedControl 0: axes arrive together
+    relative: bool = False  # DoAlterJoint: q is an offset from where the robot is
 
 
 class AlterMode(Struct):

@@ -78,7 +78,7 @@ def test_rob6_processes_through_the_secure_router(certs, tmp_path):
     with the files the containers use: the ACL must let the system work, and stop the rest."""
     from rob6.bus import Bus, BusError
     from rob6.config import BusSettings
-    from rob6.messages import Ack, Empty, PingReply
+    from rob6.messages import Ack, AlterTarget, Empty, PingReply
 
     port = free_port()
     endpoint = f"tls/127.0.0.1:{port}"
@@ -103,13 +103,15 @@ def test_rob6_processes_through_the_secure_router(certs, tmp_path):
             time.sleep(0.2)
         driver, planner, gateway = bus("driver"), bus("planner"), bus("gateway")
         driver.serve({"ping": lambda req, ctx: PingReply(robot_time=1.0, wall_time=time.time()),
-                      "stop": lambda req, ctx: Ack()})
+                      "stop": lambda req, ctx: Ack(), "alter_target": lambda req, ctx: Ack()})
         planner.serve({"session_end": lambda req, ctx: Ack()})
         assert not gateway.wait_for(["driver", "planner"], 5.0)
         assert not planner.wait_for(["driver"], 5.0)
 
         assert planner.request("driver", "stop", Empty(), timeout=2.0).ok  # the planner commands the driver
         assert gateway.request("driver", "ping", Empty(), timeout=2.0).robot_time == 1.0  # gateway may read
+        # ... and stream joint Alter targets (the driver checks them)
+        assert gateway.request("driver", "alter_target", AlterTarget(q=[0.0] * 6), timeout=2.0).ok
         with pytest.raises(BusError):
             gateway.request("driver", "stop", Empty(), timeout=1.0)  # ... but not command
         assert gateway.request("planner", "session_end", Empty(), timeout=2.0).ok

@@ -219,6 +219,23 @@ def test_alter_targets_near_a_turn_limit_never_cross_it():
     assert sim.violation_count == 0
 
 
+def test_alter_targets_within_max_change_of_where_the_robot_is():
+    """The driver is the home of the Alter target rule (the gateway streams to it directly)."""
+    sim = MotionCore("kr16", dummy=True)
+    assert sim.set_limits(max_change=[5, 5, 5, 5, 5, 1])[0]
+    assert not sim.set_target([1, 0, 0, 0, 0, 0])[0]  # Alter mode off
+    sim.enable_alter()
+    assert sim.set_target([5, 0, 0, 0, 0, 1])[0]  # exactly max change away is allowed
+    ok, reason = sim.set_target([5, 0, 0, 0, 0, 2.5])
+    assert not ok and "joint 6" in reason and "max change 1" in reason
+    assert np.array_equal(sim.state().q, [5, 0, 0, 0, 0, 1])  # a refused target moves nothing
+    assert sim.set_target([-1, 0, 0, 0, 0, 0.5], relative=True)[0]  # DoAlterJoint: an offset
+    assert np.array_equal(sim.state().q, [4, 0, 0, 0, 0, 1.5])
+    assert not sim.set_target([0, 0, 0, 0, 0, 1.5], relative=True)[0]
+    assert not sim.set_limits(max_change=[1, 2, 3])[0]  # six values or nothing changes
+    assert sim.limits().max_change.tolist() == [5, 5, 5, 5, 5, 1]
+
+
 def test_limit_change_during_alter_is_smooth():
     sim = MotionCore("kr16rt", alter_timeout_s=10)
     sim.enable_alter()
@@ -229,7 +246,7 @@ def test_limit_change_during_alter_is_smooth():
     q2, qd2, qdd2, st = run_states(sim, 3000)
     new = sim.limits()
     wide = Limits(old.turn_min, old.turn_max, np.maximum(old.vmax, new.vmax),
-                     np.maximum(old.amax, new.amax), old.jmax)
+                     np.maximum(old.amax, new.amax), old.jmax, old.max_change)
     q = np.vstack([q1, q2])
     assert limit_problems(q, sim.dt, wide, np.zeros(6)) == []
     assert np.allclose(sim.enforced_limits().vmax, new.vmax)  # monitor closed again

@@ -93,22 +93,24 @@ class Limits:
     vmax: np.ndarray
     amax: np.ndarray
     jmax: np.ndarray
+    max_change: np.ndarray  # deg: an Alter target's largest distance from where the robot is
 
     @classmethod
-    def from_protocol(cls, turn_min, turn_max, max_speed, max_accel,
+    def from_protocol(cls, turn_min, turn_max, max_speed, max_accel, max_change,
                       jerk_ramp_s: float = JERK_RAMP_S) -> "Limits":
         a = accel_si(max_accel)
         return cls(np.asarray(turn_min, float).copy(), np.asarray(turn_max, float).copy(),
-                   np.array(speed_si(max_speed)), np.array(a), np.array(jerk_si(a, jerk_ramp_s)))
+                   np.array(speed_si(max_speed)), np.array(a), np.array(jerk_si(a, jerk_ramp_s)),
+                   np.asarray(max_change, float).copy())
 
     @classmethod
     def defaults(cls, robot: RobotModel) -> "Limits":
         return cls.from_protocol(robot.turn_min, robot.turn_max, robot.default_speed,
-                                 robot.default_accel)
+                                 robot.default_accel, robot.default_max_change)
 
     def copy(self) -> "Limits":
         return Limits(self.turn_min.copy(), self.turn_max.copy(), self.vmax.copy(),
-                         self.amax.copy(), self.jmax.copy())
+                      self.amax.copy(), self.jmax.copy(), self.max_change.copy())
 
 
 @dataclass
@@ -345,7 +347,8 @@ class MotionCore:
         self._motion = self._stop_motion = None
 
     # ------------------------------------------------------------------ limits
-    def set_limits(self, turn_min=None, turn_max=None, max_speed=None, max_accel=None) -> tuple[bool, str]:
+    def set_limits(self, turn_min=None, turn_max=None, max_speed=None, max_accel=None,
+                   max_change=None) -> tuple[bool, str]:
         """New limits (protocol units; None = unchanged). See the module doc for changes in motion."""
         with self._lock:
             new = self._lim.copy()
@@ -359,6 +362,8 @@ class MotionCore:
                 if max_accel is not None:
                     a = accel_si(_six(max_accel))
                     new.amax, new.jmax = np.array(a), np.array(jerk_si(a))
+                if max_change is not None:
+                    new.max_change = _six(max_change)
             except ValueError as exc:
                 return False, str(exc)
             if np.any(new.vmax < 0) or np.any(new.amax < 0):
@@ -546,8 +551,9 @@ class MotionCore:
         self._run_deferred()
         return motion
 
-    def set_target(self, q, synchronized: bool | None = None) -> tuple[bool, str]:
-        """New Alter target (deg), any time; refused outside strict turn limits.
+    def set_target(self, q, synchronized: bool | None = None, relative: bool = False) -> tuple[bool, str]:
+        """New Alter target (deg), any time; refused outside strict turn limits or further
+        than max change from where the robot is. ``relative``: ``q`` is an offset from there.
 
         ``synchronized``: RTSpeedControl 0 -> True (axes arrive together), 1 -> False
         (every axis ramps on its own as fast as its limits allow). Any call counts as a
@@ -560,7 +566,7 @@ class MotionCore:
                 return False, "alter mode is not enabled"
             self._last_heard = self.t
             try:
-                target = _six(q)
+                target = _six(q) + (self._q if relative else 0.0)
             except ValueError as exc:
                 return False, str(exc)
             lo, hi = self._lim.turn_min, self._lim.turn_max
@@ -568,6 +574,12 @@ class MotionCore:
             if bad.any():
                 j = int(np.argmax(bad))
                 return False, f"joint {j + 1} target {target[j]:.6f} outside turn limits ({lo[j]:g}, {hi[j]:g})"
+            step = np.abs(target - self._q)
+            far = step > self._lim.max_change
+            if far.any():
+                j = int(np.argmax(far))
+                return False, (f"joint {j + 1} target {target[j]:.6f} is {step[j]:.6f} deg away, "
+                               f"beyond the max change {self._lim.max_change[j]:g}")
             if synchronized is not None:
                 self._sync = bool(synchronized)
             self._watchdog_fired = False

@@ -112,7 +112,8 @@ class DriverService:
                             state=self.joint_state(final))
 
     def limits(self, req: LimitsUpdate, _ctx) -> Ack:
-        ok, reason = self.core.set_limits(req.turn_min, req.turn_max, req.max_speed, req.max_accel)
+        ok, reason = self.core.set_limits(req.turn_min, req.turn_max, req.max_speed, req.max_accel,
+                                          req.max_change)
         return Ack(ok=ok, reason=reason)
 
     def alter_mode(self, req: AlterMode, _ctx) -> Ack:
@@ -127,7 +128,7 @@ class DriverService:
 
     def alter_target(self, req: AlterTarget, _ctx) -> Ack:
         try:
-            ok, reason = self.core.set_target(req.q, req.synchronized)
+            ok, reason = self.core.set_target(req.q, req.synchronized, req.relative)
         except Offline as exc:
             return Ack(ok=False, reason=str(exc), error=str(exc))
         return Ack(ok=ok, reason=reason)
@@ -152,7 +153,8 @@ class DriverService:
         self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,
                         "limits": self.limits, "alter_mode": self.alter_mode,
                         "alter_target": self.alter_target, "stop": self.stop,
-                        "link": self.link_status}, workers=4)
+                        "link": self.link_status}, workers=4,
+                       inline=("ping", "state", "alter_target", "link"))
 
     def shutdown(self) -> None:
         self.core.stop("driver shutting down").wait(2.0)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from rob6 import logs
 from rob6.bus import Bus, BusError
 from rob6.messages import (
+    AlterTarget,
     BackwardCalcRequest,
     ClientExchange,
     ConfigChange,
@@ -133,15 +134,14 @@ class Gateway:
 
     def record(self, session: Session, received: float, line, reply: str | None) -> None:
         """A copy of the exchange for the recorder, sent after the reply went out."""
-        self.bus.publish("trace/gateway/session", ClientExchange(
+        self.bus.trace("trace/gateway/session", ClientExchange(
             session=session.number, peer=session.peer, cid=session.cid, t_in=received,
             t_out=time.time(), line=line.text if not line.too_long else f"<{line.too_long} bytes>",
-            reply=reply), reliable=True)
+            reply=reply))
 
     def record_event(self, session: Session, event: str, greeting: str = "") -> None:
-        self.bus.publish("trace/gateway/event", SessionEvent(
-            session=session.number, event=event, peer=session.peer, t=time.time(), greeting=greeting),
-            reliable=True)
+        self.bus.trace("trace/gateway/event", SessionEvent(
+            session=session.number, event=event, peer=session.peer, t=time.time(), greeting=greeting))
 
     async def session_end(self, session: Session) -> None:
         """The client left: the planner stops any real-time motion (Alter mode)."""
@@ -551,10 +551,30 @@ def _pose_and_status(args):
     return {"pose": pose, "pattern": args.status()}
 
 
-command("MoveRTJoints")(_alter_move("MoveRTJoints", lambda a: {"joints": a.joints()}))
+def _alter_joints(relative: bool):
+    """Joint targets go straight to the driver, one hop on the real-time path; the driver
+    checks them (Alter mode, turn limits, max change). Cartesian ones need the planner's IK."""
+    async def handler(gw, session, args):
+        if not gw.alter:  # the original answers false without reading the arguments
+            return FALSE
+        joints = args.joints()
+        if session.routetest is not None:  # real moves are refused while route testing
+            return FALSE
+        config = await _config(gw, session)
+        reply = await gw.call(session, "driver", "alter_target", AlterTarget(
+            q=joints, synchronized=config.rt_speed_control == 0, relative=relative))
+        if not reply.ok and reply.error:  # the robot failed (not connected, link lost)
+            return error(f"driver: {reply.error}")
+        if not reply.ok:
+            log.warning("Alter target refused: %s", reply.reason)
+        return boolean(reply.ok)
+    return handler
+
+
+command("MoveRTJoints")(_alter_joints(relative=False))
 command("MoveRTHomRowWise")(_alter_move("MoveRTHomRowWise", lambda a: {"pose": a.matrix()}))
 command("MoveRTHomRowWiseStatus")(_alter_move("MoveRTHomRowWiseStatus", _pose_and_status))
-command("DoAlterJoint")(_alter_move("DoAlterJoint", lambda a: {"joints": a.joints()}))
+command("DoAlterJoint")(_alter_joints(relative=True))
 command("DoAlterCart")(_alter_move("DoAlterCart", lambda a: {"pose": a.doubles(6, "joints")}))
 
 

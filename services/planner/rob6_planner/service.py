@@ -49,7 +49,7 @@ JOINT_MOVES: frozenset[MotionKind] = frozenset({"MovePTPJoints", "MovePTPJointsS
 ALTER_MOVES: frozenset[MotionKind] = frozenset({
     "MoveRTJoints", "MoveRTHomRowWise", "MoveRTHomRowWiseStatus", "DoAlterJoint", "DoAlterCart"})
 ADEPT_SETTINGS = {"SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoarse"}
-LIMIT_FIELDS = ("speed", "accel", "turn_min", "turn_max")
+LIMIT_FIELDS = ("speed", "accel", "turn_min", "turn_max", "max_change")
 
 
 class Refused(Exception):
@@ -118,7 +118,7 @@ class PlannerService:
         try:
             self.bus.request("driver", "limits", LimitsUpdate(
                 turn_min=list(c.turn_min), turn_max=list(c.turn_max), max_speed=list(c.speed),
-                max_accel=list(c.accel)), cid=cid)
+                max_accel=list(c.accel), max_change=list(c.max_change)), cid=cid)
         except BusError as exc:
             log.warning("could not update the driver's limits: %s", exc.message)
 
@@ -247,27 +247,24 @@ class PlannerService:
         return self._execute(plan.trajectory, cid)
 
     def _alter_move(self, req: MoveRequest, cid: str) -> MoveReply:
+        """Alter targets; the driver checks them (Alter mode, turn limits, max change), since
+        the gateway streams joint targets (MoveRTJoints, DoAlterJoint) to it directly."""
         if not self.alter:
             raise Refused("Alter mode is off (EnableAlter first)")
-        current = self._current()
-        if req.kind == "MoveRTJoints":
+        relative = req.kind == "DoAlterJoint"
+        if req.kind in ("MoveRTJoints", "DoAlterJoint"):
             target = list(_given(req.joints, "joints", req.kind))
-        elif req.kind == "DoAlterJoint":
-            target = [q + d for q, d in zip(current, _given(req.joints, "joints", req.kind), strict=True)]
-        elif req.kind == "DoAlterCart":
-            target = self._select(_shifted_pose(self._pose(current, cid), req.pose), KEEP_CONFIGURATION,
-                                  current, cid)
-        else:  # MoveRTHomRowWise keeps the configuration, ...Status chooses by its pattern
-            pattern = req.pattern if req.kind == "MoveRTHomRowWiseStatus" else KEEP_CONFIGURATION
-            target = self._select(req.pose, pattern, current, cid)
-        c = self.config
-        if not all(lo < q < hi for lo, q, hi in zip(c.turn_min, target, c.turn_max, strict=True)):
-            raise Refused("Alter target outside the turn limits")
-        if any(abs(q - s) > m for q, s, m in zip(target, current, c.max_change, strict=True)):
-            raise Refused("Alter target beyond the max change")
+        else:
+            current = self._current()
+            if req.kind == "DoAlterCart":
+                pose = _shifted_pose(self._pose(current, cid), req.pose)
+                target = self._select(pose, KEEP_CONFIGURATION, current, cid)
+            else:  # MoveRTHomRowWise keeps the configuration, ...Status chooses by its pattern
+                pattern = req.pattern if req.kind == "MoveRTHomRowWiseStatus" else KEEP_CONFIGURATION
+                target = self._select(req.pose, pattern, current, cid)
         reply = self.bus.request("driver", "alter_target", AlterTarget(
-            q=target, synchronized=c.rt_speed_control == 0), cid=cid)
-        return MoveReply(ok=reply.ok, joints=target, reason=reply.reason, error=reply.error)
+            q=target, synchronized=self.config.rt_speed_control == 0, relative=relative), cid=cid)
+        return MoveReply(ok=reply.ok, joints=None if relative else target, reason=reply.reason, error=reply.error)
 
     def _pose(self, joints, cid) -> list[float]:
         return self.bus.request("kinematics", "fk", FkRequest(joints=[joints]), cid=cid).poses[0]
