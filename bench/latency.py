@@ -4,10 +4,15 @@ same run (the echo is the floor any asyncio TCP server on this machine can reach
 from __future__ import annotations
 
 import asyncio
+import os
 import socket
 import statistics
+import subprocess
+import sys
 import threading
 import time
+
+import zenoh
 
 from rob6.testing import Client, free_port
 
@@ -58,3 +63,74 @@ def echo_baseline(count: int) -> list[float]:
         return measure(client, "CM_PING", 1, count)
     finally:
         client.close()
+
+
+_BARE_QUERYABLE = """
+import sys, time, zenoh
+config = zenoh.Config()
+config.insert_json5("mode", '"peer"')
+config.insert_json5("connect/endpoints", '["tcp/127.0.0.1:%s"]' % sys.argv[1])
+config.insert_json5("scouting/multicast/enabled", "false")
+session = zenoh.open(config)
+queryable = session.declare_queryable("bench/bare", lambda query: query.reply(query.key_expr, b"pong"))
+print("ready", flush=True)
+sys.stdin.read()
+"""
+
+
+def zenoh_baseline(router_port: int, count: int, warmup: int = 200) -> list[float]:
+    """The bare Zenoh query round trip between two Python processes (peers beside the same
+    router as rob6's services), awaited on an asyncio loop the way the gateway awaits."""
+    server = subprocess.Popen([sys.executable, "-c", _BARE_QUERYABLE, str(router_port)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("connect/endpoints", f'["tcp/127.0.0.1:{router_port}"]')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(config)
+    try:
+        assert server.stdout is not None and server.stdout.readline().strip() == "ready"
+
+        async def run() -> list[float]:
+            loop = asyncio.get_running_loop()
+            samples = []
+            for i in range(warmup + count):
+                future = loop.create_future()
+
+                def on_reply(reply, future=future):
+                    loop.call_soon_threadsafe(future.set_result, reply.ok is not None)
+
+                start = time.perf_counter()
+                session.get("bench/bare", zenoh.handlers.Callback(on_reply))
+                if not await asyncio.wait_for(future, 5):
+                    raise RuntimeError("the bare queryable answered with an error")
+                if i >= warmup:
+                    samples.append(time.perf_counter() - start)
+            return samples
+
+        time.sleep(0.5)  # the peers find each other through the router
+        return asyncio.run(run())
+    finally:
+        session.close()
+        server.kill()
+        server.wait()
+
+
+def usage(pids: list[int], seconds: float) -> tuple[float, float]:
+    """CPU (share of one core) and resident memory (MB) of ``pids`` together, over ``seconds``."""
+    def cpu_seconds() -> float:
+        total = 0
+        for pid in pids:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            total += int(fields[11]) + int(fields[12])  # utime + stime, in clock ticks
+        return total / os.sysconf("SC_CLK_TCK")
+
+    before, start = cpu_seconds(), time.monotonic()
+    time.sleep(seconds)
+    cpu = (cpu_seconds() - before) / (time.monotonic() - start)
+    rss = 0
+    for pid in pids:
+        with open(f"/proc/{pid}/status") as f:
+            rss += next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
+    return cpu, rss / 1024
