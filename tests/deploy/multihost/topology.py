@@ -188,7 +188,10 @@ class Topology:
         queue = 10 + HOSTS.index(host)
         ns = ["nsenter", "-t", str(pid), "-n"]
         rules = [["OUTPUT", "-d", peer_ip], ["INPUT", "-s", peer_ip]]
-        proc = subprocess.Popen([*ns, sys.executable, str(NETEM), "--queue", str(queue), "--delay-ms", str(delay_ms),
+        # real-time priority: on a busy machine a packet must not wait for the emulator's turn
+        # on the CPU (that would add the machine's scheduling delay to the one asked for)
+        rt = ["chrt", "-f", "20"] if shutil.which("chrt") else []
+        proc = subprocess.Popen([*ns, *rt, sys.executable, str(NETEM), "--queue", str(queue), "--delay-ms", str(delay_ms),
                                  "--jitter-ms", str(jitter_ms), "--loss", str(loss)],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         line = proc.stdout.readline() if proc.stdout else ""
