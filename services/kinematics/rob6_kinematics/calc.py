@@ -50,6 +50,11 @@ class Kinematics:
         self.turn_min = np.array(robot.turn_min, dtype=float)
         self.turn_max = np.array(robot.turn_max, dtype=float)
         self.max_change = np.array(robot.default_max_change, dtype=float)
+        # plain-float copies for the single-pose (numpy-free) paths
+        self._lo = self.turn_min.tolist()
+        self._hi = self.turn_max.tolist()
+        self._mc = self.max_change.tolist()
+        self._mid = ((np.asarray(robot.hw_min, float) + np.asarray(robot.hw_max, float)) / 2).tolist()
 
     # ------------------------------------------------------------------ FK / IK
     def fk(self, q) -> np.ndarray:
@@ -72,6 +77,11 @@ class Kinematics:
         """
         return opw.ik(self.g, T)
 
+    def ik_one(self, T) -> list[list[float] | None]:
+        """``ik`` of one pose without numpy's per-call overhead (``opw.ik_one``):
+        8 branches, each 6 joints (deg) or None."""
+        return opw.ik_one(self.g, T)
+
     def ik_limited(self, T, turn_min=None, turn_max=None) -> np.ndarray:
         """``ik`` with the original's limit handling, vectorised: each joint outside
         its turn limits is shifted once by -+360 deg; a branch with a joint not
@@ -86,7 +96,7 @@ class Kinematics:
 
     def robot_status(self, q) -> Status:
         """Status words of joints q (deg) in this kinematics' geometry."""
-        q = [float(x) for x in np.asarray(q, dtype=float).reshape(6)]
+        q = _floats6(q)
         return status_words(*status_flags(self.g, math.radians(q[1]), math.radians(q[2]), q[4]))
 
     def status_batch(self, q) -> np.ndarray:
@@ -120,15 +130,12 @@ class Kinematics:
         n = len(nums)
         if n == 0:
             return None
-        lo = self.turn_min if turn_min is None else np.asarray(turn_min, float)
-        hi = self.turn_max if turn_max is None else np.asarray(turn_max, float)
-        mid = (np.asarray(self.robot.hw_min, float) + np.asarray(self.robot.hw_max, float)) / 2
-        q = mid.copy()
-        q[:n] = nums
-        if not np.all(np.isfinite(q)) or not np.all((lo < q) & (q < hi)):
+        lo = self._lo if turn_min is None else _floats6(turn_min)
+        hi = self._hi if turn_max is None else _floats6(turn_max)
+        q = nums + self._mid[n:]
+        if not all(lo[j] < q[j] < hi[j] for j in range(6)):  # also False for NaN
             return None
-        T = self.partial_frame(q, n)
-        return [float(x) for x in T.reshape(12)], self.status(q)
+        return opw.fk_compiled_one(self.g, q, n), self.status(q)
 
     # ------------------------------------------------------------------ BackwardCalc
     def resolve_pattern(self, pattern, current_q) -> list[int]:
@@ -182,31 +189,45 @@ class Kinematics:
         weights the original used here are not observable (never changed before a
         BackwardCalc in the transcripts); the defaults are assumed.
         """
-        raw = self.ik(np.asarray(matrix, float).reshape(1, 12))[0]
-        cands = self._check(raw, current_q, turn_min, turn_max, max_change)
-        allowed = set(self.resolve_pattern(pattern, current_q))
-        w = DEFAULT_WEIGHTS if weights is None else np.asarray(weights, float)
-        cur = np.asarray(current_q, float).reshape(6)
-        best, best_cost = None, np.inf
+        cur = _floats6(current_q)
+        cands = self._check_one(self.ik_one(_matrix12(matrix)), cur, turn_min, turn_max, max_change)
+        allowed = set(self.resolve_pattern(pattern, cur))
+        w = _DEFAULT_WEIGHTS if weights is None else _floats6(weights)
+        best, best_cost = None, math.inf
         for b in TIE_ORDER:
             q = cands[b]
-            if b not in allowed or not np.all(np.isfinite(q)):
+            if q is None or b not in allowed:
                 continue
-            cost = float(np.max(w * np.abs(q - cur)))
+            cost = max(w[j] * abs(q[j] - cur[j]) for j in range(6))
             if cost < best_cost - TIE_EPS:
                 best, best_cost = q, cost
-        return None if best is None else [float(x) for x in best]
+        return best
 
     def is_possible(self, matrix, pattern, current_q, turn_min=None, turn_max=None, max_change=None) -> bool:
         """``IsPossible`` = BackwardCalc would return joints (independent of weights)."""
-        cands = self.candidates(matrix, current_q, turn_min, turn_max, max_change)
-        return any(np.all(np.isfinite(cands[b])) for b in self.resolve_pattern(pattern, current_q))
+        cur = _floats6(current_q)
+        cands = self._check_one(self.ik_one(_matrix12(matrix)), cur, turn_min, turn_max, max_change)
+        return any(cands[b] is not None for b in self.resolve_pattern(pattern, cur))
 
     def candidates(self, matrix, current_q, turn_min=None, turn_max=None, max_change=None) -> np.ndarray:
         """(8,6) solutions after the limit shift, limit and max-change checks, in
         ``BRANCHES`` order; NaN rows are not possible."""
-        raw = self.ik(np.asarray(matrix, float).reshape(1, 12))[0]
-        return self._check(raw, current_q, turn_min, turn_max, max_change)
+        cands = self._check_one(self.ik_one(_matrix12(matrix)), _floats6(current_q), turn_min, turn_max, max_change)
+        return np.array([[math.nan] * 6 if q is None else q for q in cands])
+
+    def _check_one(self, raw, cur, turn_min, turn_max, max_change) -> list[list[float] | None]:
+        """``_check`` on ``ik_one``'s branches in plain floats (None = not possible)."""
+        lo = self._lo if turn_min is None else _floats6(turn_min)
+        hi = self._hi if turn_max is None else _floats6(turn_max)
+        mc = self._mc if max_change is None else _floats6(max_change)
+        out: list[list[float] | None] = []
+        for q in raw:
+            if q is not None:
+                q = [v - 360.0 if v >= hi[j] else (v + 360.0 if v <= lo[j] else v) for j, v in enumerate(q)]
+                if not all(lo[j] < q[j] < hi[j] and not abs(q[j] - cur[j]) > mc[j] for j in range(6)):
+                    q = None
+            out.append(q)
+        return out
 
     def _check(self, raw, current_q, turn_min, turn_max, max_change) -> np.ndarray:
         lo = self.turn_min if turn_min is None else np.asarray(turn_min, float)
@@ -233,6 +254,24 @@ class Kinematics:
     def manipulability(self, q) -> float:
         """Yoshikawa manipulability sqrt(det(J J^T)) of the flange Jacobian (m, rad)."""
         return self.pin.manipulability(q)
+
+
+_DEFAULT_WEIGHTS = DEFAULT_WEIGHTS.tolist()
+
+
+def _floats6(x) -> list[float]:
+    """6 plain floats from a sequence / array (numpy broadcasting rules otherwise)."""
+    if isinstance(x, (list, tuple)) and len(x) == 6:
+        return [float(v) for v in x]
+    return np.broadcast_to(np.asarray(x, dtype=float).reshape(-1) if np.ndim(x) > 1 else np.asarray(x, dtype=float),
+                           (6,)).tolist()
+
+
+def _matrix12(m) -> list[float]:
+    """12 row-wise floats of a pose (12 numbers or (3,4))."""
+    if isinstance(m, (list, tuple)) and len(m) == 12:
+        return [float(v) for v in m]
+    return np.asarray(m, dtype=float).reshape(12).tolist()
 
 
 def apply_limits(Q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

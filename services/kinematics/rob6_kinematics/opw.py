@@ -319,3 +319,274 @@ def ik(g: Geometry, T, *, clamp_tol: float = CLAMP_TOL) -> np.ndarray:
     bad = bad | zero_rot[:, None, None, None]
     q[np.broadcast_to(bad[..., None], q.shape)] = np.nan
     return q.reshape(N, 8, 6)
+
+
+# --------------------------------------------------------------------------- single pose
+# Scalar (``math``, plain floats) versions of ``ik`` and ``fk_compiled`` for one pose:
+# numpy's per-call overhead (array creation, np.stack, clip, broadcasting) costs
+# ~1 ms per ``ik`` call on N = 1, the arithmetic itself a few microseconds.  They
+# follow the vectorised functions operation by operation, so they give the same
+# numbers; the two places where numpy's arithmetic is not plain IEEE float
+# arithmetic are reproduced exactly where it can decide a result:
+#
+# * ``np.hypot`` is libm's ``hypot`` (``math.hypot`` rounds differently in the last
+#   bit, which the stretched-elbow ``sqrt(1 - c*c)`` would amplify to ~1e-6 deg);
+# * the 3x3 / 4x4 products of ``@`` go to OpenBLAS, whose kernel accumulates with
+#   fused multiply-adds, ``fma(a2, b2, fma(a1, b1, a0*b0 + 0))``.  The fast path uses
+#   plain products (a few ulps off); where those ulps can decide something -- the
+#   sign of the rounding noise that puts J4 / J5 / J6 at +180 or -180, the wrist
+#   singularity threshold -- the wrist rotation is recomputed with exact fmas
+#   (``_W_exact``), and ``fk_compiled_one`` falls back to ``fk_compiled`` where the
+#   printed ``%f`` could differ (noise around 0 prints as -0.000000 or 0.000000).
+import ctypes  # noqa: E402
+import ctypes.util  # noqa: E402
+import math  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from fractions import Fraction  # noqa: E402
+
+
+def _fma_fraction(a: float, b: float, c: float) -> float:
+    return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+
+def _load_libm() -> tuple[Callable[[float, float, float], float], Callable[[float, float], float]]:
+    fma: Callable[..., float] | None = getattr(math, "fma", None)  # Python >= 3.13
+    hypot: Callable[..., float] | None = None
+    try:
+        libm = ctypes.CDLL(ctypes.util.find_library("m") or "libm.so.6")
+        if fma is None:
+            fma = libm.fma
+            fma.restype = ctypes.c_double
+            fma.argtypes = [ctypes.c_double] * 3
+        hypot = libm.hypot
+        hypot.restype = ctypes.c_double
+        hypot.argtypes = [ctypes.c_double] * 2
+    except (OSError, AttributeError):  # pragma: no cover - no libm
+        pass
+    if fma is None or fma(0.1, 10.0, -1.0) != _fma_fraction(0.1, 10.0, -1.0):  # pragma: no cover
+        fma = _fma_fraction
+    if hypot is None or hypot(1e-3, 7.0) != float(np.hypot(1e-3, 7.0)):  # pragma: no cover
+        def np_hypot(x: float, y: float) -> float:
+            return float(np.hypot(x, y))
+
+        hypot = np_hypot
+    return fma, hypot
+
+
+_fma, _hypot = _load_libm()
+_PI = math.pi
+_HALF_PI = math.pi / 2
+_RAD = 180.0 / math.pi
+_DEG = math.pi / 180.0
+_CA = math.cos(-math.pi / 2)  # 6.1e-17, as np.cos(-np.pi / 2)
+_SA = math.sin(-math.pi / 2)
+#: |y| below this (relative to the rotation's scale) in an atan2 of the wrist makes
+#: ``ik_one`` recompute the wrist rotation exactly (see above).
+_NOISE = 1e-11
+
+
+def _pose12(T) -> list[float]:
+    if isinstance(T, (list, tuple)) and len(T) == 12:
+        return [float(x) for x in T]
+    P = as_poses(T)
+    if P.shape[0] != 1:
+        raise ValueError(f"one pose expected, got {P.shape[0]}")
+    return P.reshape(12).tolist()
+
+
+def _dh_rot(th: float, ca: float, sa: float) -> list[list[float]]:
+    c, s = math.cos(th), math.sin(th)
+    return [[c, -s * ca, s * sa], [s, c * ca, -c * sa], [0.0, 0.0 + sa, 0.0 + ca]]
+
+
+def _fma_x(a: float, b: float, c: float) -> float:
+    """fma(a, b, c); a*b + c where the product is exact (structural 0 and +-1)."""
+    if b == 0.0 or b == 1.0 or b == -1.0 or a == 0.0 or a == 1.0 or a == -1.0:
+        return a * b + c
+    return _fma(a, b, c)
+
+
+def _mm3_blas(A, B) -> list[list[float]]:
+    """A @ B as numpy/OpenBLAS computes it (fma accumulation, bit for bit)."""
+    f = _fma_x
+    return [[f(a[2], B[2][j], f(a[1], B[1][j], a[0] * B[0][j] + 0.0)) for j in range(3)] for a in A]
+
+
+def _W_exact(t1: float, t2: float, t3c: float, R) -> list[list[float]]:
+    """(A1 A2 A3)^T R of ``ik`` bit for bit."""
+    R03 = _mm3_blas(_mm3_blas(_dh_rot(t1, _CA, _SA), _dh_rot(t2, 1.0, 0.0)), _dh_rot(t3c, _CA, _SA))
+    return _mm3_blas([list(col) for col in zip(*R03, strict=True)], R)
+
+
+def _wrist(W) -> list[tuple[float, float, float]]:
+    """(t4, t5, t6) of hands noflip, flip from the wrist rotation W (radians)."""
+    r11, r12, r13 = W[0]
+    r21, r22, r23 = W[1]
+    r33 = W[2][2]
+    sing = abs(r13) < WRIST_SING_EPS and abs(r23) < WRIST_SING_EPS
+    out = []
+    for t4 in (math.atan2(-r23, -r13), math.atan2(r23, r13)):
+        if sing:
+            t4 = 0.0
+        c4, s4 = math.cos(t4), math.sin(t4)
+        t5 = math.atan2(-(c4 * r13 + s4 * r23), r33)
+        m20 = s4 * r11 - c4 * r21
+        m21 = s4 * r12 - c4 * r22
+        out.append((t4, t5, math.atan2(-m20, -m21)))
+    return out
+
+
+def _wrap180(x: float) -> float:
+    return 180.0 - (180.0 - x) % 360.0
+
+
+def ik_one(g: Geometry, T, *, clamp_tol: float = CLAMP_TOL) -> list[list[float] | None]:
+    """``ik`` of one pose without numpy: 12 row-wise numbers (or (3,4)/(4,4)) -> 8
+    branches (``BRANCHES`` order), each a list of 6 joints (deg, (-180, 180]) or
+    None where ``ik`` gives NaN.  Same numbers as ``ik(g, T)[0]`` (see above)."""
+    t = _pose12(T)
+    if not all(map(math.isfinite, t)):
+        return _ik_via_numpy(g, t, clamp_tol)
+    try:
+        return _ik_one(g, t, clamp_tol)
+    except (ValueError, OverflowError):  # pragma: no cover - overflow on absurd input
+        return _ik_via_numpy(g, t, clamp_tol)
+
+
+def _ik_via_numpy(g: Geometry, t: list[float], clamp_tol: float) -> list[list[float] | None]:
+    with np.errstate(invalid="ignore", over="ignore"):
+        Q = ik(g, np.array(t).reshape(1, 12), clamp_tol=clamp_tol)[0]
+    return [q.tolist() if np.all(np.isfinite(q)) else None for q in Q]
+
+
+def _ik_one(g: Geometry, t: list[float], clamp_tol: float) -> list[list[float] | None]:
+    r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz = t
+    out: list[list[float] | None] = [None] * 8
+    R = [[r00, r01, r02], [r10, r11, r12], [r20, r21, r22]]
+    scale = max(abs(r00), abs(r01), abs(r02), abs(r10), abs(r11), abs(r12), abs(r20), abs(r21), abs(r22))
+    if scale == 0.0:  # zero rotation
+        return out
+    noise = _NOISE * scale
+    d6 = g.d6
+    wx = px + d6 * r02
+    wy = py + d6 * r12
+    wz = pz + d6 * r22
+    rho = _hypot(wx, wy)
+    a2 = g.a2
+    L2 = g.a3 * g.a3 + g.d4 * g.d4
+    L = math.sqrt(L2)
+    beta = math.atan2(g.a3, g.d4)
+    h = g.d1 - wz
+    lim = 1.0 + clamp_tol
+    for arm in (0, 1):
+        if arm == 0:
+            t1 = math.atan2(wy, wx)
+            r = rho - g.a1
+        else:
+            t1 = math.atan2(-wy, -wx)
+            r = -rho - g.a1
+        c = (r * r + h * h - a2 * a2 - L2) / (2.0 * a2) / L
+        if not abs(c) <= lim:
+            continue
+        c = -1.0 if c < -1.0 else (1.0 if c > 1.0 else c)
+        s2 = 1.0 - c * c
+        sn0 = math.sqrt(s2 if s2 > 0.0 else 0.0)
+        u = L * c
+        th_r = math.atan2(h, r)
+        c1, s1 = math.cos(t1), math.sin(t1)
+        q1 = _wrap180(-t1 * _RAD)
+        for elbow in (0, 1):
+            sn = sn0 if elbow == 0 else -sn0
+            v = L * sn
+            t3 = math.atan2(sn, c) + beta - _HALF_PI
+            t2 = th_r - math.atan2(v, a2 + u)
+            t3c = t3 + _PI
+            # fast wrist rotation: R03 = Rz(t1) Rx(-90) Rz(t2 + t3c) Rx(-90), W = R03^T R
+            t23 = t2 + t3c
+            c23, s23 = math.cos(t23), math.sin(t23)
+            a00, a01, a02 = c1 * c23, s1, -c1 * s23
+            a10, a11, a12 = s1 * c23, -c1, -s1 * s23
+            a20, a22 = -s23, -c23
+            w13 = a00 * r02 + a10 * r12 + a20 * r22
+            w23 = a01 * r02 + a11 * r12
+            w = [
+                [a00 * r00 + a10 * r10 + a20 * r20, a00 * r01 + a10 * r11 + a20 * r21, w13],
+                [a01 * r00 + a11 * r10, a01 * r01 + a11 * r11, w23],
+                [0.0, 0.0, a02 * r02 + a12 * r12 + a22 * r22],
+            ]
+            hands = _wrist(w)
+            if _near_cut(w, hands, noise):
+                hands = _wrist(_W_exact(t1, t2, t3c, R))
+            q2 = _wrap180(t2 * _RAD)
+            q3 = _wrap180((t3 + _HALF_PI) * _RAD)
+            for hand, (t4, t5, t6) in enumerate(hands):
+                q = [q1, q2, q3, _wrap180(t4 * _RAD), _wrap180(t5 * _RAD), _wrap180(t6 * _RAD)]
+                if all(map(math.isfinite, q)):
+                    out[4 * hand + 2 * elbow + arm] = q
+    return out
+
+
+def _near_cut(W, hands, noise: float) -> bool:
+    """Whether plain-arithmetic noise in W could change a result of ``_wrist``."""
+    r11, r12, r13 = W[0]
+    r21, r22, r23 = W[1]
+    if abs(abs(r13) - WRIST_SING_EPS) < noise or abs(abs(r23) - WRIST_SING_EPS) < noise:
+        return True
+    sing = abs(r13) < WRIST_SING_EPS and abs(r23) < WRIST_SING_EPS
+    if not sing and abs(r23) <= noise:  # J4 at 0 / +-180
+        return True
+    for t4, _t5, _t6 in hands:
+        c4, s4 = math.cos(t4), math.sin(t4)
+        if abs(c4 * r13 + s4 * r23) <= noise:  # J5 at 0 / +-180
+            return True
+        if abs(s4 * r11 - c4 * r21) <= noise:  # J6 at 0 / +-180
+            return True
+    return False
+
+
+def fk_compiled_one(g: Geometry, q_deg, n: int = 6) -> list[float]:
+    """``fk_compiled`` of one joint vector without numpy: 6 joints (deg) -> the 12
+    row-wise numbers of the frame of joint n (n = 6: the flange pose).
+
+    Plain-float products (within a few ulps of ``fk_compiled``); where those ulps
+    could change the ``%f`` text -- an entry that is rounding noise around 0
+    (``-0.000000`` / ``0.000000``) or next to a 6-decimal rounding boundary -- the
+    result is ``fk_compiled``'s, so the printed reply is the same byte for byte.
+    """
+    q = [float(x) for x in q_deg]
+    if len(q) != 6:
+        raise ValueError(f"6 joints expected, got {len(q)}")
+    if not all(map(math.isfinite, q)):
+        return _fk_via_numpy(g, q, n)
+    th = [-(q[0] * _DEG), q[1] * _DEG, q[2] * _DEG + _HALF_PI, q[3] * _DEG, q[4] * _DEG, q[5] * _DEG]
+    d = (g.d1, 0.0, 0.0, -g.d4, 0.0, -g.d6)
+    a = (g.a1, g.a2, -g.a3, 0.0, 0.0, 0.0)
+    T = None
+    for i in range(n):
+        ct, st = math.cos(th[i]), math.sin(th[i])
+        ca, sa = _ALPHA_CS[i]
+        b00, b01, b02, b03 = ct, -st * ca, st * sa, a[i] * ct
+        b10, b11, b12, b13 = st, ct * ca, -ct * sa, a[i] * st
+        b21, b22, b23 = sa, ca, d[i]
+        if T is None:
+            T = [[b00, b01, b02, b03], [b10, b11, b12, b13], [0.0, b21, b22, b23]]
+            continue
+        T = [
+            [t0 * b00 + t1 * b10, t0 * b01 + t1 * b11 + t2 * b21, t0 * b02 + t1 * b12 + t2 * b22,
+             t0 * b03 + t1 * b13 + t2 * b23 + t3]
+            for t0, t1, t2, t3 in T
+        ]
+    assert T is not None
+    out = T[0] + T[1] + T[2]
+    for v in out:
+        x = abs(v)
+        if x < 1e-9 or abs((x * 1e6) % 1.0 - 0.5) < 1e-6 * max(1.0, x):
+            return _fk_via_numpy(g, q, n)
+    return out
+
+
+def _fk_via_numpy(g: Geometry, q: list[float], n: int) -> list[float]:
+    return fk_compiled(g, np.array(q).reshape(1, 6), n)[0].reshape(12).tolist()
+
+
+_ALPHA_CS = [(float(c), float(s)) for c, s in zip(np.cos(DH_ALPHA), np.sin(DH_ALPHA), strict=True)]
