@@ -176,3 +176,35 @@ def test_forward_calc_text_equals_vectorised(robot):
             assert got is not None
             assert " ".join("%f" % x for x in got[0]) == " ".join("%f" % x for x in ref)
             assert got[1] == k.status(full)
+
+
+class _VectorisedOnly:
+    """A kin without ik_one: selection.branches_of takes the vectorised path."""
+
+    def __init__(self, k):
+        self.k = k
+        self.BRANCHES = k.BRANCHES
+        self.robot_status = k.robot_status
+
+    def ik(self, T):
+        return self.k.ik(T)
+
+
+@pytest.mark.parametrize("robot", ROBOT_TYPES)
+def test_select_single_pose_equals_vectorised(robot):
+    from rob6_kinematics import selection
+
+    k = Kinematics(get_robot(robot))
+    v = _VectorisedOnly(k)
+    rng = np.random.default_rng(11)
+    qs = poses_joints(k, seed=4, n=20)
+    for i, t in enumerate(k.fk(qs).reshape(-1, 12).tolist()):
+        cur = list(qs[rng.integers(len(qs))])
+        words = ["toggleHand", "toggleElbow", "toggleArm"] if i % 3 else BRANCH_WORDS[i % 8].split()
+        args = (words, cur, list(k.turn_min), list(k.turn_max), list(k.max_change), list(DEFAULT_WEIGHTS))
+        for shift in (True, False):
+            a = selection.select(k, t, *args, shift_360=shift)
+            b = selection.select(v, t, *args, shift_360=shift)
+            assert (a is None) == (b is None), (t, words)
+            if a is not None:
+                assert np.max(np.abs(np.array(a) - np.array(b))) <= TOL

@@ -3,7 +3,10 @@
 ``bench_ik()`` times, on the same random reachable poses of one robot:
 
 * ``batch_ik``   — ``Kinematics.ik`` on all poses at once (numpy, all 8 branches);
-* ``single_ik``  — ``Kinematics.ik`` called once per pose (all 8 branches);
+* ``single_ik``  — ``Kinematics.ik_one`` called once per pose (all 8 branches, the
+  numpy-free single-pose path of BackwardCalc / IsPossible / the Cartesian moves);
+* ``single_ik_numpy`` — ``Kinematics.ik`` (vectorised) called once per pose, for comparison;
+* ``backward_calc`` / ``forward_calc`` — one protocol command per pose (microseconds per call);
 * ``clik``       — Pinocchio's numeric CLIK (damped least squares on ``pin.log6``,
   the loop of Pinocchio's ``examples/inverse-kinematics.py`` on the flange frame),
   one solution per pose, started from q = 0.
@@ -55,6 +58,15 @@ def clik(pm, T_mm: np.ndarray, q0=None, eps=1e-4, it_max=1000, dt=1e-1, damp=1e-
     return np.degrees(q), False
 
 
+def _best(repeat: int, fn) -> float:
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
 def bench_ik(robot: str = "kr16", n_batch: int = 20000, n_single: int = 2000, n_clik: int = 50,
              repeat: int = 3, seed: int = 0) -> dict:
     """Poses/s of batch IK, single-call IK and Pinocchio CLIK on the same poses."""
@@ -64,7 +76,7 @@ def bench_ik(robot: str = "kr16", n_batch: int = 20000, n_single: int = 2000, n_
     from .calc import Kinematics
 
     kin = Kinematics(get_robot(robot))
-    T, _ = random_poses(kin, n_batch, seed)
+    T, q_all = random_poses(kin, n_batch, seed)
     kin.ik(T[:10])  # warm-up
 
     best = np.inf
@@ -76,13 +88,14 @@ def bench_ik(robot: str = "kr16", n_batch: int = 20000, n_single: int = 2000, n_
     solved = float(np.mean(np.isfinite(Q).all(axis=-1).any(axis=-1)))
 
     Ts = T[:n_single]
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for t in Ts:
-            kin.ik(t)
-        best = min(best, time.perf_counter() - t0)
-    single = len(Ts) / best
+    Tl = Ts.reshape(-1, 12).tolist()
+    single = len(Ts) / _best(repeat, lambda: [kin.ik_one(t) for t in Tl])
+    single_np = len(Ts) / _best(repeat, lambda: [kin.ik(t) for t in Ts])
+    zero = [0.0] * 6
+    bc_us = 1e6 / len(Tl) * _best(repeat, lambda: [
+        kin.backward_calc(t, "toggleHand toggleElbow toggleArm", zero) for t in Tl])
+    ql = q_all[:n_single].tolist()
+    fc_us = 1e6 / len(ql) * _best(repeat, lambda: [kin.forward_calc(q) for q in ql])
 
     pm = kin.pin
     Tc = T[:n_clik]
@@ -95,6 +108,9 @@ def bench_ik(robot: str = "kr16", n_batch: int = 20000, n_single: int = 2000, n_
         "robot": robot,
         "batch_ik_poses_per_s": batch,
         "single_ik_poses_per_s": single,
+        "single_ik_numpy_poses_per_s": single_np,
+        "backward_calc_us": bc_us,
+        "forward_calc_us": fc_us,
         "clik_poses_per_s": len(Tc) / dt,
         "clik_success_rate": ok / len(Tc),
         "batch_solved_rate": solved,

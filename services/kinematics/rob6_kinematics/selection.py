@@ -187,21 +187,29 @@ def branches_of(kin, pose12: Sequence[float]) -> dict[Status, list[float] | None
     ``kin.ik(T)`` must return (N, 8, 6) degrees (NaN = no solution) in the order of
     ``kin.BRANCHES`` if it has one, else ``opw.BRANCHES`` (hand major, noflip first), as
     ``opw.ik`` does: the raw branches, each joint in (−180, 180], *without* the turn limits
-    (the ±360° representatives are chosen here).
+    (the ±360° representatives are chosen here).  A ``kin`` with ``ik_one`` (``calc.Kinematics``:
+    the same branches without numpy's per-call overhead) gives them as lists, None = no solution.
     """
     import numpy as np
 
     from . import opw
 
+    labels = getattr(kin, "BRANCHES", None) or opw.BRANCHES
+    ik_one = getattr(kin, "ik_one", None)
+    if ik_one is not None:
+        return {_label(label): q for label, q in zip(labels, ik_one(pose12), strict=True)}
     arr = np.asarray(kin.ik(np.asarray(pose12, dtype=float).reshape(1, 12)), dtype=float)
     arr = arr.reshape(-1, 8, 6)[0]
-    labels = getattr(kin, "BRANCHES", None) or opw.BRANCHES
     out: dict[Status, list[float] | None] = {}
     for label, q in zip(labels, arr, strict=True):
-        hand, elbow, arm = label.split() if isinstance(label, str) else label
         ok = bool(np.all(np.isfinite(q)))
-        out[(hand, elbow, arm)] = [float(x) for x in q] if ok else None
+        out[_label(label)] = [float(x) for x in q] if ok else None
     return out
+
+
+def _label(label) -> Status:
+    hand, elbow, arm = label.split() if isinstance(label, str) else label
+    return hand, elbow, arm
 
 
 def _status_tuple(fn: Callable) -> Callable[[Sequence[float]], Status]:
