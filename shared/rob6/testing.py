@@ -6,6 +6,7 @@ Used by the test suite and the benchmarks; also handy for a lab's own integratio
 from __future__ import annotations
 
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -16,12 +17,23 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+#: Ports handed out for tests: below Linux's ephemeral range (32768-60999), where the
+#: kernel picks the local port of every outgoing connection; a port the kernel gave us
+#: from that range can be taken by someone's connection before our server binds it
+TEST_PORTS = range(20000, 32768)
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A port nothing listens on (TCP, or UDP with ``socket.SOCK_DGRAM``), on any address."""
+    for _ in range(200):
+        port = random.choice(TEST_PORTS)
+        with socket.socket(socket.AF_INET, kind) as sock:
+            try:
+                sock.bind(("0.0.0.0", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError("no free port for a test")
 
 
 class System:
@@ -38,7 +50,8 @@ class System:
                 "--dummy" if dummy else "--real-time", "--restart" if restart else "--no-restart"]
         for service in services:
             argv += ["--service", service]
-        env = dict(os.environ, **(extra_env or {}))
+        # no live view unless a test asks for one: systems of a test run must not race for 8765
+        env = {**os.environ, "ROB6_LIVE_PORT": "0", **(extra_env or {})}
         if log_dir:
             env["ROB6_LOG_DIR"] = log_dir
         self.output: list[str] = []

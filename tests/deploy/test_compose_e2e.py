@@ -30,6 +30,7 @@ from pathlib import Path
 
 import pytest
 
+from rob6.testing import free_port
 from tests.conformance import load, same
 from tests.deploy import zenoh_probe
 from tests.system import CONFORMANCE, Client
@@ -70,12 +71,6 @@ def _docker_ok() -> bool:
 if not _docker_ok() or _compose_cmd() is None:
     pytest.skip("no Docker engine or docker compose here", allow_module_level=True)
 COMPOSE = _compose_cmd()
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @dataclass

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import sys
 import threading
 import time
@@ -27,6 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import zenoh
+
+from rob6.testing import free_port
 
 ROBOT_ID = "robot1"
 WAIT_S = 1.0  # how long a reply/sample is awaited before "none"
@@ -86,12 +87,6 @@ def localize_config(src: Path, dest: Path, certs: Path, name: str, listen: str |
         text = text.replace('"tls/0.0.0.0:7447"', json.dumps(listen))
     dest.write_text(text)
     return dest
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @contextmanager

@@ -23,7 +23,7 @@ from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import running
+from tests.system import free_port, running
 
 pytestmark = pytest.mark.slow
 
@@ -37,9 +37,7 @@ POSITION_TOL = 2e-4
 
 
 def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+    return free_port(socket.SOCK_DGRAM)
 
 
 def rsi_system(port: int, **kwargs):

@@ -19,7 +19,8 @@ pytestmark = pytest.mark.slow
 
 def _rob6_run(*args: str, **env) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "rob6.cli", "run", "--dummy", *args],
-                          env=dict(os.environ, **env), capture_output=True, text=True, timeout=30)
+                          env={**os.environ, "ROB6_LIVE_PORT": "0", **env}, capture_output=True, text=True,
+                          timeout=30)
 
 
 def _one_line(result: subprocess.CompletedProcess) -> str:
