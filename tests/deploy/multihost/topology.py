@@ -248,9 +248,17 @@ class Topology:
 
 
 def backward_line(client: Client) -> str:
-    """A BackwardCalc line that succeeds (the pose of FK_LINE and its status)."""
-    pose, status = client.ask(FK_LINE, lines=2, timeout=15).splitlines()
-    return f"BackwardCalc {pose.strip()} {status.strip()}"
+    """A BackwardCalc line that succeeds (the pose of FK_LINE and its status); asks again while
+    kinematics answers ``ERROR: ...`` (one line: e.g. right after a partition healed)."""
+    deadline = time.monotonic() + 60
+    while True:
+        reply = client.ask(FK_LINE, timeout=15)
+        if not reply.startswith("ERROR"):
+            pose, status = reply, client.read_lines(1, timeout=15)
+            return f"BackwardCalc {pose.strip()} {status.strip()}"
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"{FK_LINE} -> {reply.strip()}")
+        time.sleep(0.2)
 
 
 def correct(reply: str) -> bool:
