@@ -225,6 +225,9 @@ def main() -> int:
     planner_table()
     links_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")), table)
     recording_table()
+    if os.environ.get("ROB6_BENCH_MULTIHOST") == "1":  # needs Docker and root, ~7 min
+        from .multihost import multihost_table
+        multihost_table(table)
     return 0
 
 
