@@ -46,7 +46,7 @@ COMMANDS = (
     ("GetAllowedStatus", 1, "mirror"),
     ("PingRobot 1 0", 1, "bus"),
     ("ForwardCalc 10 -20 30 40 50 60", 2, "bus"),
-    ("BackwardCalc", 2, "bus"),  # the pose ForwardCalc gave, and its status
+    ("BackwardCalc", 1, "bus"),  # the pose ForwardCalc gave, and its status
     ("MoveRTJoints", 1, "bus"),  # Alter mode on, a joint target 0.01 deg away each time
 )
 GOALS = {"gateway": "p50 <= original", "mirror": "p50 <= 1.5x CM_PING",
