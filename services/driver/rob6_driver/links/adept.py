@@ -509,6 +509,8 @@ class AdeptLink(Link):
                     ms = round(self.state_timeout_s * 1000)
                     return f"no state message from the controller at {self.state_name} for {ms} ms"
                 continue
+            except ConnectionResetError:  # closed with data unread: a reset, still a close
+                data = b""
             except OSError as exc:
                 return f"the state connection to {self.state_name} failed: {exc.strerror or exc}"
             if not data:
@@ -673,6 +675,8 @@ class AdeptLink(Link):
             data = sock.recv(4096)
         except BlockingIOError:
             return
+        except ConnectionResetError:  # closed with data unread: a reset, still a close
+            data = b""
         except OSError as exc:
             raise _Down(f"the motion connection to {self.motion_name} failed: {exc.strerror or exc}") from None
         if not data:
