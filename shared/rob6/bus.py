@@ -8,8 +8,18 @@ Key expressions (``<id>`` is the robot id, so several robots share one network):
     rob6/<id>/gripper/state                gripper state
     rob6/<id>/control/<name>               verbosity, shutdown (gateway -> all)
     rob6/<id>/log/<service>                log records of every process
-    rob6/<id>/trace/<service>/<op>         each served request with its reply (recorder)
-    rob6/<id>/trace/gateway/session        each client line in / reply out (recorder)
+    rob6/<id>/trace/<service>              the records below, in batches (recorder)
+
+Records for the recorder (``Bus.trace``) leave in batches, one message per few
+milliseconds (``TRACE_BATCH_S``): a JSON array of ``[suffix, record]`` pairs, read
+with ``trace_records``. They come from a zenoh.ext advanced publisher that keeps the
+last ``TRACE_CACHE_S`` of batches and numbers them: a recorder that was partitioned
+away or restarted gets what it missed and learns of what it could not get
+(``Bus.subscribe_traces``). The suffixes::
+
+    trace/<service>/<op>                   each served request with its reply
+    trace/gateway/session                  each client line in / reply out
+    trace/gateway/event                    a client session opening or closing
 
 Requests go to one *instance*: the bus watches the liveliness tokens and spreads the
 calls of a replicated service (kinematics) over its live instances (least in flight,
@@ -21,7 +31,11 @@ instance id as the Zenoh attachment), so a stray second driver is never mixed in
 Zenoh itself would send every query to one complete queryable, so replicas would sit
 idle without this. When an instance vanishes mid-request (its token disappears) or
 does not answer in time, a request to an idempotent service is retried once on
-another instance; everything else fails with a structured ``BusError``.
+another instance; a hedged one (single-pose kinematics, ``Op.hedged``) not answered
+after ``HEDGE_DELAY_S`` is sent a second time, to another live instance (or the same
+one when it is the only one), and the first answer wins. Never for an owner service:
+one robot, one owner, a motion is never sent twice. Everything else fails with a
+structured ``BusError``.
 
 Zenoh runs callbacks on its own threads: the callbacks here only hand data over
 (set a future, update a dict) and never block. Served requests are taken from a
@@ -39,11 +53,12 @@ import time
 import uuid
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from queue import SimpleQueue
+from queue import Empty, SimpleQueue
 from typing import Any, TypeVar
 
 import msgspec
 import zenoh
+import zenoh.ext
 
 from .config import BusSettings
 from .messages import (
@@ -62,6 +77,36 @@ log = logging.getLogger("rob6.bus")
 T = TypeVar("T")
 
 _encoder = msgspec.json.Encoder()
+
+#: traces gather this long before they leave as one message: a request pays for a queue
+#: put, not for a thread wake-up and a publication of its own (the recording overhead)
+TRACE_BATCH_S = 0.005
+TRACE_BATCH_MAX = 256
+#: a hedged request (``Op.hedged``: single-pose kinematics) not answered after this long
+#: is sent a second time: the first copy may sit on a replica that hangs or on a remote
+#: host behind a lost TCP segment (retransmission >= 200 ms). Above the p99 of a healthy
+#: remote call (tens of ms, deploy/MULTI_HOST.md), so a second copy costs a replica
+#: something only when the first is already late; below TCP's 200 ms retransmission
+#: timeout, so the copy is out before a stalled exchange would recover by itself.
+HEDGE_DELAY_S = 0.15
+
+#: every ``trace/<service>`` batch is kept this long by its (advanced) publisher, so a
+#: recorder partitioned away or restarted gets what it missed (``Bus.subscribe_traces``):
+#: batches leave at most every TRACE_BATCH_S, so 10 s are at most ~2,000 batches
+TRACE_CACHE_S = 10.0
+TRACE_CACHE_SAMPLES = int(TRACE_CACHE_S / TRACE_BATCH_S)
+#: how often a trace publisher tells its subscribers the sequence number of its last
+#: batch, when it changed (a lost *last* batch is detected and recovered within this)
+TRACE_HEARTBEAT_S = 0.5
+#: when the recorder's second trace subscriber comes (see ``_TraceSubscription``)
+TRACE_RESUBSCRIBE_S = 2.0
+
+_trace_batch = msgspec.json.Decoder(list[tuple[str, msgspec.Raw]])
+
+
+def trace_records(payload: bytes) -> list[tuple[str, bytes]]:
+    """The ``(suffix, record JSON)`` pairs of one ``trace/<service>`` batch."""
+    return [(suffix, bytes(record)) for suffix, record in _trace_batch.decode(payload)]
 
 
 class BusError(Exception):
@@ -141,7 +186,7 @@ class Bus:
         self._lock = threading.Lock()
         self._live: dict[str, list[str]] = {}
         self._inflight: dict[str, int] = {}
-        self._pending: dict[str, set[_Waiter]] = {}
+        self._pending: dict[str, set[tuple[_Waiter, int]]] = {}  # instance -> (waiter, attempt)
         self._rotation = itertools.count()
         self._listeners: list[Callable[[str, str, bool], None]] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
@@ -154,6 +199,14 @@ class Bus:
         # records for the recorder leave from a thread of their own, in order, so a request
         # never waits for their encoding or for the network (see ``trace``)
         self._traces: SimpleQueue[tuple[str, object] | None] = SimpleQueue()
+        # declared now, not with the first batch: a recorder learns of it (publisher
+        # detection) before there is anything to miss
+        self._trace_publisher = zenoh.ext.declare_advanced_publisher(
+            self.session, self.key("trace", service), congestion_control=zenoh.CongestionControl.BLOCK,
+            cache=zenoh.ext.CacheConfig(TRACE_CACHE_SAMPLES, replies_config=zenoh.ext.RepliesConfig(
+                congestion_control=zenoh.CongestionControl.BLOCK)),  # history, like the batches: never dropped
+            sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=TRACE_HEARTBEAT_S),
+            publisher_detection=True)
         self._tracer = threading.Thread(target=self._trace_loop, name=f"{service}-traces", daemon=True)
         self._tracer.start()
         self._live_sub = self.session.liveliness().declare_subscriber(
@@ -177,8 +230,8 @@ class Bus:
             elif not alive and instance in instances:
                 instances.remove(instance)
             lost = self._pending.pop(instance, set()) if not alive else set()
-        for waiter in lost:
-            waiter.fail(_InstanceLost(f"{service} instance {instance} went away"))
+        for waiter, attempt in lost:
+            waiter.fail(attempt, _InstanceLost(f"{service} instance {instance} went away"))
         for listener in list(self._listeners):
             try:
                 listener(service, instance, alive)
@@ -308,65 +361,95 @@ class Bus:
 
         Raises ``BusError`` with code ``unavailable`` (no live instance), ``timeout``,
         or whatever the service answered (``rejected``, ``invalid``, ``internal``...).
+        A hedged operation (``Op.hedged``) not answered after ``HEDGE_DELAY_S`` is sent
+        a second time, to another replica when there is one: the first answer wins.
         """
         call = _Request(self, service, op, body, timeout, cid, instance)
         while True:
             target = call.next_target()
-            waiter = self._send(call, target, _Waiter())
+            waiter = _Waiter()
+            self._send(call, target, waiter)
             try:
-                return call.decode(waiter.result(call.remaining() + 0.05), target)
+                hedge_at = call.hedge_at()
+                outcome = waiter.result(hedge_at - time.monotonic()) if hedge_at else None  # before the deadline
+                if outcome is None:
+                    if hedge_at:
+                        self._hedge(call, waiter)
+                    outcome = waiter.result(call.remaining() + 0.05)
+                if outcome is None:
+                    raise _InstanceLost("no reply in time")
+                return call.decode(*outcome)
             except _InstanceLost as exc:
                 call.lost(target, exc)
             finally:
-                self._done(target, waiter)
+                self._done(waiter)
 
     async def arequest(self, service: str, op: str, body: object, *, timeout: float | None = None,
                        cid: str | None = None, instance: str | None = None) -> Any:
         """``request`` for asyncio code: the reply wakes the event loop straight from
-        Zenoh's callback thread (no executor thread in between)."""
+        Zenoh's callback thread (no executor thread in between). The hedge is a timer on
+        the loop that sends the second copy itself: no task, no wake-up of the caller."""
         call = _Request(self, service, op, body, timeout, cid, instance)
         loop = asyncio.get_running_loop()
         while True:
             target = call.next_target()
-            waiter = self._send(call, target, _Waiter(loop))
+            waiter = _Waiter(loop)
+            self._send(call, target, waiter)
+            hedge_at = call.hedge_at()
+            hedge = loop.call_later(hedge_at - time.monotonic(), self._hedge, call, waiter) if hedge_at else None
             try:
-                return call.decode(await waiter.aresult(call.remaining() + 0.05), target)
+                return call.decode(*await waiter.aresult(call.remaining() + 0.05))
             except _InstanceLost as exc:
                 call.lost(target, exc)
             finally:
-                self._done(target, waiter)
+                if hedge is not None:
+                    hedge.cancel()
+                self._done(waiter)
 
-    def _send(self, call: "_Request", instance: str, waiter: "_Waiter") -> "_Waiter":
+    def _hedge(self, call: "_Request", waiter: "_Waiter") -> None:
+        """No answer yet: the second copy, to another live instance (the same one if it is
+        the only one; the first copy may be stuck behind a lost packet, not the replica)."""
+        if waiter.settled or call.remaining() <= 0:
+            return
+        target = self._pick(call.service, call.tried) or self._pick(call.service, set())
+        if target is None:
+            return
+        log.debug("hedging %s.%s on %s", call.service, call.op, target)
+        self._send(call, target, waiter)
+
+    def _send(self, call: "_Request", instance: str, waiter: "_Waiter") -> None:
         """Send the query; its reply, or the loss of the instance, completes ``waiter``."""
         service = call.service
+        call.sent(instance)
+        attempt = waiter.attempt(instance)
 
         def on_reply(reply: zenoh.Reply) -> None:
             ok, err = reply.ok, reply.err  # exactly one of them is set
             if ok is not None:
-                waiter.resolve(ok.payload.to_bytes())
+                waiter.resolve(attempt, ok.payload.to_bytes())
             elif err is not None:
                 message = err.payload.to_string()
                 if message == "Timeout":  # Zenoh's own error reply: the query timed out
                     # (a stopped/hung instance); report it like any lost instance, not as
                     # a bare "ERROR: Timeout" that names no service
-                    waiter.fail(_InstanceLost(f"no reply from {service} instance {instance} in time"))
+                    waiter.fail(attempt, _InstanceLost(f"no reply from {service} instance {instance} in time"))
                 else:
-                    waiter.fail(BusError("internal", message))
+                    waiter.fail(attempt, BusError("internal", message))
 
         def on_done() -> None:
-            waiter.fail(_InstanceLost(f"no reply from {service} instance {instance}"))
+            waiter.fail(attempt, _InstanceLost(f"no reply from {service} instance {instance}"))
 
         with self._lock:
-            self._pending.setdefault(instance, set()).add(waiter)
+            self._pending.setdefault(instance, set()).add((waiter, attempt))
             self._inflight[instance] = self._inflight.get(instance, 0) + 1
         self.session.get(self.key(service, instance, call.op), zenoh.handlers.Callback(on_reply, on_done),
                          payload=call.payload, timeout=max(call.remaining(), 0.001))
-        return waiter
 
-    def _done(self, instance: str, waiter: "_Waiter") -> None:
+    def _done(self, waiter: "_Waiter") -> None:
         with self._lock:
-            self._pending.get(instance, set()).discard(waiter)
-            self._inflight[instance] = self._inflight.get(instance, 1) - 1
+            for attempt, instance in enumerate(waiter.targets):
+                self._pending.get(instance, set()).discard((waiter, attempt))
+                self._inflight[instance] = self._inflight.get(instance, 1) - 1
 
     # ------------------------------------------------------------------ pub/sub
     def publish(self, suffix: str, data: object, *, reliable: bool = False) -> None:
@@ -385,16 +468,55 @@ class Bus:
         publisher.put(data if isinstance(data, bytes) else _encoder.encode(data), attachment=self._attachment)
 
     def trace(self, suffix: str, data: object) -> None:
-        """Publish a record for the recorder (reliably, in order) from the trace thread:
-        the caller, usually a request on its latency path, does not wait for it."""
+        """Queue a record for the recorder (struct or JSON bytes): it leaves, in order and
+        reliably, in the next ``trace/<service>`` batch from the trace thread, so the
+        caller, usually a request on its latency path, waits for nothing."""
         self._traces.put((suffix, data))
 
     def _trace_loop(self) -> None:
-        while (item := self._traces.get()) is not None:
+        closing = full = False
+        while not closing:
+            first = self._traces.get()
+            if first is None:
+                break
+            if not full:
+                time.sleep(TRACE_BATCH_S)  # a burst gathers
+            batch = [first]
+            while len(batch) < TRACE_BATCH_MAX:
+                try:
+                    item = self._traces.get_nowait()
+                except Empty:
+                    break
+                if item is None:
+                    closing = True
+                    break
+                batch.append(item)
+            full = len(batch) == TRACE_BATCH_MAX  # a backlog: no pause before the next
             try:
-                self.publish(*item, reliable=True)
+                self._publish_traces(_encoder.encode([
+                    (suffix, msgspec.Raw(data) if isinstance(data, bytes) else data) for suffix, data in batch]))
             except Exception:
-                log.exception("could not publish %s", item[0])
+                log.exception("could not publish %d trace records", len(batch))
+
+    def _publish_traces(self, payload: bytes) -> None:
+        """One batch on ``trace/<service>``, from an advanced publisher: it keeps the last
+        ``TRACE_CACHE_SAMPLES`` batches for a recorder that missed them (its history and
+        recovery queries), numbers them so a gap is detected (sample-miss detection with
+        a heartbeat for the last one), and announces itself (publisher detection), so a
+        recorder started after it still asks it for its history."""
+        if not self._closed.is_set():
+            self._trace_publisher.put(payload, attachment=self._attachment)
+
+    def subscribe_traces(self, on_batch: Callable[[str, bytes], None],
+                         on_miss: Callable[[str, int], None]) -> "_TraceSubscription":
+        """Every ``trace/<service>`` batch of every process, with what the publishers kept
+        (``TRACE_CACHE_S``): ``on_batch(key, payload)`` for each batch, the ones published
+        before this subscriber came (history of every publisher, also of one detected
+        later) and the ones lost on the way (recovered from the publisher's cache) included,
+        each once; ``on_miss(source, count)`` for batches that could not be recovered
+        (``source``: the key and instance of the publisher, or its Zenoh id until one of its
+        batches came). Both are called on Zenoh's threads and must not block."""
+        return _TraceSubscription(self, on_batch, on_miss)
 
     def subscribe(self, suffix: str, on_message: Callable[[str, bytes], None], *,
                   owner: str | None = None) -> zenoh.Subscriber[None]:
@@ -442,6 +564,97 @@ class Bus:
             log.debug("closing the zenoh session failed", exc_info=True)
 
 
+class _TraceSubscription:
+    """``Bus.subscribe_traces``: a zenoh.ext advanced subscriber, declared twice.
+
+    Its history query reaches only the publishers whose cache this session already has a
+    route to; right after the session opened it may come back without them, and the
+    first live batch of a publisher then becomes where that publisher starts (the
+    subscriber drops older batches its history brings later): measured, 1 to 3 restarts
+    in 6 lost the batches published while the recorder was down. So a second subscriber
+    is declared ``TRACE_RESUBSCRIBE_S`` later, when the routes are there, whose history
+    brings what the first missed; batches are passed on once (by publisher and sequence
+    number), and the first subscriber goes.
+    """
+
+    def __init__(self, bus: Bus, on_batch: Callable[[str, bytes], None], on_miss: Callable[[str, int], None]):
+        self.bus, self.on_batch, self.on_miss = bus, on_batch, on_miss
+        self._lock = threading.Lock()
+        self._sources: dict[str, str] = {}  # publisher's entity id -> "<key> <instance>"
+        self._seen: dict[str, set[int]] = {}  # publisher's entity id -> sequence numbers passed on
+        self._closed = False
+        self._current: list[Any] = self._declare()
+        self._timer = threading.Timer(TRACE_RESUBSCRIBE_S, self._redeclare)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _declare(self) -> list[Any]:
+        subscriber = zenoh.ext.declare_advanced_subscriber(
+            self.bus.session, self.bus.key("trace", "*"), zenoh.handlers.Callback(self._sample),
+            history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=TRACE_CACHE_SAMPLES,
+                                            max_age=TRACE_CACHE_S),
+            recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
+            subscriber_detection=True)
+        return [subscriber.sample_miss_listener(zenoh.handlers.Callback(self._missed)), subscriber]
+
+    def _redeclare(self) -> None:
+        if self._closed or self.bus._closed.is_set():
+            return
+        try:
+            second = self._declare()  # not under the lock: its replies take it
+        except Exception:
+            log.exception("could not declare the second trace subscriber")
+            return
+        with self._lock:
+            if self._closed:
+                first = second
+            else:
+                first, self._current = self._current, second
+        for declaration in first:
+            try:
+                declaration.undeclare()
+            except Exception:
+                log.debug("undeclaring the first trace subscriber failed", exc_info=True)
+
+    def _sample(self, sample: zenoh.Sample) -> None:
+        try:
+            info = sample.source_info
+            if info is not None:
+                source, sn = str(info.source_id), info.source_sn
+                with self._lock:
+                    seen = self._seen.setdefault(source, set())
+                    if sn in seen:
+                        return  # the second subscriber's history: passed on already
+                    seen.add(sn)
+                    if len(seen) > 4 * TRACE_CACHE_SAMPLES:  # keep the newest, enough for any history
+                        self._seen[source] = set(sorted(seen)[-2 * TRACE_CACHE_SAMPLES:])
+                    if source not in self._sources:
+                        attachment = sample.attachment
+                        self._sources[source] = "%s %s" % (sample.key_expr, attachment.to_bytes().decode(
+                            errors="replace") if attachment is not None else "?")
+            self.on_batch(str(sample.key_expr), sample.payload.to_bytes())
+        except Exception:
+            log.exception("trace subscriber failed")
+
+    def _missed(self, miss: zenoh.ext.Miss) -> None:
+        source = str(miss.source)
+        try:
+            self.on_miss(self._sources.get(source, source), miss.nb)
+        except Exception:
+            log.exception("trace miss listener failed")
+
+    def undeclare(self) -> None:
+        self._timer.cancel()
+        with self._lock:
+            self._closed = True
+            current, self._current = self._current, []
+        for declaration in current:
+            try:
+                declaration.undeclare()
+            except Exception:
+                log.debug("undeclaring the trace subscriber failed", exc_info=True)
+
+
 class _Request:
     """One request: its encoded payload, deadline and the instances tried so far."""
 
@@ -451,11 +664,24 @@ class _Request:
         self.spec = OPS[(service, op)]
         self.deadline = time.monotonic() + (self.spec.timeout if timeout is None else timeout)
         self.payload = _encoder.encode(RequestEnvelope(v=SCHEMA_VERSION, cid=cid or new_cid(), body=body))
-        self.retry = instance is None and service in IDEMPOTENT_SERVICES
+        self.retry = instance is None and service in IDEMPOTENT_SERVICES and service not in OWNER_SERVICES
+        self.hedged = self.retry and self.spec.hedged
         self.tried: set[str] = set()
+        self.sends = 0  # copies sent: never more than two (a retry or a hedge)
 
     def remaining(self) -> float:
         return self.deadline - time.monotonic()
+
+    def sent(self, target: str) -> None:
+        self.tried.add(target)
+        self.sends += 1
+
+    def hedge_at(self) -> float | None:
+        """When to send the second copy (monotonic), or None: not hedged, or no time."""
+        if not self.hedged or self.sends >= 2:
+            return None
+        at = time.monotonic() + HEDGE_DELAY_S
+        return at if at < self.deadline else None
 
     def next_target(self) -> str:
         target = self.instance or self.bus._pick(self.service, self.tried)
@@ -469,7 +695,7 @@ class _Request:
         """The target vanished or did not answer: raise, or return to try another replica."""
         self.tried.add(target)
         remaining = self.remaining()
-        if not self.retry or len(self.tried) >= 2 or remaining <= 0:
+        if not self.retry or self.sends >= 2 or remaining <= 0:
             code: ErrorCode = "timeout" if remaining <= 0 else "unavailable"
             raise BusError(code, f"{self.service} unavailable ({exc})") from None
         log.warning("retrying %s.%s on another instance: %s", self.service, self.op, exc)
@@ -489,26 +715,39 @@ class _Request:
 
 
 class _Waiter:
-    """Where a reply goes: completed from any thread (Zenoh's), first outcome wins.
+    """Where the reply to one or two copies (attempts) of a request goes: completed from
+    any thread (Zenoh's); the first answer wins, a failure counts only once every copy
+    has failed.
 
     With an event loop the future is an asyncio one, completed through the loop's
-    thread-safe call; otherwise a concurrent.futures one a thread can block on.
+    thread-safe call; otherwise a concurrent.futures one a thread can block on. Its
+    result is ``(reply payload, instance that answered)``.
     """
 
     def __init__(self, loop: asyncio.AbstractEventLoop | None = None):
         self.loop = loop
-        self.future: asyncio.Future[bytes] | concurrent.futures.Future[bytes] = (
+        self.future: asyncio.Future[tuple[bytes, str]] | concurrent.futures.Future[tuple[bytes, str]] = (
             loop.create_future() if loop is not None else concurrent.futures.Future())
-        self._settled = False  # the first outcome wakes the waiting loop; later ones cost nothing
+        self.targets: list[str] = []  # attempt number -> instance
+        self.settled = False  # the first outcome wakes the waiting loop; later ones cost nothing
+        self._open: set[int] = set()
+        self._lock = threading.Lock()
 
-    def result(self, timeout: float) -> bytes:
+    def attempt(self, target: str) -> int:
+        with self._lock:
+            self.targets.append(target)
+            self._open.add(len(self.targets) - 1)
+            return len(self.targets) - 1
+
+    def result(self, timeout: float) -> tuple[bytes, str] | None:
+        """The outcome, or None when none came within ``timeout``."""
         assert isinstance(self.future, concurrent.futures.Future)  # made without a loop
         try:
-            return self.future.result(timeout=timeout)
+            return self.future.result(timeout=max(timeout, 0.0))
         except concurrent.futures.TimeoutError:
-            raise _InstanceLost("no reply in time") from None
+            return None
 
-    async def aresult(self, timeout: float) -> bytes:
+    async def aresult(self, timeout: float) -> tuple[bytes, str]:
         assert isinstance(self.future, asyncio.Future) and self.loop is not None  # made with the running loop
         # a timer on the loop, not asyncio.wait_for: that costs a task switch per request
         timer = self.loop.call_later(timeout, self._complete_in_loop, self.future.set_exception,
@@ -518,16 +757,25 @@ class _Waiter:
         finally:
             timer.cancel()
 
-    def resolve(self, value: bytes) -> None:
+    def resolve(self, attempt: int, payload: bytes) -> None:
+        with self._lock:
+            if self.settled:
+                return
+            self.settled = True
+            value = (payload, self.targets[attempt])
         self._complete(self.future.set_result, value)
 
-    def fail(self, exc: BaseException) -> None:
+    def fail(self, attempt: int, exc: BaseException) -> None:
+        with self._lock:
+            if self.settled or attempt not in self._open:
+                return
+            self._open.discard(attempt)
+            if self._open:  # the other copy may still answer
+                return
+            self.settled = True
         self._complete(self.future.set_exception, exc)
 
     def _complete(self, setter: Callable[[Any], None], value: object) -> None:
-        if self._settled:
-            return
-        self._settled = True
         if self.loop is None:
             try:
                 setter(value)

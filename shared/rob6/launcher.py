@@ -239,11 +239,11 @@ def run(**options: Any) -> int:
     signal.signal(signal.SIGINT, lambda *_: launcher.stopping.set())
     try:
         launcher.start()
-        click.echo(f"rob6 ready: robot {launcher.robot} on 127.0.0.1:{launcher.port} "
-                   f"(Zenoh router {launcher.endpoint}); Ctrl-C stops everything", err=True)
-        if launcher.live_url:
+        if launcher.live_url:  # before the ready line: whoever waits for it sees both
             click.echo(f"live view: {launcher.live_url} (open in Foxglove: Open connection > "
                        f"Foxglove WebSocket)", err=True)
+        click.echo(f"rob6 ready: robot {launcher.robot} on 127.0.0.1:{launcher.port} "
+                   f"(Zenoh router {launcher.endpoint}); Ctrl-C stops everything", err=True)
         return launcher.supervise()
     except StartFailed as exc:
         click.echo(f"rob6: {exc}", err=True)

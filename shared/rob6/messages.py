@@ -341,6 +341,7 @@ class ClientExchange(Struct):
     t_out: float
     line: str  # latin-1 text, terminator removed
     reply: str | None  # None: no reply (empty line, SetAllowedStatus)
+    seq: int = 0  # 1, 2, ... per session, in the order of the lines: a gap is a lost record
 
 
 class SessionEvent(Struct):
@@ -357,6 +358,16 @@ class Op(NamedTuple):
     request: type
     reply: type
     timeout: float = 0.2  # default per-call timeout, seconds
+    #: a second copy goes to another replica when the first has not answered after
+    #: ``rob6.bus.HEDGE_DELAY_S`` (idempotent services only, never an owner service)
+    hedged: bool = False
+
+
+#: the deadline of a single-pose kinematics call, which may go to a replica on another
+#: host: a lost TCP segment on the way stalls the exchange for TCP's retransmission
+#: timeout (>= 200 ms on Linux, doubling on a second loss), so the 0.2 s default turned
+#: 5-12 % of the calls into errors under 5 % packet loss (deploy/MULTI_HOST.md section 8)
+REMOTE_POSE_TIMEOUT = 1.0
 
 
 #: Every request/reply operation on the bus.
@@ -369,11 +380,11 @@ OPS: dict[tuple[str, str], Op] = {
     ("driver", "alter_target"): Op(AlterTarget, Ack),
     ("driver", "stop"): Op(Empty, Ack, timeout=5.0),
     ("driver", "link"): Op(LinkQuery, LinkStatus),
-    ("kinematics", "fk"): Op(FkRequest, FkReply),
-    ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply),
-    ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply),
+    ("kinematics", "fk"): Op(FkRequest, FkReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
+    ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
+    ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
     ("kinematics", "ik_batch"): Op(IkBatchRequest, IkBatchReply, timeout=2.0),
-    ("kinematics", "select"): Op(SelectRequest, JointsReply),
+    ("kinematics", "select"): Op(SelectRequest, JointsReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
     ("planner", "config"): Op(Empty, MotionConfig),
     ("planner", "config_change"): Op(ConfigChange, ConfigReply),
     ("planner", "move"): Op(MoveRequest, MoveReply, timeout=600.0),

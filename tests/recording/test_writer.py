@@ -70,9 +70,9 @@ def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
                 "rob6.BusRequest", "rob6.BusReply", "rob6.SessionEvent"} <= schemas
         assert all(s.encoding == "jsonschema" for s in summary.schemas.values())
         with open(path, "rb") as fh:
-            reader = make_reader(fh)
-            assert [a.name for a in reader.iter_attachments()] == ["robot.urdf"]
-            meta = {m.name: m.metadata for m in reader.iter_metadata()}
+            mcap_reader = make_reader(fh)
+            assert [a.name for a in mcap_reader.iter_attachments()] == ["robot.urdf"]
+            meta = {m.name: m.metadata for m in mcap_reader.iter_metadata()}
         assert meta["rob6"]["robot"] == "kr16" and meta["rob6"]["robot_id"] == "robot1"
         assert "rob6.end" in meta
 
@@ -160,6 +160,20 @@ def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path, caplog):
     assert rec.stats().written == 100
 
 
+def test_missed_batches_are_logged_and_recorded_on_the_status_channel(tmp_path, caplog):
+    """What the bus reports as lost on the way (sample-miss detection) is in the file."""
+    with caplog.at_level(logging.WARNING, logger="rob6.recorder"):
+        with Recorder(tmp_path, "kr16", "robot1") as rec:
+            rec.report_missed("rob6/robot1/trace/gateway gw-1", 3)
+            rec.report_missed("rob6/robot1/trace/gateway gw-1", 2)
+            assert rec.stats().missed == 5
+    assert any("missed 3 trace batches from rob6/robot1/trace/gateway gw-1" in r.message for r in caplog.records)
+    (system,) = _files(tmp_path, "system")
+    status = [r.data for r in read_records(system) if r.topic == "/recorder/status"]
+    assert status == [{"missed": 3, "missed_source": "rob6/robot1/trace/gateway gw-1", "missed_total": 3},
+                      {"missed": 2, "missed_source": "rob6/robot1/trace/gateway gw-1", "missed_total": 5}]
+
+
 def test_submit_after_close_is_refused_and_counted(tmp_path):
     rec = Recorder(tmp_path, "kr16", "robot1").start()
     rec.close()
@@ -235,12 +249,15 @@ def test_tf_from_urdf(urdf):
 
 
 def test_pose_from_fk_forms():
-    (p, q) = pose_from_fk([0, -0.173648, -0.984808, 1741.140107, 0, -0.984808, 0.173648,
-                           -307.009978, -1, 0, 0, 640])
+    pose = pose_from_fk([0, -0.173648, -0.984808, 1741.140107, 0, -0.984808, 0.173648,
+                         -307.009978, -1, 0, 0, 640])
+    assert pose is not None
+    (p, q) = pose
     assert p == pytest.approx((1.741140107, -0.307009978, 0.64))
     assert sum(c * c for c in q) == pytest.approx(1.0)
     assert pose_from_fk(None) is None
-    assert pose_from_fk([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1000], [0, 0, 0, 1]])[0] == (0, 0, 1.0)
+    pose = pose_from_fk([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1000], [0, 0, 0, 1]])
+    assert pose is not None and pose[0] == (0, 0, 1.0)
 
 
 def test_bus_trace_adapter():

@@ -133,11 +133,13 @@ class Gateway:
         return state.q
 
     def record(self, session: Session, received: float, line, reply: str | None) -> None:
-        """A copy of the exchange for the recorder, sent after the reply went out."""
+        """A copy of the exchange for the recorder, sent after the reply went out, numbered
+        (1, 2, ... per session) so a recording shows whether any is missing."""
+        session.seq += 1
         self.bus.trace("trace/gateway/session", ClientExchange(
             session=session.number, peer=session.peer, cid=session.cid, t_in=received,
             t_out=time.time(), line=line.text if not line.too_long else f"<{line.too_long} bytes>",
-            reply=reply))
+            reply=reply, seq=session.seq))
 
     def record_event(self, session: Session, event: str, greeting: str = "") -> None:
         self.bus.trace("trace/gateway/event", SessionEvent(

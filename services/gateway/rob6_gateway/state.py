@@ -68,3 +68,4 @@ class Session:
     peer: str
     cid: str = field(default_factory=new_cid)  # of the command being executed
     routetest: list[float] | None = None  # the virtual position while route testing
+    seq: int = 0  # client exchanges recorded so far (ClientExchange.seq of the last one)

@@ -112,6 +112,7 @@ CLIENT_LINE = {
         "cid": {"type": "string", "description": "correlation id of the command"},
         "text": {"type": "string", "description": "raw bytes decoded as latin-1"},
         "peer": {"type": "string"},
+        "seq": {"type": "integer", "description": "1, 2, ... per session: a gap is a lost record"},
     },
     "required": ["session", "cid", "text"],
 }
@@ -127,6 +128,7 @@ CLIENT_REPLY = {
         "text": {"type": "string"},
         "kind": {"type": "string", "enum": ["reply", "greeting", "busy", "error"]},
         "dt": {"type": "number", "description": "seconds from line received to reply sent"},
+        "seq": {"type": "integer", "description": "the client_in record's seq"},
     },
     "required": ["session", "cid", "text"],
 }
@@ -198,7 +200,8 @@ GRIPPER_STATE = struct_schema(GripperState, "rob6.GripperState")
 
 RECORDER_STATUS = {
     "title": "rob6.RecorderStatus",
-    "description": "Recorder accounting: records dropped because the writer fell behind.",
+    "description": "Recorder accounting: records dropped because the writer fell behind, "
+                   "and batches of records lost on the way to the recorder (missed).",
     "type": "object",
     "properties": {
         "submitted": {"type": "integer"},
@@ -210,6 +213,11 @@ RECORDER_STATUS = {
         "max_backlog_seen": {"type": "integer"},
         "first_drop_ns": {"type": "integer"},
         "last_drop_ns": {"type": "integer"},
+        "missed": {"type": "integer",
+                   "description": "trace batches (each of one or more records) from missed_source "
+                                  "the bus detected as lost and could not recover"},
+        "missed_source": {"type": "string", "description": "the publisher: key and instance"},
+        "missed_total": {"type": "integer", "description": "batches missed so far"},
     },
 }
 

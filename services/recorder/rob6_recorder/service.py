@@ -2,7 +2,8 @@
 
 It subscribes to ``rob6/<id>/**``. Services publish a copy of each request/reply they
 served (``trace/<service>/<op>``), the gateway a copy of each client line and reply
-(``trace/gateway/session``) and of each session's start and end; states and logs are
+(``trace/gateway/session``) and of each session's start and end, in batches
+(``trace/<service>``, see ``rob6.bus``); states and logs are
 published anyway. ``Recorder.submit`` never blocks, so the Zenoh callback stays short.
 
 With ``live_port`` (not 0) the recorder's writer thread also feeds the live view
@@ -19,7 +20,7 @@ from typing import Any
 import msgspec
 
 import rob6
-from rob6.bus import Bus
+from rob6.bus import Bus, trace_records
 from rob6.messages import ClientExchange, SessionEvent
 from rob6.robots import RobotModel
 
@@ -54,17 +55,41 @@ class RecorderService:
         self.recorder.start()
         self._subscriber = self.bus.subscribe("**", self.on_sample)
         self.bus.announce()
+        # trace batches with what their publishers kept for a recorder that was away
+        # (partitioned, restarted): a separate, advanced subscriber; "**" gets the rest
+        self._traces = self.bus.subscribe_traces(self.on_traces, self.recorder.report_missed)
 
     def stop(self) -> None:
         # stop listening first, then write out what is queued: nothing arrives after the close
+        self._traces.undeclare()
         self._subscriber.undeclare()
         self.recorder.close()
         if self.live is not None:
             self.live.close()
 
     def on_sample(self, key: str, payload: bytes) -> None:
+        suffix = key[self._prefix:]
+        if suffix.startswith("trace/") and suffix.count("/") == 1:  # a batch: on_traces has it
+            return
+        self._record(suffix, payload, time.time_ns())
+
+    def on_traces(self, key: str, payload: bytes) -> None:
+        """One ``trace/<service>`` batch of records."""
         now = time.time_ns()
         suffix = key[self._prefix:]
+        try:
+            records = trace_records(payload)
+        except msgspec.DecodeError:
+            log.warning("malformed trace batch on %s (%d bytes) kept as it is", key, len(payload))
+            self.recorder.submit("/" + suffix, now, payload)
+            return
+        for record_suffix, record in records:
+            try:
+                self._record(record_suffix, record, now)
+            except Exception:  # one bad record must not cost the rest of its batch
+                log.exception("could not record %s", record_suffix)
+
+    def _record(self, suffix: str, payload: bytes, now: int) -> None:
         submit = self.recorder.submit
         topic = TOPICS.get(suffix)
         if topic:
@@ -92,7 +117,7 @@ class RecorderService:
         session = exchange.session
         self.recorder.submit(f"/session/{session}/client_in", int(exchange.t_in * 1e9),
                              {"session": session, "cid": exchange.cid, "text": exchange.line + "\n",
-                              "peer": exchange.peer})
+                              "peer": exchange.peer, "seq": exchange.seq})
         self.recorder.submit(f"/session/{session}/client_out", int(exchange.t_out * 1e9),
                              {"session": session, "cid": exchange.cid, "text": exchange.reply or "",
-                              "dt": exchange.t_out - exchange.t_in})
+                              "dt": exchange.t_out - exchange.t_in, "seq": exchange.seq})

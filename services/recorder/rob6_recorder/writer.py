@@ -62,6 +62,7 @@ class RecorderStats:
     submitted: int = 0
     written: int = 0  # records processed by the writer thread (one per submit)
     dropped: int = 0
+    missed: int = 0  # trace batches lost on the way to the recorder (report_missed)
     dropped_by_topic: dict[str, int] = field(default_factory=dict)
     backlog: int = 0
     max_backlog_seen: int = 0
@@ -137,6 +138,7 @@ class Recorder:
         self._drops_pending: dict[str, int] = {}
         self._first_drop_ns = 0
         self._last_drop_ns = 0
+        self._missed = 0  # trace batches the bus reported lost on the way (report_missed)
         self._last_warn = 0.0
         self._last_drop_warn = 0.0
         self._max_seen = 0
@@ -223,6 +225,17 @@ class Recorder:
                             "records, %d dropped so far", n, self.max_backlog, total)
         self._wake.set()
 
+    def report_missed(self, source: str, count: int) -> None:
+        """``count`` batches of records from ``source`` never reached this recorder (the
+        bus detected the gap and could not recover them): logged, and written on
+        ``/recorder/status`` in order with the records. Never blocks; any thread."""
+        with self._lock:
+            self._missed += count
+            total = self._missed
+        log.warning("recorder missed %d trace batches from %s (%d in total)", count, source, total)
+        now = self.clock()
+        self.submit(STATUS_TOPIC, now, {"missed": count, "missed_source": source, "missed_total": total})
+
     def _warn_backlog(self, n: int) -> None:
         now = time.monotonic()
         if now - self._last_warn >= 1.0:
@@ -256,7 +269,7 @@ class Recorder:
             queued = sum(1 for item in list(self._queue) if type(item) is tuple)
             return RecorderStats(
                 submitted=self._written + queued, written=self._written, dropped=self._dropped,
-                dropped_by_topic=dict(self._dropped_by_topic), backlog=len(self._queue),
+                missed=self._missed, dropped_by_topic=dict(self._dropped_by_topic), backlog=len(self._queue),
                 max_backlog_seen=self._max_seen, errors=self._errors, files=self._files.paths())
 
     # ----------------------------------------------------------------- writer thread
