@@ -9,7 +9,7 @@ import time
 import pytest
 
 from rob6_gripper import smp
-from rob6_gripper.backend import ERROR, GRIPPING, IDLE, MOVING
+from rob6_gripper.backend import ERROR, GRIPPING, IDLE, MOVING, Result
 from rob6_gripper.fake_device import FakeSmpDevice
 from rob6_gripper.schunk import SchunkGripper
 
@@ -100,7 +100,7 @@ def test_current_refused_by_module(grip):
 def test_state_observable_while_moving_and_stop(dev, grip):
     dev.time_scale = 1.0
     dev.model.w = 0.0
-    res = {}
+    res: dict[str, Result] = {}
     th = threading.Thread(target=lambda: res.setdefault("r", grip.move_to_position(0.070, 5)))
     th.start()
     time.sleep(0.25)

@@ -9,7 +9,7 @@ import time
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from rob6_gripper.backend import GRIPPING, IDLE, MOVING, GripperStatus, VirtualClock
+from rob6_gripper.backend import GRIPPING, IDLE, MOVING, GripperStatus, Result, VirtualClock
 from rob6_gripper.sim import GripperModel, GripperParams, SimGripper
 
 P = GripperParams()
@@ -81,7 +81,8 @@ def test_close_time_is_what_the_model_implies(amps, width):
     m.advance(expected * 0.999)
     assert m.outcome(mid) is None
     m.advance(expected * 0.002)
-    assert m.outcome(mid).status == "gripping"
+    out = m.outcome(mid)
+    assert out is not None and out.status == "gripping"
     assert m.w == pytest.approx(width)
     assert m.force == pytest.approx(P.force_constant * amps)
 
@@ -116,14 +117,15 @@ def test_opening_runs_to_the_stroke_end_object_does_not_block():
     assert m.time_to_completion() == pytest.approx(expected)
     m.advance(expected + 0.01)
     out = m.outcome(mid)
-    assert out.ok and out.status == "end_stop" and m.w == P.stroke_max and m.mode == IDLE
+    assert out is not None and out.ok and out.status == "end_stop" and m.w == P.stroke_max and m.mode == IDLE
 
 
 def test_closing_without_object_stops_at_zero():
     m = GripperModel()
     mid = m.command_current(-2.0)
     m.advance(5.0)
-    assert m.outcome(mid).status == "end_stop" and m.w == 0.0 and m.force == 0.0
+    out = m.outcome(mid)
+    assert out is not None and out.status == "end_stop" and m.w == 0.0 and m.force == 0.0
 
 
 def test_object_narrower_than_jaws_only():
@@ -153,7 +155,7 @@ def test_move_to_position_reaches_target_in_trapezoid_time(target):
     assert m.time_to_completion() == pytest.approx(expected, abs=1e-12)
     m.advance(expected)
     out = m.outcome(mid)
-    assert out.status == "reached" and m.w == target and m.v == 0 and m.mode == IDLE
+    assert out is not None and out.status == "reached" and m.w == target and m.v == 0 and m.mode == IDLE
 
 
 def test_speed_and_acceleration_limits_respected():
@@ -225,7 +227,7 @@ def test_bad_timeout(timeout):
 
 def test_stop_from_another_thread_ends_blocking_call_real_time():
     g = SimGripper(position=0.0)  # real clock: a full-stroke move takes ~1.1 s
-    result = {}
+    result: dict[str, Result] = {}
     th = threading.Thread(target=lambda: result.setdefault("r", g.move_to_position(0.070)))
     t0 = time.monotonic()
     th.start()

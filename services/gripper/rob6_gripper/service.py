@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 
 from rob6.bus import Bus, Context
 from rob6.messages import Empty, GripperCommand, GripperReply, GripperState
@@ -13,6 +14,7 @@ from .backend import GripperBackend, Result
 log = logging.getLogger("rob6.gripper")
 
 STATE_PERIOD_S = 0.02  # 50 Hz: fast enough to plot a 0.3 s closing motion
+STATE_HEARTBEAT_S = 1.0  # an unchanged state is published again this often
 
 
 class GripperService:
@@ -49,9 +51,17 @@ class GripperService:
         return GripperState(**self.backend.state().as_dict())
 
     def _publish_state(self) -> None:
+        """Sample the gripper at 50 Hz; publish each change, and at rest a heartbeat every
+        ``STATE_HEARTBEAT_S`` (an idle gripper cost every subscriber 50 messages a second)."""
+        last: GripperState | None = None
+        last_sent = 0.0
         while not self._stop.wait(STATE_PERIOD_S):
             try:
-                self.bus.publish("gripper/state", GripperState(**self.backend.state().as_dict()))
+                state = GripperState(**self.backend.state().as_dict())
+                now = time.monotonic()
+                if state != last or now - last_sent >= STATE_HEARTBEAT_S:
+                    self.bus.publish("gripper/state", state)
+                    last, last_sent = state, now
             except Exception:
                 log.exception("could not read the gripper state")
                 self._stop.wait(1.0)
