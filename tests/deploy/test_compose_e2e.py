@@ -24,7 +24,8 @@ import socket
 import subprocess
 import sys
 import time
-from contextlib import ExitStack
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,6 +34,7 @@ import pytest
 from rob6.testing import free_port
 from tests.conformance import load, same
 from tests.deploy import zenoh_probe
+from tests.deploy.compose import compose_cmd, project_containers, run
 from tests.system import CONFORMANCE, Client
 
 pytestmark = pytest.mark.docker
@@ -49,28 +51,15 @@ REPORT: dict[str, object] = {}  # timings and sizes, printed at the end (pytest 
 
 
 # ---------------------------------------------------------------------- docker helpers
-def _run(cmd: list[str], *, timeout: float = 900, check: bool = True, env=None, **kw) -> subprocess.CompletedProcess:
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, **kw)
-    if check and proc.returncode != 0:
-        raise AssertionError(f"{' '.join(cmd)} -> {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return proc
-
-
-def _compose_cmd() -> list[str] | None:
-    for cmd in (["docker", "compose"], ["docker-compose"]):
-        if shutil.which(cmd[0]) and subprocess.run([*cmd, "version"], capture_output=True).returncode == 0:
-            return cmd
-    return None
-
-
 def _docker_ok() -> bool:
     return bool(shutil.which("docker")) and subprocess.run(
         ["docker", "info"], capture_output=True, timeout=30).returncode == 0
 
 
-if not _docker_ok() or _compose_cmd() is None:
+_compose = compose_cmd() if _docker_ok() else None
+if _compose is None:
     pytest.skip("no Docker engine or docker compose here", allow_module_level=True)
-COMPOSE = _compose_cmd()
+COMPOSE: list[str] = _compose
 
 
 @dataclass
@@ -96,17 +85,14 @@ class Stack:
     def compose(self, *args: str, timeout: float = 900, check: bool = True) -> subprocess.CompletedProcess:
         files = [a for f in self.files for a in ("-f", str(REPO / f))]
         profiles = [a for p in self.profiles for a in ("--profile", p)]
-        return _run([*COMPOSE, "-p", self.project, *files, "--env-file", str(self.env_file), *profiles, *args],
-                    timeout=timeout, check=check, env=self.env, cwd=REPO)
+        return run([*COMPOSE, "-p", self.project, *files, "--env-file", str(self.env_file), *profiles, *args],
+                   timeout=timeout, check=check, env=self.env, cwd=REPO)
 
     def containers(self, service: str | None = None) -> list[str]:
-        filters = ["--filter", f"label=com.docker.compose.project={self.project}"]
-        if service:
-            filters += ["--filter", f"label=com.docker.compose.service={service}"]
-        return _run(["docker", "ps", "-a", "-q", *filters]).stdout.split()
+        return project_containers(self.project, service)
 
     def state(self, container: str) -> dict:
-        return json.loads(_run(["docker", "inspect", "-f", "{{json .State}}", container]).stdout)
+        return json.loads(run(["docker", "inspect", "-f", "{{json .State}}", container]).stdout)
 
     def wait_healthy(self, services: tuple[str, ...], timeout: float = 180) -> float:
         """Seconds until every container of ``services`` is healthy; fails with the logs otherwise."""
@@ -200,7 +186,7 @@ def image_report() -> dict[str, str]:
     sizes = {}
     for name in ("base", *SERVICES, "router"):
         ref = BASE_IMAGE if name == "base" else f"rob6/{name}:{TAG}"
-        size = int(_run(["docker", "image", "inspect", "-f", "{{.Size}}", ref]).stdout)
+        size = int(run(["docker", "image", "inspect", "-f", "{{.Size}}", ref]).stdout)
         sizes[ref] = f"{size / 1e6:.0f} MB"
     return sizes
 
@@ -210,16 +196,16 @@ def image_report() -> dict[str, str]:
 def built():
     """Base image (reused if present), wheelhouse, `compose build`; all timed."""
     start = time.monotonic()
-    have_base = _run(["docker", "image", "inspect", BASE_IMAGE], check=False).returncode == 0
+    have_base = run(["docker", "image", "inspect", BASE_IMAGE], check=False).returncode == 0
     if not have_base:
         if BASE_IMAGE != "rob6/base:bookworm" or os.geteuid() != 0:
             pytest.skip(f"{BASE_IMAGE} missing and cannot be made here (deploy/build-base.sh needs root)")
-        _run(["bash", str(DEPLOY / "build-base.sh")], timeout=1200)
+        run(["bash", str(DEPLOY / "build-base.sh")], timeout=1200)
     REPORT["base image"] = f"{time.monotonic() - start:.0f} s ({'reused' if have_base else 'built'})"
     t = time.monotonic()
     # offline when the wheelhouse is complete (only the rob6 wheels are rebuilt), else download
-    if _run(["bash", str(DEPLOY / "wheelhouse.sh"), "--offline"], check=False).returncode != 0:
-        _run(["bash", str(DEPLOY / "wheelhouse.sh")], timeout=1200)
+    if run(["bash", str(DEPLOY / "wheelhouse.sh"), "--offline"], check=False).returncode != 0:
+        run(["bash", str(DEPLOY / "wheelhouse.sh")], timeout=1200)
     REPORT["wheelhouse"] = f"{time.monotonic() - t:.0f} s"
     t = time.monotonic()
     builder = Stack("rob6e2ebuild")
@@ -236,8 +222,8 @@ def entry_points(built) -> dict[str, bool]:
     """Which services' images can import their entry point (the lead writes them)."""
     found = {}
     for service in SERVICES:
-        proc = _run(["docker", "run", "--rm", "--network", "none", f"rob6/{service}:{TAG}", "python", "-c",
-                     f"import rob6_{service}.__main__"], check=False, timeout=120)
+        proc = run(["docker", "run", "--rm", "--network", "none", f"rob6/{service}:{TAG}", "python", "-c",
+                    f"import rob6_{service}.__main__"], check=False, timeout=120)
         found[service] = proc.returncode == 0
     return found
 
@@ -265,9 +251,9 @@ def plain(built, entry_points):
 def certs(tmp_path_factory):
     out = tmp_path_factory.mktemp("certs")
     make = DEPLOY / "certs" / "make-certs.sh"
-    _run(["bash", str(make), "--out", str(out), "router", *SERVICES, "intruder"])
+    run(["bash", str(make), "--out", str(out), "router", *SERVICES, "intruder"])
     foreign = tmp_path_factory.mktemp("foreign")
-    _run(["bash", str(make), "--out", str(foreign), "intruder"])
+    run(["bash", str(make), "--out", str(foreign), "intruder"])
     return out, foreign
 
 
@@ -279,14 +265,14 @@ def test_images_offline_minimal_non_root(built):
              "gripper": {"serial"}, "recorder": {"mcap", "zstandard"}}
     for name, mods in needs.items():
         image = f"rob6/{name}:{TAG}"
-        config = json.loads(_run(["docker", "image", "inspect", "-f", "{{json .Config}}", image]).stdout)
+        config = json.loads(run(["docker", "image", "inspect", "-f", "{{json .Config}}", image]).stdout)
         assert config["User"] == "rob6", (image, config["User"])
         assert config["Healthcheck"]["Test"][0] == "CMD", image
         absent = sorted(heavy - mods)
         script = (f"import importlib.util as u, zenoh, rob6; [__import__(m) for m in {sorted(mods)!r}]; "
                   f"extra = [m for m in {absent!r} if u.find_spec(m)]; assert not extra, extra; "
                   f"import os; assert os.getuid() != 0")
-        _run(["docker", "run", "--rm", "--network", "none", image, "python", "-c", script], timeout=120)
+        run(["docker", "run", "--rm", "--network", "none", image, "python", "-c", script], timeout=120)
 
 
 def test_router_container_tls_and_acl(built, certs):
@@ -323,14 +309,14 @@ def test_kinematics_killed_mid_session(plain):
     with connect(plain.port) as client:
         assert same(FK, client.ask(FK, lines=2), expected)
         kinematics = plain.containers("kinematics")
-        _run(["docker", "kill", *kinematics])
+        run(["docker", "kill", *kinematics])
         t = time.monotonic()
         reply = client.ask(FK, lines=1, timeout=10)
         REPORT["reply without kinematics"] = f"{reply.strip()!r} after {(time.monotonic() - t) * 1000:.0f} ms"
         assert reply.startswith("ERROR"), reply
         assert time.monotonic() - t < 5, "the client waited instead of getting an error"
         assert client.ask("CM_PING") == "PONG\n"  # the gateway itself is fine
-        _run(["docker", "start", *kinematics])
+        run(["docker", "start", *kinematics])
         t = time.monotonic()
         while True:  # back as soon as its liveliness token is on the bus
             reply = client.ask(FK, lines=1, timeout=10)
@@ -344,10 +330,10 @@ def test_kinematics_killed_mid_session(plain):
 
         # a crash, not a stop: the restart policy brings it back
         cid = kinematics[0]
-        before = int(_run(["docker", "inspect", "-f", "{{.RestartCount}}", cid]).stdout)
-        _run(["docker", "exec", cid, "sh", "-c", "kill -KILL -1"], check=False)  # all but docker-init
+        before = int(run(["docker", "inspect", "-f", "{{.RestartCount}}", cid]).stdout)
+        run(["docker", "exec", cid, "sh", "-c", "kill -KILL -1"], check=False)  # all but docker-init
         t = time.monotonic()
-        while int(_run(["docker", "inspect", "-f", "{{.RestartCount}}", cid]).stdout) == before:
+        while int(run(["docker", "inspect", "-f", "{{.RestartCount}}", cid]).stdout) == before:
             assert time.monotonic() - t < 30, "kinematics was not restarted after a crash"
             time.sleep(0.2)
         plain.wait_healthy(("kinematics",), timeout=90)
@@ -373,9 +359,9 @@ def test_two_kinematics_replicas_both_serve(plain):
             assert same(FK, client.ask(FK, lines=2), expected)
         time.sleep(0.5)
         served: dict[str, int] = {}
-        for _key, payload in inbox.samples:
-            instance = json.loads(payload)["instance"]
-            served[instance] = served.get(instance, 0) + 1
+        for _key, batch in inbox.samples:
+            for _suffix, record in json.loads(batch):
+                served[record["instance"]] = served.get(record["instance"], 0) + 1
     REPORT["ForwardCalc x20 over 2 replicas"] = served
     assert len(served) == 2 and min(served.values()) >= 3, served
 
@@ -391,10 +377,10 @@ def test_replicas_from_outside_the_stack(plain, tmp_path):
     config.write_text((DEPLOY / "zenoh" / "remote-client.json5").read_text().replace("tcp/robot-pc:7447", endpoint))
     process = None
     with ExitStack() as stack:
-        _run(["docker", "run", "-d", "--name", name, "--network", "host", "--init",
-              "-e", "ROB6_ZENOH_MODE=client", "-e", f"ROB6_ZENOH_CONNECT={endpoint}", "-e", f"ROB6_ROBOT={ROBOT}",
-              f"rob6/kinematics:{TAG}"])
-        stack.callback(_run, ["docker", "rm", "-f", name], check=False)
+        run(["docker", "run", "-d", "--name", name, "--network", "host", "--init",
+             "-e", "ROB6_ZENOH_MODE=client", "-e", f"ROB6_ZENOH_CONNECT={endpoint}", "-e", f"ROB6_ROBOT={ROBOT}",
+             f"rob6/kinematics:{TAG}"])
+        stack.callback(run, ["docker", "rm", "-f", name], check=False)
         process = subprocess.Popen([str(Path(sys.executable).with_name("rob6-kinematics"))],
                                    env={**os.environ, "ROB6_ZENOH_CONFIG": str(config), "ROB6_ROBOT": ROBOT},
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -412,9 +398,9 @@ def test_replicas_from_outside_the_stack(plain, tmp_path):
         for _ in range(24):
             assert same(FK, client.ask(FK, lines=2), fk_expected())
         time.sleep(0.5)
-        served = {json.loads(p)["instance"] for _k, p in inbox.samples}
+        served = {record["instance"] for _k, batch in inbox.samples for _s, record in json.loads(batch)}
         hostname = socket.gethostname()
-        remote_container = _run(["docker", "inspect", "-f", "{{.Config.Hostname}}", name]).stdout.strip()
+        remote_container = run(["docker", "inspect", "-f", "{{.Config.Hostname}}", name]).stdout.strip()
     REPORT["ForwardCalc x24 over 2 compose + 2 outside replicas"] = sorted(served)
     assert len(served) == 4, served
     assert any(i.startswith(remote_container) or i.startswith(hostname) for i in served), served
@@ -443,7 +429,7 @@ def test_second_project_for_the_same_robot_is_refused(plain, tmp_path):
                 time.sleep(0.5)
             assert {s: st["ExitCode"] for s, st in states.items()} == dict.fromkeys(owners, 78), states
             for service in owners:
-                logs = _run(["docker", "logs", second.containers(service)[0]]).stderr.strip().splitlines()
+                logs = run(["docker", "logs", second.containers(service)[0]]).stderr.strip().splitlines()
                 assert len(logs) == 1 and logs[0].startswith(f"rob6: a {service} for robot1 is already running on "), logs
             REPORT["second project, same robot id"] = "driver, planner, gripper, gateway refused (exit 78)"
             assert client.ask("MovePTPJoints 13 -60 80 0 40 0") == "true\n"
@@ -473,13 +459,44 @@ for path in files:
 out["topics"] = sorted(out["topics"])
 print(json.dumps(out))
 """
-    proc = _run(["docker", "run", "--rm", "--network", "none", "-v", f"{volume}:/data/logs:ro",
-                 f"rob6/recorder:{TAG}", "python", "-c", script], timeout=120)
+    proc = run(["docker", "run", "--rm", "--network", "none", "-v", f"{volume}:/data/logs:ro",
+                f"rob6/recorder:{TAG}", "python", "-c", script], timeout=120)
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     REPORT["recordings"] = {k: (v if k != "topics" else v[:12]) for k, v in result.items()}
     assert result["files"] >= 1 and result["messages"] > 0, result
     assert not result["unclosed"], result
     assert any("kinematics" in topic for topic in result["topics"]), result["topics"]
+
+
+# ---------------------------------------------------------------------- stand-in controllers
+@contextmanager
+def controller_stack(profile: str, controller: str, *, robot: str, link: str,
+                     control_port_setting: str) -> Iterator[tuple[Stack, Callable[[], dict]]]:
+    """The stack of compose profile ``profile`` with the driver on ``link`` to the stand-in
+    controller container ``controller`` (its image built here): up and healthy. Yields the
+    stack and the controller's status request (its control channel, published on the port
+    the compose setting ``control_port_setting`` names); the stack is removed at the end."""
+    control_port = free_port()
+    stack = Stack(f"rob6e2e{profile}{os.getpid()}", settings={
+        "ROB6_ROBOT": robot, "ROB6_LINK": link, "ROB6_DUMMY": "0",
+        control_port_setting: str(control_port)}, profiles=(profile,))
+    try:
+        t = time.monotonic()
+        stack.compose("build", controller, timeout=900)
+        stack.compose("up", "-d", "--no-build")
+        stack.wait_healthy(("router", *SERVICES, controller))
+        REPORT[f"{profile}: build the controller image, up until all healthy"] = f"{time.monotonic() - t:.0f} s"
+        with socket.create_connection(("127.0.0.1", control_port), timeout=10) as sock, \
+                sock.makefile("rwb") as control:
+
+            def status() -> dict:
+                control.write(b'{"cmd": "status"}\n')
+                control.flush()
+                return json.loads(control.readline())
+
+            yield stack, status
+    finally:
+        stack.down()
 
 
 # ---------------------------------------------------------------------- tests: rsi profile
@@ -488,23 +505,8 @@ def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
     stand-in KR C4 (its own container on the robot network) over RSI in real time; the
     controller's axes end where the client moved them, without a trip."""
     require(entry_points, *SERVICES)
-    control_port = free_port()
-    stack = Stack(f"rob6e2ersi{os.getpid()}", settings={
-        "ROB6_ROBOT": "kr16rt", "ROB6_LINK": "rsi", "ROB6_DUMMY": "0",
-        "ROB6_KUKA_SIM_CONTROL_PORT": str(control_port)}, profiles=("rsi",))
-    try:
-        t = time.monotonic()
-        stack.compose("build", "kuka-rsi-sim", timeout=900)
-        stack.compose("up", "-d", "--no-build")
-        stack.wait_healthy(("router", *SERVICES, "kuka-rsi-sim"))
-        REPORT["rsi: build the controller image, up until all healthy"] = f"{time.monotonic() - t:.0f} s"
-        control = socket.create_connection(("127.0.0.1", control_port), timeout=10).makefile("rwb")
-
-        def kuka() -> dict:
-            control.write(b'{"cmd": "status"}\n')
-            control.flush()
-            return json.loads(control.readline())
-
+    with controller_stack("rsi", "kuka-rsi-sim", robot="kr16rt", link="rsi",
+                          control_port_setting="ROB6_KUKA_SIM_CONTROL_PORT") as (stack, kuka):
         # the KR C4 sends from the moment it is up; until the driver answers, RSI times out
         # and the stand-in operator (--auto-ack) restarts it, as on a real controller
         deadline = time.monotonic() + 90
@@ -516,12 +518,9 @@ def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
             assert client.ask("MovePTPJoints " + " ".join(f"{x:g}" for x in target), timeout=60) == "true\n"
             assert [float(x) for x in client.ask("GetPositionJoints").split()] == target
             status = kuka()
-        control.close()
         assert status["state"] == "running" and status["trips"] == before["trips"], status  # no trip in the move
         assert all(abs(a - b) < 2e-4 for a, b in zip(status["aipos"], target, strict=True)), status["aipos"]
         REPORT["rsi: controller after the move"] = {k: status[k] for k in ("cycle_ms", "late_total", "rtt_ms")}
-    finally:
-        stack.down()
 
 
 # ---------------------------------------------------------------------- tests: adept profile
@@ -531,23 +530,8 @@ def test_adept_profile_drives_the_adept_container(built, entry_points):
     by the compose default ROB6_SM_HOST=adept-sm-sim) and streams a PTP motion to it over
     simple_message; the move answers true only once the controller's arm is at the target."""
     require(entry_points, *SERVICES)
-    control_port = free_port()
-    stack = Stack(f"rob6e2eadept{os.getpid()}", settings={
-        "ROB6_ROBOT": "ad850", "ROB6_LINK": "simple_message", "ROB6_DUMMY": "0",
-        "ROB6_ADEPT_SIM_CONTROL_PORT": str(control_port)}, profiles=("adept",))
-    try:
-        t = time.monotonic()
-        stack.compose("build", "adept-sm-sim", timeout=900)
-        stack.compose("up", "-d", "--no-build")
-        stack.wait_healthy(("router", *SERVICES, "adept-sm-sim"))
-        REPORT["adept: build the controller image, up until all healthy"] = f"{time.monotonic() - t:.0f} s"
-        control = socket.create_connection(("127.0.0.1", control_port), timeout=10).makefile("rwb")
-
-        def adept() -> dict:
-            control.write(b'{"cmd": "status"}\n')
-            control.flush()
-            return json.loads(control.readline())
-
+    with controller_stack("adept", "adept-sm-sim", robot="ad850", link="simple_message",
+                          control_port_setting="ROB6_ADEPT_SIM_CONTROL_PORT") as (stack, adept):
         # the driver is the client of both simple_message ports and retries until they answer
         deadline = time.monotonic() + 90
         while not ((before := adept())["clients"]["motion"] and before["clients"]["state"]):
@@ -571,7 +555,6 @@ def test_adept_profile_drives_the_adept_container(built, entry_points):
             moved_s = time.monotonic() - t
             assert [float(x) for x in client.ask("GetPositionJoints").split()] == target
             status = adept()
-        control.close()
         # the controller's own arm is at the target and at rest: true means the robot arrived
         assert all(abs(a - b) < 2e-4 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
         assert not status["in_motion"] and status["queue_length"] == 0, status
@@ -584,8 +567,6 @@ def test_adept_profile_drives_the_adept_container(built, entry_points):
         REPORT["adept: controller after the move"] = {
             "move_s": round(moved_s, 2), **{k: status[k] for k in (
                 "points_received", "points_acknowledged", "points_executed", "underruns", "ack_latency_ms")}}
-    finally:
-        stack.down()
 
 
 # ---------------------------------------------------------------------- tests: secure profile

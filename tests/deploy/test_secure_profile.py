@@ -87,6 +87,7 @@ def test_rob6_processes_through_the_secure_router(certs, tmp_path):
     env = dict(os.environ, ROB6_ZENOH_CONFIG=str(router_cfg), ROB6_ZENOH_LISTEN=endpoint)
     router = subprocess.Popen([str(ROB6), "router"], env=env, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True)
+    assert router.stdout is not None  # a pipe
     buses: list[Bus] = []
 
     def bus(name: str) -> Bus:

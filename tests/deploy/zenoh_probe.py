@@ -55,6 +55,7 @@ def client_config(endpoint: str, certs: Path | None = None, name: str | None = N
     if ca is not None:
         config.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(ca)))
     if name is not None:
+        assert certs is not None, "mutual TLS needs certs"
         config.insert_json5("transport/link/tls/enable_mtls", "true")
         config.insert_json5("transport/link/tls/connect_certificate", json.dumps(str(certs / f"{name}.crt")))
         config.insert_json5("transport/link/tls/connect_private_key", json.dumps(str(certs / f"{name}.key")))

@@ -19,7 +19,8 @@ conf.insert_json5("scouting/multicast/enabled", "false")
 session = zenoh.open(conf)
 def on_sample(sample):
     s = json.loads(sample.payload.to_bytes())
-    print(json.dumps([s["cycle"], s["q"], s["mode"], s["missed"]]), flush=True)
+    # a joint state leaves out fields at their defaults (mode idle, missed 0)
+    print(json.dumps([s["cycle"], s["q"], s.get("mode", "idle"), s.get("missed", 0)]), flush=True)
 sub = session.declare_subscriber("rob6/robot1/driver/state", on_sample)
 print("ready", flush=True)
 stop = threading.Event()
@@ -68,6 +69,26 @@ class StateRecorder:
 
     def __exit__(self, *exc: object) -> None:
         run(["docker", "rm", "-f", self.name], check=False)
+
+
+def same_motion(reference: list[Sample], other: list[Sample], until: int, shifts: int = 3) -> bool:
+    """Whether ``other`` holds the same joint positions as ``reference`` at the same cycles
+    counted from where each motion starts, over the first ``until`` cycles of the reference's
+    motion. Samples the probe did not receive (a state is dropped, never queued, under
+    congestion) are skipped, at most one in ten; a missed first sample is allowed for by
+    trying the start up to ``shifts`` cycles either way."""
+    def by_cycle(samples: list[Sample]) -> dict[int, list[float]]:
+        first = samples[0].q
+        start = next((i for i, s in enumerate(samples) if s.q != first), len(samples))
+        origin = samples[max(0, start - 1)].cycle
+        return {s.cycle - origin: s.q for s in samples}
+
+    ref, oth = by_cycle(reference), by_cycle(other)
+    for shift in range(-shifts, shifts + 1):
+        common = [c for c in range(until) if c in ref and c + shift in oth]
+        if len(common) >= 0.9 * until and all(ref[c] == oth[c + shift] for c in common):
+            return True
+    return False
 
 
 def motion(samples: list[Sample]) -> list[list[float]]:

@@ -22,7 +22,6 @@ import json
 import os
 import random
 import shutil
-import socket
 import subprocess
 import sys
 import threading
@@ -31,7 +30,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rob6.testing import Client
+from rob6.testing import Client, free_port
+from tests.deploy.compose import compose_cmd, project_containers, run
 
 REPO = Path(__file__).resolve().parents[3]
 COMPOSE_FILE = REPO / "deploy" / "multihost" / "docker-compose.yml"
@@ -45,20 +45,6 @@ FK_LINE = "ForwardCalc 10 -20 30 40 50 60"
 JOINTS = (10.0, -20.0, 30.0, 40.0, 50.0, 60.0)
 
 
-def run(cmd: list[str], *, timeout: float = 300, check: bool = True, **kw) -> subprocess.CompletedProcess:
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kw)
-    if check and proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} -> {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return proc
-
-
-def compose_cmd() -> list[str] | None:
-    for cmd in (["docker", "compose"], ["docker-compose"]):
-        if shutil.which(cmd[0]) and subprocess.run([*cmd, "version"], capture_output=True).returncode == 0:
-            return cmd
-    return None
-
-
 def fault_tools_missing() -> str | None:
     """Why faults cannot be made here (None: they can): root, nsenter, iptables, NFQUEUE."""
     if os.geteuid() != 0:
@@ -67,12 +53,6 @@ def fault_tools_missing() -> str | None:
         if not shutil.which(tool):
             return f"{tool} is not installed on this machine"
     return None
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def free_subnet() -> str:
@@ -124,10 +104,7 @@ class Topology:
         return time.monotonic() - start
 
     def containers(self, service: str | None = None) -> list[str]:
-        filters = ["--filter", f"label=com.docker.compose.project={self.project}"]
-        if service:
-            filters += ["--filter", f"label=com.docker.compose.service={service}"]
-        return run(["docker", "ps", "-a", "-q", *filters]).stdout.split()
+        return project_containers(self.project, service)
 
     def container(self, service: str) -> str:
         ids = self.containers(service)

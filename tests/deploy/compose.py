@@ -1,0 +1,33 @@
+"""Docker helpers shared by the deployment tests: tests/deploy/test_compose_e2e.py and the
+multi-host topology (tests/deploy/multihost/topology.py, which bench/multihost.py uses too)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from typing import Any
+
+
+def run(cmd: list[str], *, timeout: float = 900, check: bool = True, **kw: Any) -> subprocess.CompletedProcess[str]:
+    """``cmd`` with its output captured as text; with ``check``, a non-zero exit raises an
+    AssertionError naming the command, its exit code and the tail of its output."""
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kw)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"{' '.join(cmd)} -> {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return proc
+
+
+def compose_cmd() -> list[str] | None:
+    """The compose command that works here: ``docker compose`` or ``docker-compose`` (None: neither)."""
+    for cmd in (["docker", "compose"], ["docker-compose"]):
+        if shutil.which(cmd[0]) and subprocess.run([*cmd, "version"], capture_output=True).returncode == 0:
+            return cmd
+    return None
+
+
+def project_containers(project: str, service: str | None = None) -> list[str]:
+    """The ids of a compose project's containers, stopped ones too (one service's with ``service``)."""
+    filters = ["--filter", f"label=com.docker.compose.project={project}"]
+    if service:
+        filters += ["--filter", f"label=com.docker.compose.service={service}"]
+    return run(["docker", "ps", "-a", "-q", *filters]).stdout.split()
