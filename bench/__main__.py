@@ -21,7 +21,7 @@ from rob6.messages import IkBatchRequest
 from rob6.testing import running
 
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baseline
-from .links import links_table
+from .links import links_table, live_realtime_table
 
 COUNT = int(os.environ.get("ROB6_BENCH_COUNT", "3000"))
 
@@ -125,11 +125,12 @@ def idle_table(seconds: float = 10.0) -> None:
         with tempfile.TemporaryDirectory() as logs, running(robot, dummy=dummy, log_dir=logs) as system:
             time.sleep(2.0)  # past start-up
             pids = [system.process.pid, *system.pids().values()]
-            cpu, rss = usage(pids, seconds)
+            cpu, rss, pss = usage(pids, seconds)
         rows.append((f"{robot} ({'dummy' if dummy else 'real time, simulated robot'})", len(pids),
-                     f"{cpu * 100:.1f} %", f"{rss:.0f}"))
+                     f"{cpu * 100:.1f} %", f"{pss:.0f}", f"{rss:.0f}"))
     table(f"The whole system idle ({seconds:.0f} s, recorder on): CPU and memory",
-          ("robot", "processes", "CPU, share of one core (goal <= 10 %)", "RSS sum, MB (goal <= 400)"), rows)
+          ("robot", "processes", "CPU, share of one core (goal <= 10 %)", "memory (PSS sum), MB (goal <= 400)",
+           "RSS sum, MB (shared pages once per process)"), rows)
 
 
 def kinematics_tables() -> None:
@@ -225,6 +226,7 @@ def main() -> int:
     planner_table()
     links_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")), table)
     recording_table()
+    live_realtime_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")) / 2, table)
     if os.environ.get("ROB6_BENCH_MULTIHOST") == "1":  # needs Docker and root, ~7 min
         from .multihost import multihost_table
         multihost_table(table)

@@ -14,8 +14,8 @@ file *and* the system file) or not. ``bench_replay``: replays a recorded session
 ``bench_writers``: the maintained MCAP writers on their own (foxglove-sdk's, which the
 recorder uses, and the ``mcap`` package's), one file and two (a session open), with
 joint-state payloads already encoded. ``live_table(table)`` (for ``bench/__main__.py``):
-gateway round trips with the live view off and on (a Foxglove client subscribed to every
-channel), same run.
+gateway round trips with the live view off and on (a Foxglove viewer in a process of its
+own, ``bench/viewer.py``, subscribed to every channel), same run.
 """
 
 from __future__ import annotations
@@ -194,8 +194,8 @@ def bench_live(count: int = 2000) -> dict[str, dict[str, list[float]]]:
     """Gateway round trips (s) with the live view off, then on with a Foxglove client
     subscribed to every channel the live view advertises."""
     from bench.latency import measure
+    from bench.viewer import Viewer
     from rob6.testing import free_port, running
-    from tests.live.ws_client import FoxgloveClient
 
     commands = {"GetPositionJoints": ("GetPositionJoints", 1), "PingRobot": ("PingRobot 1 0", 1),
                 "ForwardCalc": ("ForwardCalc 10 -20 30 40 50 60", 2),
@@ -206,22 +206,18 @@ def bench_live(count: int = 2000) -> dict[str, dict[str, list[float]]]:
         env = {"ROB6_LIVE_PORT": str(port) if case == "on" else "0"}
         with tempfile.TemporaryDirectory() as logs, running("kr16", dummy=True, log_dir=logs,
                                                             extra_env=env) as system:
-            fox = None
-            if case == "on":
-                fox = FoxgloveClient(f"ws://127.0.0.1:{port}")
-                fox.subscribe(*fox.wait_topics(["/tf", "/driver/joint_state"]))
+            viewer = Viewer(f"ws://127.0.0.1:{port}") if case == "on" else None
             try:
                 with system.client() as client:
                     measure(client, "GetRobot", 1, 50, warmup=0)  # session channels appear
-                    if fox is not None:  # everything advertised by now, bus traffic included
-                        fox.subscribe(*(t for t in fox.topics() if t not in fox._subs.values()))
+                    if viewer is not None:  # everything advertised by now, bus traffic included
+                        viewer.subscribe_all()
                     results[case] = {name: measure(client, cmd, lines, count)
                                      for name, (cmd, lines) in commands.items()}
-                if fox is not None:
-                    results[case]["_received"] = [float(sum(len(v) for v in fox.messages.values()))]
             finally:
-                if fox is not None:
-                    fox.close()
+                received = viewer.close() if viewer is not None else 0
+            if viewer is not None:
+                results[case]["_received"] = [float(received)]
     return results
 
 

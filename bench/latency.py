@@ -70,6 +70,7 @@ import sys, time, zenoh
 config = zenoh.Config()
 config.insert_json5("mode", '"peer"')
 config.insert_json5("connect/endpoints", '["tcp/127.0.0.1:%s"]' % sys.argv[1])
+config.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
 config.insert_json5("scouting/multicast/enabled", "false")
 session = zenoh.open(config)
 queryable = session.declare_queryable("bench/bare", lambda query: query.reply(query.key_expr, b"pong"))
@@ -80,12 +81,14 @@ sys.stdin.read()
 
 def zenoh_baseline(router_port: int, count: int, warmup: int = 200) -> list[float]:
     """The bare Zenoh query round trip between two Python processes (peers beside the same
-    router as rob6's services), awaited on an asyncio loop the way the gateway awaits."""
+    router as rob6's services, linked directly to each other as they are), awaited on an
+    asyncio loop the way the gateway awaits."""
     server = subprocess.Popen([sys.executable, "-c", _BARE_QUERYABLE, str(router_port)],
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     config = zenoh.Config()
     config.insert_json5("mode", '"peer"')
     config.insert_json5("connect/endpoints", f'["tcp/127.0.0.1:{router_port}"]')
+    config.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')  # a direct link, as rob6's peers have
     config.insert_json5("scouting/multicast/enabled", "false")
     session = zenoh.open(config)
     try:
@@ -116,8 +119,11 @@ def zenoh_baseline(router_port: int, count: int, warmup: int = 200) -> list[floa
         server.wait()
 
 
-def usage(pids: list[int], seconds: float) -> tuple[float, float]:
-    """CPU (share of one core) and resident memory (MB) of ``pids`` together, over ``seconds``."""
+def usage(pids: list[int], seconds: float) -> tuple[float, float, float]:
+    """CPU (share of one core), resident memory summed (MB) and proportional set size summed
+    (MB) of ``pids`` together, over ``seconds``. The RSS sum counts every shared page (the
+    Python interpreter, Zenoh's library, numpy) once per process; PSS divides each shared page
+    among the processes that map it, so its sum is the memory the system occupies."""
     def cpu_seconds() -> float:
         total = 0
         for pid in pids:
@@ -126,11 +132,13 @@ def usage(pids: list[int], seconds: float) -> tuple[float, float]:
             total += int(fields[11]) + int(fields[12])  # utime + stime, in clock ticks
         return total / os.sysconf("SC_CLK_TCK")
 
+    def kilobytes(path: str, field: str) -> int:
+        with open(path) as f:
+            return next(int(line.split()[1]) for line in f if line.startswith(field))
+
     before, start = cpu_seconds(), time.monotonic()
     time.sleep(seconds)
     cpu = (cpu_seconds() - before) / (time.monotonic() - start)
-    rss = 0
-    for pid in pids:
-        with open(f"/proc/{pid}/status") as f:
-            rss += next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
-    return cpu, rss / 1024
+    rss = sum(kilobytes(f"/proc/{pid}/status", "VmRSS:") for pid in pids)
+    pss = sum(kilobytes(f"/proc/{pid}/smaps_rollup", "Pss:") for pid in pids)
+    return cpu, rss / 1024, pss / 1024

@@ -24,6 +24,7 @@ from rob6.messages import Empty, LinkQuery
 from rob6.testing import free_port, running
 
 from .latency import percentiles
+from .viewer import Viewer
 
 START = "0 -80 100 0 30 0"
 
@@ -51,15 +52,14 @@ class ControllerSim:
         self.proc.wait(10)
 
 
-def free_udp_port() -> int:
-    return free_port(socket.SOCK_DGRAM)
-
-
-def stream(link: str, seconds: float) -> dict:
-    """Stream for ``seconds``; the client's round trips and what the driver and controller counted."""
-    udp = free_udp_port()
+def stream(link: str, seconds: float, live: bool = False) -> dict:
+    """Stream for ``seconds``; the client's round trips and what the driver and controller
+    counted. ``live``: with the live view on and a Foxglove viewer subscribed to every channel."""
+    udp = free_port(socket.SOCK_DGRAM)
     extra = {"ROB6_LINK": link, "ROB6_RSI_LISTEN": f"127.0.0.1:{udp}"} if link == "rsi" else {}
-    kuka = None
+    live_port = free_port() if live else 0
+    extra["ROB6_LIVE_PORT"] = str(live_port)
+    kuka = viewer = None
     with tempfile.TemporaryDirectory() as logs, \
             running("kr16rt", dummy=False, log_dir=logs, extra_env=extra) as system:
         bus = Bus(BusSettings(robot="kr16rt", robot_id=system.robot_id,
@@ -74,6 +74,9 @@ def stream(link: str, seconds: float) -> dict:
             with system.client() as client:
                 client.ask("MovePTPJoints " + START, timeout=60)
                 assert client.ask("EnableAlter") == "true\n"
+                if live:
+                    viewer = Viewer(f"ws://127.0.0.1:{live_port}")
+                    viewer.subscribe_all()
                 before = bus.request("driver", "state", Empty())
                 controller_before = kuka.status() if kuka else None
                 bus.request("driver", "link", LinkQuery(reset=True))
@@ -97,9 +100,10 @@ def stream(link: str, seconds: float) -> dict:
             bus.close()
             if kuka:
                 kuka.close()
+            received = viewer.close() if viewer is not None else 0
     result = {"n": n, "rate": n / elapsed, "cycles": after.cycle - before.cycle,
               "missed": after.missed - before.missed, "rtt": percentiles(rtts), "latency_us": status.latency_us,
-              "realtime": status.realtime}
+              "realtime": status.realtime, "viewer_received": received}
     if controller and controller_before:
         result.update(late=controller["late_total"] - controller_before["late_total"],
                       trips=len(controller["trips"]), controller_rtt=controller["rtt_ms"])
@@ -212,3 +216,19 @@ def links_table(seconds: float, table) -> None:
                f"{p50r:.3f} / {p99r:.3f}", "p99 <= 4 (one cycle)"),
           ])
     adept_table(max(5.0, seconds / 3), table)
+
+
+def live_realtime_table(seconds: float, table) -> None:
+    """The live view's cost on the real-time path: the RSI Alter stream with it off, then on
+    with a Foxglove viewer (a process of its own) subscribed to every channel."""
+    off, on = stream("rsi", seconds), stream("rsi", seconds, live=True)
+
+    def row(r: dict) -> tuple[str, ...]:
+        lat = r["latency_us"] or [float("nan")] * 3
+        return (f"{r['late']} / {r['trips']}", f"{r['cycles']} / {r['missed']}",
+                f"{lat[1] / 1000:.3f} / {lat[2] / 1000:.3f}", "%.3f / %.3f" % r["rtt"],
+                f"{r['viewer_received']:,}")
+    table(f"Live view cost on the real-time path: MoveRTJoints at 250 Hz for {seconds:.0f} s, kr16rt over RSI",
+          ("live view", "late packets / RSI stops", "driver cycles / missed", "packet in -> answer out p99 / max, ms",
+           "command -> target p50 / p99, ms", "messages the viewer received"),
+          [("off", *row(off)), ("on, every channel watched", *row(on))])
