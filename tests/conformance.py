@@ -128,6 +128,7 @@ def replay(system: System, robot: str, path: Path) -> Result:
         deviation = DEVIATIONS.get((name, index + 1)) or DEVIATIONS.get((robot, name, index + 1))
         if waiting:  # the original took this message as the arguments of the waiting command
             send, waiting = waiting.rstrip("\r\n") + " " + send.rstrip("\r\n") + "\n", ""
+        assert client is not None, f"{where}: a record before the transcript's connect"
         client.send(send.encode("latin-1"))
         by_mode = modes.expect(send)
         bare = record.get("no_reply_within_ms") is not None and bare_command_error(send)

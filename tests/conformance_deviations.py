@@ -8,6 +8,9 @@ docs/COMPATIBILITY.md describes the same differences for users.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 from rob6_gateway.args import Args, ParseError
 
 #: kaw_fs uses the self-consistent +250 geometry: forward kinematics differ by design
@@ -22,10 +25,19 @@ def _reply(records, number):
     return records[number - 1]["reply"]
 
 
+#: ``(robot, records) -> expected reply``, ``None``: not judged
+Deviation = Callable[[str, list[dict[str, Any]]], "str | None"]
+
+
+def _always(answer: str | None) -> Deviation:
+    """The deviation that expects ``answer`` whatever the robot and records."""
+    return lambda robot, records: answer
+
+
 # Several commands in one write: the original executed only the first; rob6 answers all.
 # Over-long lines: the original cut every 1024 bytes into separate messages; rob6 keeps
 # the line whole (up to 64 KiB). Lines split across writes inside one line: see framing.
-DEVIATIONS = {
+DEVIATIONS: dict[tuple[str, int] | tuple[str, str, int], Deviation] = {
     ("framing", 17): lambda robot, records: "ERROR:  \n" + _name(robot),  # " \r\nGetRobot\n": two lines
     ("framing", 43): lambda robot, records: "ERROR: Foo\nERROR: Bar\n",
     ("framing", 44): lambda robot, records: "ERROR: Foo\nERROR: Bar\n",
@@ -98,7 +110,7 @@ for _file, _first in (("adept_grippergohome", "true\n"),
                       ("adept_directcmd", _DIRECT_DISABLED),
                       ("adept_directcmd_noarg", _DIRECT_DISABLED)):
     for _number, _answer in ((4, _first), (5, "ad850\n"), (6, _ZERO), (7, "bye!\n")):
-        DEVIATIONS[("ad850", _file, _number)] = lambda robot, records, answer=_answer: answer
+        DEVIATIONS[("ad850", _file, _number)] = _always(_answer)
 DEVIATIONS[("ad850", "debug_grippergohome", 5)] = lambda robot, records: "true\n"
 DEVIATIONS[("ad850", "debug_grippergohome", 6)] = lambda robot, records: "ad850\n"
 
@@ -156,9 +168,8 @@ _AD850_LIMITS_TAIL = {
     579: "ERROR: incorrect value\nfalse\n", 581: "ERROR: incorrect value\nfalse\n", 583: SKIP, 586: SKIP,
     587: SKIP, 591: "bye!\n",
 }
-for _number in range(559, 592):
-    _answer = _AD850_LIMITS_TAIL.get(_number, "ad850\n")  # the rest are GetRobot
-    DEVIATIONS[("ad850", "limits", _number)] = lambda robot, records, answer=_answer: answer
+for _number in range(559, 592):  # the records not listed are GetRobot
+    DEVIATIONS[("ad850", "limits", _number)] = _always(_AD850_LIMITS_TAIL.get(_number, "ad850\n"))
 
 # kr3: ForwardCalc with the elbow exactly stretched (q3 = 0): d4 sin q3 - a3 cos q3 = 0, so
 # robots.md's formula says "down"; the original's rounding said "up" here.

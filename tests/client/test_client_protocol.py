@@ -33,7 +33,8 @@ def test_generated_signatures_and_docs():
     assert signature.parameters["timeout"].kind is inspect.Parameter.KEYWORD_ONLY
     assert signature.return_annotation == "Joints | None"
     assert inspect.signature(AsyncRobot.ping_robot).parameters["n"].default == 10
-    assert "Original rob6server" in Robot.enable_alter.__doc__ and "kr16" in Robot.enable_alter.__doc__
+    doc = Robot.enable_alter.__doc__
+    assert doc is not None and "Original rob6server" in doc and "kr16" in doc
 
 
 def test_type_stub_is_current():

@@ -42,7 +42,9 @@ def test_lab_session(kr16):
         assert abs(robot.get_timestamp() - time.time()) < 5
 
         # FK / IK round trip
-        pose, status = robot.forward_calc(Q)
+        fk = robot.forward_calc(Q)
+        assert fk is not None
+        pose, status = fk
         assert status == ("noflip", "up", "lefty")
         assert close_to(robot.backward_calc(pose, status), Q)
         assert close_to(robot.get_joints_row_wise(pose.rows, "noflip up lefty"), Q)
@@ -75,11 +77,13 @@ def test_lab_session(kr16):
         assert robot.set_joints_max_change([10] * 6) is True
         assert robot.move_ptp_joints([20.5, *Q[1:]]) is False  # 10.5 deg > max change
         assert robot.reset_joints_max_change() is True
-        assert robot.set_allowed_status("righty") is None
+        robot.set_allowed_status("righty")  # no answer on success (raises Rob6Error if refused)
         assert robot.get_allowed_status() == ("toggleHand", "toggleElbow", "righty")
         assert robot.move_ptp_joints([0, -60, 80, 20, 40, 30]) is False  # a lefty pose
         assert robot.reset_allowed_status() is True
-        target, _ = robot.forward_calc([0, -60, 80, 20, 40, 30])
+        fk = robot.forward_calc([0, -60, 80, 20, 40, 30])
+        assert fk is not None
+        target, _ = fk
         assert robot.move_ptp_hom_row_wise(target) is True
         assert close_to(robot.get_position_hom_row_wise(), target)
 
@@ -125,7 +129,8 @@ def test_timeout_closes_the_session_and_a_new_one_starts(kr16):
     while True:  # the gateway finishes the pings before it takes the next client
         try:
             with Robot("127.0.0.1", kr16.port) as robot:
-                assert robot.ping_robot(3, 1).mean_rtt < 0.5
+                ping = robot.ping_robot(3, 1)
+                assert ping is not None and ping.mean_rtt < 0.5
                 return
         except Rob6ConnectionError:
             assert time.monotonic() < deadline
@@ -136,7 +141,9 @@ def test_asyncio_twin(kr16):
     async def session():
         async with AsyncRobot("127.0.0.1", kr16.port) as robot:
             assert await robot.get_robot() == "kr16"
-            pose, status = await robot.forward_calc(Q)
+            fk = await robot.forward_calc(Q)
+            assert fk is not None
+            pose, status = fk
             assert close_to(await robot.backward_calc(pose, status), Q)
             assert await robot.move_ptp_joints(Q) is True
             assert await robot.get_position_joints() == Q
@@ -150,7 +157,8 @@ def test_asyncio_twin(kr16):
             # calls from several tasks are serialised: each gets its own reply
             results = await asyncio.gather(*(robot.forward_calc([k, 0, 0, 0, 0, 0]) for k in range(5)),
                                            robot.get_robot())
-            assert all(abs(pose.r12 + math.sin(math.radians(k))) < 1e-5 for k, (pose, _) in enumerate(results[:5]))
+            assert all(isinstance(fk, tuple) and abs(fk[0].r12 + math.sin(math.radians(k))) < 1e-5
+                       for k, fk in enumerate(results[:5]))
             assert results[5] == "kr16"
             with pytest.raises(Rob6Timeout):
                 await robot.ping_robot(40, 25, timeout=0.2)

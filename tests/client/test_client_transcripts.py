@@ -67,7 +67,7 @@ def covered_records(path):
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: f"{p.parent.name}/{p.stem}")
 def test_every_recorded_reply_parses(path):
-    checked = Counter()
+    checked: Counter[str] = Counter()
     for name, record, reply in covered_records(path):
         if name == "handshake":
             accepted = reply[1:] == ["accepted"]

@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import socket
@@ -30,11 +31,14 @@ class AdeptController:
                      "--byte-order", byte_order, *args]
         self.start_timeout = start_timeout
         self.proc: subprocess.Popen | None = None
-        self.motion = self.state = self.control = self.io = None
+        self.motion: tuple[str, int] | None = None
+        self.state: tuple[str, int] | None = None
+        self.control: tuple[str, int] | None = None
+        self.io: tuple[str, int] | None = None
         self.stderr_lines: list[str] = []
         self._ctl: socket.socket | None = None
         self._stderr_thread: threading.Thread | None = None
-        self._ctl_file = None
+        self._ctl_file: io.BufferedRWPair | None = None
 
     # ---- lifecycle -----------------------------------------------------------
     def start(self) -> "AdeptController":
@@ -59,8 +63,11 @@ class AdeptController:
         return self
 
     def _read_ready(self) -> str:
+        proc, stderr_thread = self.proc, self._stderr_thread
+        assert proc is not None and proc.stdout is not None and stderr_thread is not None, "not started"
+        stdout = proc.stdout
         box: list[str] = []
-        t = threading.Thread(target=lambda: box.append(self.proc.stdout.readline()), daemon=True)
+        t = threading.Thread(target=lambda: box.append(stdout.readline()), daemon=True)
         t.start()
         t.join(self.start_timeout)
         if not box:
@@ -68,13 +75,14 @@ class AdeptController:
             raise RuntimeError(f"adept-sm-sim did not get ready within {self.start_timeout} s; "
                                f"stderr: {self.stderr_lines}")
         if not box[0]:
-            code = self.proc.wait(10)
-            self._stderr_thread.join(5)
+            code = proc.wait(10)
+            stderr_thread.join(5)
             raise RuntimeError(f"adept-sm-sim exited with code {code} before its ready line; "
                                f"stderr: {self.stderr_lines}")
         return box[0].rstrip("\n")
 
     def _drain_stderr(self) -> None:
+        assert self.proc is not None and self.proc.stderr is not None, "not started"
         for line in self.proc.stderr:
             self.stderr_lines.append(line.rstrip("\n"))
 
@@ -92,6 +100,7 @@ class AdeptController:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+        assert self._stderr_thread is not None  # started right after proc
         self._stderr_thread.join(5)
         return self.proc.returncode
 
@@ -105,6 +114,7 @@ class AdeptController:
     def request(self, req: dict | str) -> dict:
         """One request (a dict, or a raw line to test bad input) and its reply."""
         line = req if isinstance(req, str) else json.dumps(req)
+        assert self._ctl_file is not None, "not started"
         self._ctl_file.write(line.encode() + b"\n")
         self._ctl_file.flush()
         reply = self._ctl_file.readline()

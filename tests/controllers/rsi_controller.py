@@ -11,6 +11,7 @@ From any test module: ``from tests.controllers.rsi_controller import RsiControll
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import socket
@@ -38,7 +39,7 @@ class RsiController:
         self.cycle_ms: int | None = None
         self.stderr_lines: list[str] = []
         self._ctl: socket.socket | None = None
-        self._ctl_file = None
+        self._ctl_file: io.BufferedRWPair | None = None
         self._stderr_thread: threading.Thread | None = None
 
     # ---- lifecycle -----------------------------------------------------------
@@ -63,8 +64,11 @@ class RsiController:
         return self
 
     def _read_ready(self) -> str:
+        proc, stderr_thread = self.proc, self._stderr_thread
+        assert proc is not None and proc.stdout is not None and stderr_thread is not None, "not started"
+        stdout = proc.stdout
         box: list[str] = []
-        t = threading.Thread(target=lambda: box.append(self.proc.stdout.readline()), daemon=True)
+        t = threading.Thread(target=lambda: box.append(stdout.readline()), daemon=True)
         t.start()
         t.join(self.start_timeout)
         if not box:
@@ -72,13 +76,14 @@ class RsiController:
             raise RsiControllerError(f"kuka-rsi-sim did not get ready within {self.start_timeout} s; "
                                      f"stderr: {self.stderr_lines}")
         if not box[0]:
-            code = self.proc.wait(10)
-            self._stderr_thread.join(5)
+            code = proc.wait(10)
+            stderr_thread.join(5)
             raise RsiControllerError(f"kuka-rsi-sim exited with code {code} before its ready line; "
                                      f"stderr: {self.stderr_lines}")
         return box[0].rstrip("\n")
 
     def _drain_stderr(self) -> None:
+        assert self.proc is not None and self.proc.stderr is not None, "not started"
         for line in self.proc.stderr:
             self.stderr_lines.append(line.rstrip("\n"))
 
@@ -155,7 +160,7 @@ class RsiController:
         return self._ok({"cmd": "clear"})
 
     def restart(self, start=None) -> dict:
-        req = {"cmd": "restart"}
+        req: dict[str, object] = {"cmd": "restart"}
         if start is not None:
             req["start"] = list(start)
         return self._ok(req)

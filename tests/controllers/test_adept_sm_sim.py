@@ -109,6 +109,7 @@ class State:
             while True:
                 length, msg_type, comm, reply, body = read_frame(self.sock, self.e)
                 assert comm == TOPIC and reply == 0, (comm, reply)
+                item: tuple[str, tuple[float, ...] | dict[str, int]]
                 if msg_type == JOINT_POSITION:
                     assert length == 56
                     seq, *joints = struct.unpack(self.e + "i10f", body)
@@ -166,6 +167,7 @@ def moving_sim(*extra):
 def test_ready_line_and_clean_exit_on_sigterm_and_sigint():
     for sig in (signal.SIGTERM, signal.SIGINT):
         ctl = AdeptController().start()
+        assert ctl.motion is not None and ctl.state is not None and ctl.control is not None and ctl.proc is not None
         assert ctl.motion[1] > 0 and ctl.state[1] > 0 and ctl.control[1] > 0
         assert ctl.io is None
         # with clients connected and a motion under way
@@ -224,7 +226,7 @@ def test_start_pose_outside_the_limits_is_refused():
     ctl = AdeptController("--start-pose", "0 0 200 0 0 0")
     with pytest.raises(RuntimeError, match="exited with code 2.*outside the controller range"):
         ctl.start()
-    assert ctl.proc.returncode == 2
+    assert ctl.proc is not None and ctl.proc.returncode == 2
 
 
 def test_stop_decelerates_and_clears_the_queue():

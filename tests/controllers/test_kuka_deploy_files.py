@@ -29,9 +29,9 @@ def rsix_objects():
     objects = {}
     for obj in root.iter("{RsiDriver}RsiObject"):
         params = {p.get("Name"): p for p in obj.iter("{RsiDriver}Parameter")}
-        inputs = {int(i.get("InIdx")): (i.get("OutObjId"), int(i.get("OutIdx")))
+        inputs = {int(i.attrib["InIdx"]): (i.get("OutObjId"), int(i.attrib["OutIdx"]))
                   for i in obj.iter("{RsiDriver}Input")}
-        objects[obj.get("ObjId")] = (obj.get("ObjType"), int(obj.get("ObjTypeId")), params, inputs)
+        objects[obj.get("ObjId")] = (obj.get("ObjType"), int(obj.attrib["ObjTypeId"]), params, inputs)
     return objects
 
 
@@ -40,8 +40,8 @@ def rsi3_objects():
     objects = {}
     for obj in root.iter("RSIObject"):
         params = {p.get("Name"): p for p in obj.iter("Parameter")}
-        inputs = {int(i.get("InIdx")): (i.get("OutObjID"), int(i.get("OutIdx"))) for i in obj.iter("Input")}
-        objects[obj.get("ObjID")] = (obj.get("ObjType"), int(obj.get("ObjTypeID")), params, inputs)
+        inputs = {int(i.attrib["InIdx"]): (i.get("OutObjID"), int(i.attrib["OutIdx"])) for i in obj.iter("Input")}
+        objects[obj.get("ObjID")] = (obj.get("ObjType"), int(obj.attrib["ObjTypeID"]), params, inputs)
     return objects
 
 
@@ -97,12 +97,12 @@ def test_signal_flow_wiring(ethernet, fmt):
 
 
 def test_krl_program():
-    src = (KUKA / "rob6_rsi.src").read_bytes()
-    dat = (KUKA / "rob6_rsi.dat").read_bytes()
-    for text in (src, dat):
+    src_bytes = (KUKA / "rob6_rsi.src").read_bytes()
+    dat_bytes = (KUKA / "rob6_rsi.dat").read_bytes()
+    for text in (src_bytes, dat_bytes):
         text.decode("ascii")  # the KRL editor reads a single-byte code page
         assert b"\r\n" in text and b"\n" not in text.replace(b"\r\n", b"")
-    src, dat = src.decode(), dat.decode()
+    src, dat = src_bytes.decode(), dat_bytes.decode()
     assert re.search(r"^DEF rob6_rsi\( \)", src, re.M) and re.search(r"^DEFDAT rob6_rsi\b", dat, re.M)
     assert src.rstrip().endswith("END") and dat.rstrip().endswith("ENDDAT")
     code = "\n".join(line.split(";")[0] for line in src.splitlines())  # without comments
@@ -111,10 +111,13 @@ def test_krl_program():
                                      "RSI_MOVECORR()", "RSI_OFF()", "ENDLOOP")]
     assert order == sorted(order)
     assert code.count("IF (ret <> RSIOK) THEN") == 3  # RSI_CREATE, RSI_ON, RSI_OFF checked
-    context = re.search(r'rob6Context\[\]="([^"]+)"', dat).group(1)
+    context_decl = re.search(r'rob6Context\[\]="([^"]+)"', dat)
+    assert context_decl is not None
+    context = context_decl.group(1)
     assert (KUKA / f"{context}.rsix").is_file()  # RSI 4.x: RSI_CREATE appends .rsix
     start = re.search(r"DECL E6AXIS rob6Start=\{A1 ([-\d.]+),A2 ([-\d.]+),A3 ([-\d.]+),"
                       r"A4 ([-\d.]+),A5 ([-\d.]+),A6 ([-\d.]+)", dat)
+    assert start is not None
     pose = [float(v) for v in start.groups()]
     for machine in MACHINES.values():
         assert all(lo < q < hi for q, lo, hi in zip(pose, machine.lower, machine.upper, strict=True)), machine.name

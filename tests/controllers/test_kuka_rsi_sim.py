@@ -17,6 +17,7 @@ import socket
 import threading
 import time
 from itertools import pairwise
+from typing import Any
 
 import pytest
 
@@ -33,13 +34,15 @@ _IPOC = re.compile(rb"<IPOC>(-?\d+)</IPOC>")
 
 def parse_rob(data: bytes) -> dict:
     assert data.startswith(b'<Rob TYPE="KUKA">') and data.endswith(b"</Rob>"), data
-    pkt = {tag.decode(): {k.decode(): v.decode() for k, v in _ATTR.findall(attrs)}
-           for tag, attrs in _ELEMENT.findall(data)}
+    text = {tag.decode(): {k.decode(): v.decode() for k, v in _ATTR.findall(attrs)}
+            for tag, attrs in _ELEMENT.findall(data)}
     for tag in ("RIst", "RSol", "AIPos", "ASPos"):
-        for value in pkt[tag].values():
+        for value in text[tag].values():
             assert re.fullmatch(r"-?\d+\.\d{4}", value), (tag, value)  # 4 decimals like the KR C4
-    pkt = {tag: {k: float(v) for k, v in attrs.items()} for tag, attrs in pkt.items()}
-    pkt["IPOC"] = int(_IPOC.search(data).group(1))
+    pkt: dict[str, Any] = {tag: {k: float(v) for k, v in attrs.items()} for tag, attrs in text.items()}
+    ipoc = _IPOC.search(data)
+    assert ipoc is not None, data
+    pkt["IPOC"] = int(ipoc.group(1))
     pkt["D"] = int(pkt["Delay"]["D"])
     pkt["aipos"] = [pkt["AIPos"][f"A{i}"] for i in range(1, 7)]
     pkt["aspos"] = [pkt["ASPos"][f"A{i}"] for i in range(1, 7)]
@@ -72,9 +75,9 @@ class Follow:
         self.sen_type = sen_type
         self.stop_next = False
         self.applied = [0.0] * 6
-        self.sent = None
-        self.aspos = None
-        self.last_delay = None
+        self.sent: list[float] | None = None
+        self.aspos: list[float] | None = None
+        self.last_delay: int | None = None
 
     def __call__(self, pkt):
         if pkt["aspos"] != self.aspos:  # a new run: AK counts from the new start pose
@@ -499,6 +502,7 @@ def test_control_channel_refuses_bad_requests_and_stays_up(pc):
 
 def test_sigterm_exits_cleanly(pc):
     kuka = sim(pc).start()
+    assert kuka.proc is not None
     pc.wait(lambda p: len(p) >= 3)
     kuka.proc.send_signal(signal.SIGTERM)
     assert kuka.proc.wait(10) == 0

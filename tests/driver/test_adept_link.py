@@ -18,6 +18,7 @@ import time
 import numpy as np
 import pytest
 
+from rob6.messages import LinkEvent
 from rob6.robots import get_robot
 from rob6_driver.links.adept import RATED_SPEED_DEG_S, AdeptLink, AdeptSettings, from_wire, to_wire
 from rob6_driver.motion import MotionCore
@@ -154,6 +155,7 @@ def ptp(core, target, config=None):
                                                   config or MotionConfig(core.robot))
     assert plan.ok, plan.reason
     t = plan.trajectory
+    assert t is not None
     return core.execute(t.q, t.dt, t.qd, t.qdd), len(t.q)
 
 
@@ -165,7 +167,7 @@ def online(core, link):
 def rig(request):
     fake = FakeController(request.param)
     core = MotionCore(ROBOT)
-    events = []
+    events: list[LinkEvent] = []
     link = AdeptLink(core, ROBOT, AdeptSettings(byte_order=request.param, **fake.settings), lambda s: None,
                      events.append, ack_timeout_s=0.5, state_timeout_s=0.3, retry_s=0.1, no_progress_s=0.5)
     yield fake, core, link, events

@@ -17,6 +17,7 @@ def ptp(core, target):
     plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), target, MotionConfig(core.robot))
     assert plan.ok, plan.reason
     t = plan.trajectory
+    assert t is not None
     return core.execute(t.q, t.dt, t.qd, t.qdd)
 
 

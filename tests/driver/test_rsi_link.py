@@ -12,9 +12,10 @@ import time
 import numpy as np
 import pytest
 
+from rob6.messages import LinkEvent
 from rob6.robots import get_robot
 from rob6_driver.links.rsi import RsiLink
-from rob6_driver.motion import MotionCore
+from rob6_driver.motion import CoreState, MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import TrajectoryPlanner
 
@@ -69,7 +70,8 @@ class Controller:
 def rig():
     robot = get_robot("kr16rt")
     core = MotionCore(robot)
-    states, events = [], []
+    states: list[CoreState] = []
+    events: list[LinkEvent] = []
     link = RsiLink(core, robot, "127.0.0.1:0", states.append, events.append, lost_after_s=0.3)
     link.start()
     controller = Controller(link.address)
@@ -88,6 +90,7 @@ def wait(predicate, timeout=5.0):
 def ptp(core, target):
     plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), list(target), MotionConfig(core.robot))
     t = plan.trajectory
+    assert t is not None, plan.reason
     return core.execute(t.q, t.dt, t.qd, t.qdd)
 
 

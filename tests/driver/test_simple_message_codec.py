@@ -40,6 +40,7 @@ def test_state_messages_and_replies_are_read(order):
     assert len(payloads) == 2 and len(buffer) == 9
     pos = codec.decode(payloads[0])
     assert pos.header == sm.Header(sm.JOINT_POSITION, sm.TOPIC, sm.INVALID)
+    assert isinstance(pos.value, sm.JointPosition)
     assert pos.value.sequence == 0
     assert [round(x, 6) for x in pos.value.joints] == [round(struct.unpack("f", struct.pack("f", x))[0], 6)
                                                         for x in joints]

@@ -25,5 +25,6 @@ def test_allowed_it_says_no_link_carries_v_plus_commands():
 
 
 def test_off_by_default_and_false_on_other_robots():
-    assert ask("ad850", "DirectAdeptCmd SPEED 50").startswith("ERROR: DirectAdeptCmd is disabled on this server")
+    reply = ask("ad850", "DirectAdeptCmd SPEED 50")
+    assert reply is not None and reply.startswith("ERROR: DirectAdeptCmd is disabled on this server")
     assert ask("kr16", "DirectAdeptCmd SPEED 50", allow_direct_adept_cmd=True) == "false\n"

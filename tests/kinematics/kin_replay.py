@@ -45,8 +45,9 @@ def leading_numbers(text: str, limit: int) -> tuple[list[float], str, bool]:
     out: list[float] = []
     pos = 0
     while len(out) < limit:
-        m = re.compile(r"\s*").match(text, pos)
-        pos = m.end()
+        blanks = re.compile(r"\s*").match(text, pos)
+        assert blanks is not None  # \s* matches anywhere
+        pos = blanks.end()
         if pos >= len(text):
             return out, "", False
         m = _NUM.match(text, pos)
@@ -153,6 +154,7 @@ def same(expected: str, got: str) -> bool:
             if e != g:
                 return False
             continue
+        tol: np.ndarray | float
         if len(ev) == 6:
             tol = np.array([JOINT_TOL] * 5 + [J6_TOL])
             d = np.abs(ev - gv)
@@ -224,6 +226,7 @@ def replay(kin: Kinematics, path: Path, judge=JUDGED) -> list[Result]:
         cmd = send.split()[0] if send.split() else ""
         if cmd in judge:
             got = answer(st, send)
+            assert got is not None, f"rob6 cannot judge {cmd}"
             out.append(Result(str(path), i + 1, send.strip(), reply, got, same(reply, got)))
         else:
             track(st, send, reply)

@@ -115,7 +115,7 @@ def test_stretched_elbow_up_equals_down():
     T = k.fk([10, -30, 0, 20, 40, 30])[0].ravel()
     up = k.backward_calc(T, "noflip up lefty", ZERO)
     down = k.backward_calc(T, "noflip down lefty", ZERO)
-    assert up is not None and np.allclose(up, down)
+    assert up is not None and down is not None and np.allclose(up, down)
 
 
 def test_toggle_rule_examples():
@@ -130,7 +130,8 @@ def test_toggle_rule_examples():
     ad = K["ad850"]
     zero_pose, _ = ad.forward_calc([0, 0, 0, 0, 0, 0])
     zero_pose = [float("%f" % x) for x in zero_pose]
-    assert np.allclose(ad.backward_calc(zero_pose, "toggleHand toggleElbow toggleArm", ZERO), 0, atol=1e-9)
+    zero_joints = ad.backward_calc(zero_pose, "toggleHand toggleElbow toggleArm", ZERO)
+    assert zero_joints is not None and np.allclose(zero_joints, 0, atol=1e-9)
     assert [BRANCHES[b] for b in TIE_ORDER[:3]] == ["flip up lefty", "flip up righty", "flip down lefty"]
     # the weights decide: with a heavy J5 the noflip branch (|q5| equal) ties, J4 decides
     assert fmt(k.backward_calc(p2, "toggleHand up lefty", ZERO, weights=[0, 0, 0, 1, 0, 0])) == \

@@ -37,9 +37,10 @@ def test_urdf_structure(robot):
     r = get_robot(GEOMETRIES[robot])
     for i, j in enumerate(rev):
         lim = j.find("limit")
-        assert math.isclose(float(lim.get("lower")), math.radians(r.turn_min[i]), abs_tol=1e-9)
-        assert math.isclose(float(lim.get("upper")), math.radians(r.turn_max[i]), abs_tol=1e-9)
-        assert float(lim.get("velocity")) > 0 and float(lim.get("effort")) > 0
+        assert lim is not None
+        assert math.isclose(float(lim.attrib["lower"]), math.radians(r.turn_min[i]), abs_tol=1e-9)
+        assert math.isclose(float(lim.attrib["upper"]), math.radians(r.turn_max[i]), abs_tol=1e-9)
+        assert float(lim.attrib["velocity"]) > 0 and float(lim.attrib["effort"]) > 0
     links = {link.get("name") for link in root.findall("link")}
     assert {"base_link", "flange"} | {f"link_{i}" for i in range(1, 7)} <= links
     assert all(link.find("visual") is not None for link in root.findall("link"))

@@ -140,9 +140,9 @@ def test_backward_calc_with_limits(robot, branch, seed):
         return
     assert q is not None
     T = k.fk(q)[0]
-    got = k.backward_calc(T.ravel(), status, q)
-    assert got is not None
-    got = np.array(got)
+    solution = k.backward_calc(T.ravel(), status, q)
+    assert solution is not None
+    got = np.array(solution)
     assert np.all(adiff(got, q) < 1e-6), (got, q)
     assert np.all((k.turn_min < got) & (got < k.turn_max))
     assert np.allclose(k.fk(got)[0], T, atol=1e-7 * (1 + np.abs(T)))
@@ -175,9 +175,9 @@ def test_limits_and_max_change_respected(robot, seed, shrink, max_change, branch
     T = k.fk(rng.uniform(k.turn_min, k.turn_max))[0].ravel()
     mc = np.array(max_change)
     for pattern in (BRANCHES[branch], "toggleHand toggleElbow toggleArm"):
-        got = k.backward_calc(T, pattern, cur, lo, hi, mc)
-        if got is not None:
-            got = np.array(got)
+        solution = k.backward_calc(T, pattern, cur, lo, hi, mc)
+        if solution is not None:
+            got = np.array(solution)
             assert np.all((lo < got) & (got < hi))
             assert np.all(np.abs(got - cur) <= mc)
             assert np.allclose(k.fk(got)[0].ravel(), T, atol=1e-6 * (1 + np.abs(T)))
@@ -221,9 +221,9 @@ def test_backward_calc_agrees_with_selection_module(robot, seed, words, weights)
     T = k.fk(rng.uniform(k.turn_min, k.turn_max))[0].ravel()
     mc = k.max_change if seed % 2 else np.full(6, 90.0)
     a = k.backward_calc(T, list(words), cur, max_change=mc, weights=weights)
-    b = selection.select(k, T, list(words), cur, k.turn_min, k.turn_max, mc, weights,
-                         allowed_pattern=None, shift_360=False)
+    b = selection.select(k, T, list(words), cur.tolist(), k.turn_min.tolist(), k.turn_max.tolist(), mc.tolist(),
+                         weights, allowed_pattern=None, shift_360=False)
     assert (a is None) == (b is None)
-    if a is not None:
+    if a is not None and b is not None:
         assert np.allclose(a, b, atol=1e-12)
     assert k.is_possible(T, list(words), cur, max_change=mc) == (a is not None)

@@ -33,7 +33,8 @@ FILES = [(robot, robot, name) for robot in ("kr16", "ad850", "kaw_fs") for name 
 FILES += [("kr3", "kr3rt", "fk"), ("kr3", "kr3rt", "ik"), ("kr3", "kr3", "kinematics")]
 FK_CMDS = {"ForwardCalc", "GetPositionHomRowWise"}
 
-SUMMARY: Counter = Counter()
+#: "folder/name" -> (judged lines, matching lines, known mismatches by kind)
+SUMMARY: dict[str, tuple[int, int, dict[str, int]]] = {}
 
 
 def run(robot, folder, name):
@@ -50,7 +51,7 @@ def run(robot, folder, name):
 def test_replay(robot, folder, name):
     kin, res = run(robot, folder, name)
     assert res, "no judged lines"
-    known = Counter()
+    known: Counter[str] = Counter()
     unexplained = []
     for r in res:
         if r.ok:

@@ -12,7 +12,7 @@ import time
 
 import msgspec
 
-from rob6.bus import Bus
+from rob6.bus import Bus, trace_records
 from rob6.config import BusSettings
 from rob6.messages import FkRequest, IkBatchRequest
 from tests.system import running
@@ -29,9 +29,9 @@ def test_requests_spread_over_replicas_and_survive_a_killed_one():
         settings = BusSettings(robot="kr16", robot_id=system.robot_id,
                                connect=(f"tcp/127.0.0.1:{system.router_port}",))
         bus = Bus(settings, "test")
-        served = collections.Counter()
-        bus.subscribe("trace/kinematics/*", lambda _k, payload: served.update(
-            [msgspec.json.decode(payload)["instance"]]))
+        served: collections.Counter[str] = collections.Counter()
+        bus.subscribe("trace/kinematics", lambda _k, batch: served.update(
+            msgspec.json.decode(record)["instance"] for _suffix, record in trace_records(batch)))
         extra = _replica(system)
         try:
             deadline = time.monotonic() + 20

@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 from functools import lru_cache
+from typing import Literal, TypedDict
 
 import pytest
 
@@ -118,13 +119,35 @@ def _floats(tokens: list[str], n: int) -> list[float] | None:
     return vals
 
 
-def replay(robot: str, name: str):
+class _Tracked(TypedDict):
+    """The original's state as far as the replay follows it."""
+
+    pos: list[float]
+    virt: list[float] | None  # routetest position, None = routetest off
+    weights: list[float]
+    allowed: Status
+    mc: list[float]
+    tmin: list[float]
+    tmax: list[float]
+
+
+#: (index, command, words, expected ok, expected joints, got: allowed or joints)
+Mismatch = tuple[int, str, list[str], bool, "list[float] | None", "bool | list[float] | None"]
+
+
+def _accepted(values: list[float] | None, rec: dict) -> list[float]:
+    """The numbers of a command the original accepted (answered ``true``)."""
+    assert values is not None, f"the original accepted {rec['send']!r}"
+    return values
+
+
+def replay(robot: str, name: str) -> tuple[dict[str, int], list[Mismatch]]:
     """Returns (matched, mismatches) over the moves of one transcript: matched counts
     {"cartesian": n, "joints": n}; a mismatch is (index, command, words, expected ok,
     expected joints, got joints)."""
     model = get_robot(robot)
     status = model.status
-    st = {
+    st: _Tracked = {
         "pos": [0.0] * 6,
         "virt": None,  # routetest position, None = routetest off
         "weights": DEFAULT_WEIGHTS[:],
@@ -135,7 +158,7 @@ def replay(robot: str, name: str):
     }
     recs = _records(robot, name)
     matched = {"cartesian": 0, "joints": 0}
-    mismatches = []
+    mismatches: list[Mismatch] = []
     i = 0
     while i < len(recs):
         rec = recs[i]
@@ -148,9 +171,11 @@ def replay(robot: str, name: str):
         if "no_reply_within_ms" in rec and not (cmd == "SetAllowedStatus" and args):
             i += 2  # the original waited for arguments and swallowed the next record
             continue
-        key = "pos" if st["virt"] is None else "virt"
+        key: Literal["pos", "virt"] = "pos" if st["virt"] is None else "virt"
+        current = st[key]
+        assert current is not None  # key is "virt" only while routetest is on
         if cmd == "SetMinChangeWeights" and reply == "true":
-            st["weights"] = _floats(args, 6)
+            st["weights"] = _accepted(_floats(args, 6), rec)
         elif cmd == "ResetMinChangeWeights":
             st["weights"] = DEFAULT_WEIGHTS[:]
         elif cmd == "SetAllowedStatus":
@@ -160,11 +185,11 @@ def replay(robot: str, name: str):
         elif cmd == "ResetAllowedStatus":
             st["allowed"] = TOGGLE_ALL
         elif cmd == "SetJointsMaxChange" and reply == "true":
-            st["mc"] = _floats(args, 6)
+            st["mc"] = _accepted(_floats(args, 6), rec)
         elif cmd == "ResetJointsMaxChange":
             st["mc"] = list(model.default_max_change)
         elif cmd in ("SetJointsMaxTurnMax", "SetJointsMaxTurnMin") and reply == "true":
-            st["tmax" if cmd.endswith("Max") else "tmin"] = _floats(args, 6)
+            st["tmax" if cmd.endswith("Max") else "tmin"] = _accepted(_floats(args, 6), rec)
         elif cmd == "ResetJointsMaxTurn":
             st["tmin"], st["tmax"] = list(model.turn_min), list(model.turn_max)
         elif cmd == "Quit":
@@ -173,13 +198,13 @@ def replay(robot: str, name: str):
             st["virt"] = st["pos"][:]
         elif cmd == "DisableRoutetest":
             st["virt"] = None
-        elif cmd == "GetPositionJoints" and _floats(reply.split(), 6) is not None:
-            st[key] = _floats(reply.split(), 6)
+        elif cmd == "GetPositionJoints" and (position := _floats(reply.split(), 6)) is not None:
+            st[key] = position
         elif cmd in JOINT_MOVES:
             q = _floats(args, 6)
             if q is not None and (cmd == "RoutetestJoints") == (key == "virt"):
                 ok = joint_move_allowed(
-                    q, st[key], st["tmin"], st["tmax"], st["mc"], st["allowed"], status
+                    q, current, st["tmin"], st["tmax"], st["mc"], st["allowed"], status
                 )
                 if ok == (reply == "true"):
                     matched["joints"] += 1
@@ -191,8 +216,8 @@ def replay(robot: str, name: str):
             q, pat = _floats(args, 6), _pattern(args[6:])
             if q is not None and pat is not None and key == "pos":
                 ok = joint_move_allowed(
-                    q, st[key], st["tmin"], st["tmax"], st["mc"], st["allowed"], status
-                ) and status_matches(pat, status(q), status(st[key]))
+                    q, current, st["tmin"], st["tmax"], st["mc"], st["allowed"], status
+                ) and status_matches(pat, status(q), status(current))
                 if ok == (reply == "true"):
                     matched["joints"] += 1
                 else:
@@ -206,10 +231,11 @@ def replay(robot: str, name: str):
             pose = _floats(args, 12)
             words = args[12:]
             pattern = PTP_HOM_PATTERN if cmd == "MovePTPHomRowWise" else _pattern(words)
+            assert pose is not None and pattern is not None, f"the original answered {rec['send']!r}"
             got = select_from_solutions(
                 _branches(robot, tuple(pose)),
                 pattern,
-                st[key],
+                current,
                 st["tmin"],
                 st["tmax"],
                 st["mc"],
@@ -276,8 +302,7 @@ def test_weighted_max_not_sum_and_tie_goes_to_earlier_branch():
         noflip_down_righty=[92.000011, -101.255190, -15.130995, 29.346113, 45.773234, 130.504044],
     )
     lim = get_robot("kr16")
-    args = (cur, lim.turn_min, lim.turn_max, lim.default_max_change, DEFAULT_WEIGHTS, TOGGLE_ALL)
-    args += (status,)
+    args = (cur, lim.turn_min, lim.turn_max, lim.default_max_change, DEFAULT_WEIGHTS, TOGGLE_ALL, status)
     got = select_from_solutions(sols, ("noflip", "toggleElbow", "righty"), *args)
     assert got == sols[("noflip", "up", "righty")]
 
@@ -291,6 +316,7 @@ def test_wrist_joints_take_nearest_turn():
         sols, ("flip", "down", "lefty"), cur, lim.turn_min, lim.turn_max,
         lim.default_max_change, DEFAULT_WEIGHTS, TOGGLE_ALL, lim.status,
     )  # fmt: skip
+    assert got is not None
     assert got[5] == pytest.approx(213.999947)  # -146 + 360: 176 from 38 instead of 184
     assert got[3] == pytest.approx(116.000047)
 
@@ -342,17 +368,18 @@ def replay_backward_calc(robot: str):
             continue
         cmd, args = (toks[0], toks[1:]) if toks else ("", [])
         if cmd == "MovePTPJoints" and reply == "true":
-            pos = _floats(args, 6)
+            pos = _accepted(_floats(args, 6), rec)
         elif cmd == "SetJointsMaxChange" and reply == "true":
-            mc = _floats(args, 6)
+            mc = _accepted(_floats(args, 6), rec)
         elif cmd == "ResetJointsMaxChange":
             mc = list(model.default_max_change)
         elif cmd == "SetJointsMaxTurnMax" and reply == "true":
-            tmax = _floats(args, 6)
+            tmax = _accepted(_floats(args, 6), rec)
         elif cmd == "ResetJointsMaxTurn":
             tmin, tmax = list(model.turn_min), list(model.turn_max)
         elif cmd in IK_COMMANDS and not reply.startswith("ERROR"):
             pose, pattern = _floats(args, 12), _pattern(args[12:])
+            assert pose is not None and pattern is not None, f"the original answered {rec['send']!r}"
             got = select_from_solutions(
                 _branches(robot, tuple(pose)), pattern, pos, tmin, tmax, mc,
                 DEFAULT_WEIGHTS, None, model.status, shift_360=False,
@@ -403,4 +430,5 @@ def test_select_wrapper_with_the_kinematics_service_class():
     assert run(TOGGLE_ALL, [1, 1, 1, 1, 1, 1]) == ("noflip", "down", "lefty")
     assert run(PTP_HOM_PATTERN, allowed=("noflip", "up", "righty")) is None
     q = select(kin, target, ("flip", "down", "lefty"), start, *lim, DEFAULT_WEIGHTS)
+    assert q is not None
     assert q[5] == pytest.approx(213.999947, abs=5e-3)

@@ -20,8 +20,8 @@ SCHEMAS = {"/robot_description": "std_msgs/String", "/tf": "foxglove.FrameTransf
 def _links(robot: str) -> tuple[str, set[str]]:
     """The URDF's root link and every other link (a 3D panel needs a transform to each)."""
     root = ET.fromstring((URDF_DIR / f"{get_robot(robot).geometry}.urdf").read_text())
-    links = {link.get("name") for link in root.iter("link")}
-    children = {j.find("child").get("link") for j in root.iter("joint")}
+    links = {link.attrib["name"] for link in root.iter("link")}
+    children = {child.attrib["link"] for child in root.iterfind(".//joint/child")}
     (base,) = links - children
     return base, links - {base}
 
@@ -41,7 +41,9 @@ def test_live_view_follows_the_arm(tmp_path, live_port):
             # the URDF: latched on its topic (sent on subscribe) and as an asset
             (_, description), *_ = fox.wait_messages("/robot_description")
             assert description["data"].lstrip().startswith("<?xml") and "<robot" in description["data"]
-            status, asset = fox.fetch_asset("package://rob6/robot.urdf")
+            fetched = fox.fetch_asset("package://rob6/robot.urdf")
+            assert fetched is not None, "no answer to fetchAsset"
+            status, asset = fetched
             assert status == 0 and asset.decode() == description["data"]
 
             # a transform for every link the 3D panel has to place

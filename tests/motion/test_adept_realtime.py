@@ -99,9 +99,9 @@ def fmt(q) -> str:
 
 def session(client, ctl) -> None:
     """PTP, LIN and Alter (EnableAdeptAlter, MoveRTJoints every 16 ms)."""
-    for target in (START, [30.0, -50.0, 50.0, 10.0, 20.0, -20.0], START):
-        assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
-        assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)  # true: the robot is there
+    for ptp_target in (START, [30.0, -50.0, 50.0, 10.0, 20.0, -20.0], START):
+        assert reply(client, "MovePTPJoints " + fmt(ptp_target)) == "true\n"
+        assert np.allclose(robot_at(ctl), ptp_target, atol=POSITION_TOL)  # true: the robot is there
     assert client.ask("GetPositionJoints") == "0.000000 -60.000000 40.000000 0.000000 30.000000 0.000000\n"
     pose = [float(x) for x in client.ask("GetPositionHomRowWise").split()]
     pose[7] += 100.0  # 100 mm along y, a straight line

@@ -177,7 +177,7 @@ def test_transcript(robot, script):
 
 
 def test_totals(capsys):
-    total = {}
+    total: dict[str, int] = {}
     for robot in ROBOTS:
         for script in SCRIPTS:
             stats, _ = replay(robot, script)

@@ -4,13 +4,13 @@ import threading
 import time
 
 from rob6_driver.loop import CycleRunner
-from rob6_driver.motion import MotionCore
+from rob6_driver.motion import CoreState, MotionCore
 from rob6_planner.bench import bench_ptp
 
 
 def test_runner_publishes_every_cycle_on_time():
     sim = MotionCore("kr16rt")  # 4 ms
-    published = []
+    published: list[CoreState] = []
     runner = CycleRunner(sim.step, sim.dt, published.append)
     t0 = time.monotonic()
     runner.start()
@@ -53,13 +53,14 @@ def test_trajectory_completion_is_awaitable_in_real_time():
     sim = MotionCore("kr16rt")
     tr = TrajectoryPlanner("kr16rt").plan_ptp(sim.state().q, [2, 0, 0, 0, 0, 0],
                                               MotionConfig("kr16rt")).trajectory
+    assert tr is not None
     done = threading.Event()
     with CycleRunner(sim.step, sim.dt):
         motion = sim.execute(tr.q, tr.dt, tr.qd, tr.qdd)
         motion.add_done_callback(lambda m: done.set())
         assert motion.wait(tr.duration + 1.0)
     assert motion.ok and done.is_set()
-    assert motion.final.q[0] == 2.0
+    assert motion.final is not None and motion.final.q[0] == 2.0
 
 
 def test_bench_functions():

@@ -14,6 +14,7 @@ positions and the reported qd/qdd), with a 1e-6 relative tolerance.
 from __future__ import annotations
 
 import os
+from typing import TypedDict
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -24,7 +25,16 @@ from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import TrajectoryPlanner
 
 EXAMPLES = int(os.environ.get("ROB6_PROPERTY_EXAMPLES", "150"))
-STATS = {"examples": 0, "states": 0, "state_violations": 0, "reported": {}}
+
+
+class Stats(TypedDict):
+    examples: int
+    states: int
+    state_violations: int
+    reported: dict[str, int]  # "kind/source" -> count
+
+
+STATS: Stats = {"examples": 0, "states": 0, "state_violations": 0, "reported": {}}
 REL = 1e-6
 ATOL_V = 1e-9
 ATOL_A = 1e-6
@@ -115,6 +125,7 @@ class Harness:
             res = self.planner.plan_ptp(sim.state().q, q1, c)
             if res.ok:
                 tr = res.trajectory
+                assert tr is not None
                 extra = (tr.qd, tr.qdd) if with_derivatives else ()
                 sim.execute(tr.q, tr.dt, *extra)
         elif kind == "alter_on":

@@ -41,6 +41,7 @@ def run_ptp_in_sim(robot, q1, config=None):
     res = planner.plan_ptp(sim.state().q, q1, config)
     assert res.ok, res.reason
     tr = res.trajectory
+    assert tr is not None
     motion = sim.execute(tr.q, tr.dt, tr.qd, tr.qdd)
     cycles = 0
     while not motion.done.is_set():
@@ -77,7 +78,7 @@ def test_single_axis_duration_matches_analytic(robot, d):
         q1 = np.zeros(6)
         q1[joint] = d
         res = p.plan_ptp(np.zeros(6), q1, c)
-        assert res.ok
+        assert res.ok and res.trajectory is not None
         v = c.speed[joint] / UNIT_CYCLE_S
         a = c.accel[joint] / UNIT_CYCLE_S**2
         T = analytic_time(d, v, a, a / JERK_RAMP_S)
@@ -97,6 +98,7 @@ def test_sampling_matches_ruckig_and_respects_limits():
             res = p.plan_ptp(q0, q1, c)
             assert res.ok, res.reason
             tr = res.trajectory
+            assert tr is not None
             q, qd, qdd = sample_at_time(p._traj, tr.t)
             assert np.abs(q - tr.q).max() < 1e-9
             assert np.abs(qd - tr.qd).max() < 1e-9
@@ -136,7 +138,7 @@ def test_target_validation():
     assert p.plan_ptp(zero, [5, 0, 0, 0, 0, 0], c).ok
     # no motion
     res = p.plan_ptp(zero, zero, c)
-    assert res.ok and res.trajectory.n == 1
+    assert res.ok and res.trajectory is not None and res.trajectory.n == 1
 
 
 def test_from_outside_changed_turn_limits_back_inside():

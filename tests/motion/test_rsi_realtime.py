@@ -36,10 +36,6 @@ RATED = np.array([156.0, 156.0, 156.0, 330.0, 330.0, 615.0])
 POSITION_TOL = 2e-4
 
 
-def free_udp_port() -> int:
-    return free_port(socket.SOCK_DGRAM)
-
-
 def rsi_system(port: int, **kwargs):
     return running("kr16rt", dummy=False, extra_env={"ROB6_LINK": "rsi", "ROB6_RSI_LISTEN": f"127.0.0.1:{port}"},
                    **kwargs)
@@ -116,7 +112,7 @@ def session(client) -> None:
 
 
 def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp_path):
-    port = free_udp_port()
+    port = free_port(socket.SOCK_DGRAM)
     # the controller starts where the simulation does, so that the replay below is exact
     zero = "--start-pose", "0,0,0,0,0,0"
     with rsi_system(port, log_dir=str(tmp_path)) as system:
@@ -164,7 +160,7 @@ def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp
 @pytest.fixture(scope="module")
 def rsi():
     """One rob6 system on RSI for the fault tests; each test brings its own controller."""
-    port = free_udp_port()
+    port = free_port(socket.SOCK_DGRAM)
     with rsi_system(port) as system:
         yield system, port
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from rob6_driver.motion import Limits, MotionCore
+from rob6_driver.motion import Limits, Motion, MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import TrajectoryPlanner
 
@@ -57,8 +57,13 @@ def test_execute_completes_awaitably():
     sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [20, -30, 40, 10, 30, -50])
     seen = []
+
+    def on_done(m: Motion) -> None:
+        assert m.final is not None  # a finished motion has its final state
+        seen.append((m.ok, m.final.cycle))
+
     motion = sim.execute(tr.q, tr.dt, tr.qd, tr.qdd)
-    motion.add_done_callback(lambda m: seen.append((m.ok, m.final.cycle)))
+    motion.add_done_callback(on_done)
     assert not motion.done.is_set() and sim.state().mode == "trajectory"
     q, qd, qdd, states = run_states(sim, tr.n - 1)
     assert motion.wait(0) and motion.ok and seen == [(True, tr.n - 1)]
@@ -157,7 +162,9 @@ def test_alter_streaming_250hz(robot):
             assert sim.set_target(target)[0]
             t_stream += dt_stream
         s = sim.step()
-        qs.append(s.q), qds.append(s.qd), qdds.append(s.qdd)
+        qs.append(s.q)
+        qds.append(s.qd)
+        qdds.append(s.qdd)
         errs.append(np.abs(s.q - target).max())
     assert limit_problems(qs, sim.dt, sim.limits(), q_start, qd=np.array(qds), qdd=np.array(qdds)) == []
     assert sim.violation_count == 0
@@ -172,7 +179,7 @@ def test_alter_streaming_250hz(robot):
 
 
 def test_watchdog_event_and_resume():
-    events = []
+    events: list[dict] = []
     sim = MotionCore("kr16rt", alter_timeout_s=0.05, on_event=events.append)
     sim.enable_alter()
     sim.set_target([40, 0, 0, 0, 0, 0])

@@ -52,7 +52,8 @@ def _moves_undisturbed(client, stop: threading.Event, seen: list) -> None:
 
 def test_second_owner_of_each_kind_is_refused_with_one_line():
     with running("kr16", dummy=True) as system, system.client() as client:
-        stop, seen = threading.Event(), []
+        stop = threading.Event()
+        seen: list[bool | tuple[str, str]] = []
         mover = threading.Thread(target=_moves_undisturbed, args=(client, stop, seen))
         mover.start()
         try:
@@ -110,6 +111,7 @@ def test_two_started_at_the_same_moment_exactly_one_wins(service):
                 codes = sorted(str(p.poll()) for p in (first, second))
                 assert codes == [str(EXIT_REFUSED), "None"], codes
                 loser = first if first.poll() is not None else second
+                assert loser.stderr is not None  # a pipe
                 err = loser.stderr.read()
                 assert err.startswith(f"rob6: a {service} for {system.robot_id} is "), err
                 assert len(err.strip().splitlines()) == 1, err

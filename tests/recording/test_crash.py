@@ -43,6 +43,7 @@ CHILD = textwrap.dedent("""
 def _kill_while_writing(directory, after: float) -> float:
     proc = subprocess.Popen([sys.executable, "-c", CHILD, str(directory), URDF],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None and proc.stderr is not None  # both are pipes
     try:
         assert proc.stdout.readline().strip() == "READY", proc.stderr.read()
         time.sleep(after)
@@ -86,7 +87,7 @@ def test_sigkill_mid_write_then_recover(tmp_path, after):
         with open(out, "rb") as fh:
             mreader = make_reader(fh, validate_crcs=True)
             summary = mreader.get_summary()
-            assert summary is not None
+            assert summary is not None and summary.statistics is not None
             assert summary.statistics.message_count == len(recs)
             got = [(c.topic, m.log_time) for _, c, m in mreader.iter_messages(log_time_order=False)]
         assert got == [(r.topic, r.log_time) for r in recs]
@@ -130,7 +131,9 @@ def test_damaged_chunk_is_skipped(tmp_path):
     (path,) = tmp_path.glob("*.mcap")
     data = bytearray(path.read_bytes())
     with open(path, "rb") as fh:
-        chunk = make_reader(fh).get_summary().chunk_indexes[3]
+        summary = make_reader(fh).get_summary()
+    assert summary is not None
+    chunk = summary.chunk_indexes[3]
     # flip bytes at the end of the 4th chunk's compressed data: its CRC check fails
     mid = chunk.chunk_start_offset + chunk.chunk_length - 6
     data[mid:mid + 4] = bytes(b ^ 0xFF for b in data[mid:mid + 4])
@@ -143,4 +146,6 @@ def test_damaged_chunk_is_skipped(tmp_path):
             if r.topic == "/driver/joint_state"]
     assert seqs == sorted(seqs) and seqs[-1] == 29  # the chunks after the damaged one are kept
     with open(tmp_path / "fixed.mcap", "rb") as fh:
-        assert make_reader(fh, validate_crcs=True).get_summary().statistics.message_count == result.messages
+        fixed = make_reader(fh, validate_crcs=True).get_summary()
+    assert fixed is not None and fixed.statistics is not None
+    assert fixed.statistics.message_count == result.messages

@@ -52,7 +52,7 @@ def test_session_recorded_replayed_and_compared(tmp_path):
         path = _session_file(tmp_path)
         with open(path, "rb") as stream:  # a complete, indexed MCAP file
             summary = make_reader(stream).get_summary()
-            assert summary is not None and summary.statistics.message_count > 0
+            assert summary is not None and summary.statistics is not None and summary.statistics.message_count > 0
         records = list(read_records(path))
         lines_in = [r for r in records if r.topic.endswith("/client_in")]
         assert [r.data["text"].rstrip("\n") for r in lines_in] == ["Hello Robot", *SCRIPT, "Quit"]

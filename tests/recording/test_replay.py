@@ -111,7 +111,8 @@ def test_compare_reply_rules():
     assert compare_reply("GetTimestamp", "1795321511.114\n", "1.5\n") is None  # shape only
     assert compare_reply("PingRobot", "-1\n", "0.42\n") is None
     assert compare_reply("GetTimestamp", "1795321511.114\n", "x\n") is not None
-    assert "whitespace" in compare_reply("X", "a b\n", "a  b\n")
+    difference = compare_reply("X", "a b\n", "a  b\n")
+    assert difference is not None and "whitespace" in difference
     assert compare_reply("X", "true\n", "") == "expected 1 line(s), got 0 (no reply)"
 
 
@@ -119,7 +120,8 @@ def _transcript_handler(path: Path):
     """Answer each connection from the transcript, one received chunk per record."""
     scripts = load_transcript(path)
     raw = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    per_conn, current = [], None
+    per_conn: list[list[dict]] = []
+    current: list[dict] | None = None
     for rec in raw:
         if rec.get("connect"):
             current = []
@@ -153,7 +155,8 @@ def test_replay_conformance_transcript(tmp_path):
 
 
 def test_replay_joints_pacing(session_file):
-    got, sleeps = [], []
+    got: list[dict] = []
+    sleeps: list[float] = []
     now = [0.0]
 
     def sleep(dt):

@@ -313,6 +313,7 @@ class TcpFuzzer:
     turn_hi: list = field(default_factory=list)
     limit_violations: int = 0
     moves_ok: int = 0
+    rss0: int = 0  # the gateway's VmRSS (KiB) before the fuzzing, for the caller to set
 
     @property
     def client(self) -> FuzzClient:

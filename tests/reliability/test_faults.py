@@ -26,14 +26,14 @@ def session():
 @pytest.mark.parametrize("service", SERVICES)
 def test_fault_is_survived_and_recovered(session, service, fault):
     system, client, gateway = session
-    problems = []
+    problems: list[tuple] = []
     assert inject(system, client, service, fault, problems), problems
     assert system.pids()["gateway"] == gateway
 
 
 def test_router_stopped_and_continued(session):
     system, client, gateway = session
-    problems = []
+    problems: list[tuple] = []
     assert inject(system, client, "router", "stop", problems), problems
 
 

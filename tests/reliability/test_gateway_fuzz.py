@@ -10,6 +10,7 @@ that were ever configured.
 """
 
 import os
+from typing import TypedDict
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -17,8 +18,17 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from rob6.testing import running
 from tests.reliability.fuzz import COMMAND_NAMES, EXTREMES_TCP, TcpFuzzer, command_line_strategy, vm_rss_kib
 
-TCP = dict(deadline=None, database=None,
-               suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+class _Settings(TypedDict):
+    """The hypothesis settings the TCP tests share."""
+
+    deadline: None
+    database: None
+    suppress_health_check: list[HealthCheck]
+
+
+TCP = _Settings(deadline=None, database=None,
+                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 
 
 @pytest.fixture(scope="module")

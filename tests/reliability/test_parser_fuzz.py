@@ -80,7 +80,8 @@ def dead_gateway(request):
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(text=command_line_strategy())
 def test_every_command_line_gets_one_well_formed_reply(dead_gateway, text):
-    check_execute(*dead_gateway[:2], text, dead_gateway[2])
+    gateway, session, loop = dead_gateway
+    check_execute(gateway, session, text, loop)
 
 
 EXTREMES = ["nan", "inf", "-inf", "1e308", "-1e308", "1e309", "-0", "4.9e-324", "10abc", ""]
