@@ -282,6 +282,8 @@ class MoveRequest(Struct):
     pose: Pose | None = None
     pattern: Pattern | None = None
     dry_run: bool = False  # route test: check and plan only, from ``start``
+    #: where the motion starts: the gateway's copy of the driver's state (the route test's
+    #: position for a dry run); None: the planner asks the driver
     start: Joints | None = None
 
 

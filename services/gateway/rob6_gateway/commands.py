@@ -443,7 +443,9 @@ async def is_possible(gw, session, args):
 async def _move(gw, session, kind: MotionKind, **fields) -> str:
     if session.routetest is not None:  # real moves are refused while route testing
         return FALSE
-    reply = await gw.call(session, "planner", "move", MoveRequest(kind=kind, **fields))
+    state = gw.joints.get()  # the planner starts from it rather than follow the state itself
+    reply = await gw.call(session, "planner", "move", MoveRequest(
+        kind=kind, start=state.q if state is not None else None, **fields))
     if reply.state is not None:
         gw.joints.update(reply.state)
     if not reply.ok and reply.error:  # the robot failed (not connected, link lost), not the command

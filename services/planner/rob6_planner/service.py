@@ -34,7 +34,6 @@ from rob6.messages import (
     Trajectory,
 )
 from rob6.robots import RobotModel
-from rob6.state import JointStateMirror
 from rob6.status import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN
 
 from .config import MotionConfig
@@ -69,7 +68,6 @@ class PlannerService:
         self.robot = robot
         self.config = MotionConfig(robot)
         self.planner = TrajectoryPlanner(robot)
-        self.joints = JointStateMirror(bus)
         self.alter = False
         self.lin = False
         self.alter_timeout_s = alter_timeout_s
@@ -176,12 +174,17 @@ class PlannerService:
             log.info("%s refused: %s", req.kind, exc)
             return MoveReply(ok=False, reason=str(exc))
 
-    def _current(self) -> list[float]:
-        state = self.joints.get() or self.bus.request("driver", "state", Empty())
-        return list(state.q)
+    def _current(self, req: MoveRequest) -> list[float]:
+        """Where the motion starts: what the gateway sent (its copy of the driver's state,
+        or the route test's position), else the driver's state asked now. The planner does
+        not follow the driver's 250 Hz state itself (idle CPU, issue 13); the driver
+        refuses a trajectory that does not start where the robot is."""
+        if req.start is not None:
+            return list(req.start)
+        return list(self.bus.request("driver", "state", Empty()).q)
 
     def _move(self, req: MoveRequest, cid: str) -> MoveReply:
-        start = list(req.start) if req.dry_run and req.start is not None else self._current()
+        start = self._current(req)
         if self.alter and not req.dry_run:
             raise Refused("Alter mode is on (DisableAlter first)")
         if req.kind == "MoveLINHomRowWise":
@@ -219,10 +222,7 @@ class PlannerService:
         reply = self.bus.request("driver", "execute", ExecuteRequest(trajectory=Trajectory(
             dt=trajectory.dt, q=trajectory.q.tolist(), qd=trajectory.qd.tolist(), qdd=trajectory.qdd.tolist())),
             cid=cid, timeout=duration + 10.0)
-        joints = None
-        if reply.state is not None:  # newer than any state the driver published before
-            self.joints.update(reply.state)
-            joints = reply.state.q
+        joints = reply.state.q if reply.state is not None else None
         return MoveReply(ok=reply.ok, joints=joints, reason=reply.reason, error=reply.error, state=reply.state)
 
     def _lin(self, req: MoveRequest, start: list[float], cid: str) -> MoveReply:
@@ -255,7 +255,7 @@ class PlannerService:
         if req.kind in ("MoveRTJoints", "DoAlterJoint"):
             target = list(_given(req.joints, "joints", req.kind))
         else:
-            current = self._current()
+            current = self._current(req)
             if req.kind == "DoAlterCart":
                 pose = _shifted_pose(self._pose(current, cid), req.pose)
                 target = self._select(pose, KEEP_CONFIGURATION, current, cid)
