@@ -158,8 +158,8 @@ def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path, order, timing
                 assert client.ask("Quit") == "bye!\n"
             time.sleep(1.0)  # the recorder writes the last states
     t, q = recorded_states(tmp_path)
-    assert len(t) > 1000, f"{len(t)} joint states recorded"
-    assert_within_limits(ROBOT, t, q)  # rob6's setpoints, every cycle, the controller connected or not
+    # rob6's setpoints, every cycle of a motion (at rest fewer), the controller connected or not
+    assert assert_within_limits(ROBOT, t, q) > 250  # the Alter part alone: 250 targets, one per cycle
     events = [r.data for path in tmp_path.glob("*_system_*.mcap") for r in read_records(path, ["/driver/link"])]
     assert [e["event"] for e in events][:2] == ["waiting", "connected"]
     assert all(e["link"] == "simple_message" for e in events)

@@ -142,8 +142,7 @@ def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp
         finally:
             kuka.stop()
     t, q = connected_states(tmp_path)
-    assert len(t) > 2000
-    assert_within_limits(ROBOT, t, q)
+    assert assert_within_limits(ROBOT, t, q) > 1000
     recorded = [r for path in tmp_path.glob("*_system_*.mcap") for r in read_records(path, ["/driver/link"])]
     assert [r.data["event"] for r in recorded][:2] == ["waiting", "run_start"]
     assert recorded[1].data["start_pose"] == [0.0] * 6

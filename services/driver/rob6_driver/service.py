@@ -43,6 +43,12 @@ from .motion import CoreState, MotionCore, Offline
 log = logging.getLogger("rob6.driver")
 
 EXECUTE_MARGIN_S = 5.0  # beyond the trajectory's own duration
+#: a state that differs from the last one published only in its time and cycle (the robot
+#: at rest) is published this often, not every cycle: each subscriber of a 250 Hz stream
+#: (gateway, recorder, live view) pays 2-4 % of a core for it (issue 13). Nothing is lost:
+#: until the next state, the robot is where the last one says. Below the gateway's
+#: rob6.state.STATE_STALE_S, so a silent driver is still told from a resting robot.
+REST_STATE_PERIOD_S = 0.04
 
 
 class DriverService:
@@ -52,6 +58,8 @@ class DriverService:
         self.bus = bus
         self.robot = robot
         self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
+        self._published: tuple | None = None  # the last published state without t and cycle
+        self._published_t = 0.0
         self.link: Link
         if link == "rsi":
             self.link = RsiLink(self.core, robot, rsi_listen, self._publish, self._publish_link_event,
@@ -70,7 +78,14 @@ class DriverService:
                           instance=self.bus.instance, link=link.state, late=link.late, q_actual=link.q_actual)
 
     def _publish(self, state: CoreState) -> None:
-        self.bus.publish("driver/state", self.joint_state(state))
+        """Every cycle's state, except at rest (``REST_STATE_PERIOD_S``)."""
+        message = self.joint_state(state)
+        content = (message.q, message.qd, message.moving, message.mode, message.missed, message.link,
+                   message.late, message.q_actual)
+        if content == self._published and 0.0 <= message.t - self._published_t < REST_STATE_PERIOD_S:
+            return
+        self._published, self._published_t = content, message.t
+        self.bus.publish("driver/state", message)
 
     def _publish_link_event(self, event: LinkEvent) -> None:
         self.bus.publish("driver/link", event, reliable=True)

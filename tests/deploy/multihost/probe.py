@@ -80,7 +80,8 @@ def same_motion(reference: list[Sample], other: list[Sample], until: int, shifts
     def by_cycle(samples: list[Sample]) -> dict[int, list[float]]:
         first = samples[0].q
         start = next((i for i, s in enumerate(samples) if s.q != first), len(samples))
-        origin = samples[max(0, start - 1)].cycle
+        # the cycle before the first that moved (at rest the driver publishes only every few cycles)
+        origin = samples[min(start, len(samples) - 1)].cycle - 1
         return {s.cycle - origin: s.q for s in samples}
 
     ref, oth = by_cycle(reference), by_cycle(other)
