@@ -4,10 +4,9 @@ Key expressions (``<id>`` is the robot id, so several robots share one network):
 
     rob6/<id>/<service>/<instance>/<op>    queryable of one service instance (requests)
     rob6/<id>/alive/<service>/<instance>   liveliness token: the instance is up
-    rob6/<id>/driver/state                 joint state, every driver cycle
+    rob6/<id>/driver/state                 joint state, every driver cycle (at rest 25 Hz)
     rob6/<id>/gripper/state                gripper state
     rob6/<id>/control/<name>               verbosity, shutdown (gateway -> all)
-    rob6/<id>/log/<service>                log records of every process
     rob6/<id>/trace/<service>              the records below, in batches (recorder)
 
 Records for the recorder (``Bus.trace``) leave in batches, one message per few
@@ -20,6 +19,7 @@ away or restarted gets what it missed and learns of what it could not get
     trace/<service>/<op>                   each served request with its reply
     trace/gateway/session                  each client line in / reply out
     trace/gateway/event                    a client session opening or closing
+    log/<service>                          a log record (rob6.logs.BusLogHandler)
 
 Requests go to one *instance*: the bus watches the liveliness tokens and spreads the
 calls of a replicated service (kinematics) over its live instances (least in flight,

@@ -35,24 +35,17 @@ def set_verbosity(level: int) -> None:
 
 
 class BusLogHandler(logging.Handler):
-    """Publishes every record on ``rob6/<id>/log/<service>`` (for the recorder)."""
+    """Sends every record to the recorder (``/log``) with the traces: batched, from the bus's
+    trace thread, kept in its publisher's cache for a recorder that was away. Logging never
+    waits for the network, and no record is lost while the recorder restarts."""
 
     def __init__(self, bus: Bus) -> None:
         super().__init__()
         self.bus = bus
-        self._busy = False
 
     def emit(self, record: logging.LogRecord) -> None:
-        if self._busy:  # a record logged while publishing one: do not recurse
-            return
-        self._busy = True
-        try:
-            self.bus.publish(f"log/{self.bus.service}", LogRecord(
-                t=record.created if record.created else time.time(),
-                service=self.bus.service, instance=self.bus.instance,
-                level=record.levelname, name=record.name, message=record.getMessage(),
-            ), reliable=True)
-        except Exception:
-            pass  # the bus is closing; the console handler still has the record
-        finally:
-            self._busy = False
+        self.bus.trace(f"log/{self.bus.service}", LogRecord(
+            t=record.created if record.created else time.time(),
+            service=self.bus.service, instance=self.bus.instance,
+            level=record.levelname, name=record.name, message=record.getMessage(),
+        ))

@@ -61,6 +61,9 @@ def test_session_recorded_replayed_and_compared(tmp_path):
         assert forward and forward[0].data["cid"] in cids  # inner request tied to its client line
         moves = [r for r in records if r.topic == "/bus/driver/execute/request"]
         assert moves and moves[0].data["cid"] in cids  # gateway -> planner -> driver, one cid
+        # log records travel with the traces (kept for a recorder that starts later)
+        logs = [r.data for p in tmp_path.glob("*_system_*.mcap") for r in read_records(p, ["/log"])]
+        assert any(r["service"] == "gateway" and r["message"].startswith("gateway listening on") for r in logs)
         same = _replay(path, system.port)
         assert same.returncode == 0, same.stdout + same.stderr
     with running("ad850", log_dir=str(tmp_path / "other")) as other:
