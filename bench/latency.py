@@ -104,7 +104,8 @@ def zenoh_baseline(router_port: int, count: int, warmup: int = 200) -> list[floa
                     loop.call_soon_threadsafe(future.set_result, reply.ok is not None)
 
                 start = time.perf_counter()
-                session.get("bench/bare", zenoh.handlers.Callback(on_reply))
+                session.get("bench/bare", zenoh.handlers.Callback(on_reply),
+                            consolidation=zenoh.ConsolidationMode.NONE)  # as rob6.bus asks
                 if not await asyncio.wait_for(future, 5):
                     raise RuntimeError("the bare queryable answered with an error")
                 if i >= warmup:

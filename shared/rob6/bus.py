@@ -442,8 +442,14 @@ class Bus:
         with self._lock:
             self._pending.setdefault(instance, set()).add((waiter, attempt))
             self._inflight[instance] = self._inflight.get(instance, 0) + 1
+        # no consolidation: the reply is passed on when it arrives. Zenoh's default holds it
+        # back until every route has sent its final, and a route through a router whose link
+        # to a partitioned host is still open never does before the timeout: measured, every
+        # gateway -> driver call on the robot PC timed out 2 s into a partition of the
+        # remote hosts (deploy/MULTI_HOST.md). The key names one instance: one reply.
         self.session.get(self.key(service, instance, call.op), zenoh.handlers.Callback(on_reply, on_done),
-                         payload=call.payload, timeout=max(call.remaining(), 0.001))
+                         payload=call.payload, timeout=max(call.remaining(), 0.001),
+                         consolidation=zenoh.ConsolidationMode.NONE)
 
     def _done(self, waiter: "_Waiter") -> None:
         with self._lock:

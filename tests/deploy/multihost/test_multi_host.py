@@ -239,7 +239,6 @@ def test_motion_unchanged_when_every_remote_host_is_partitioned(topology, client
     from tests.deploy.multihost.probe import StateRecorder, motion, same_motion
 
     refused: dict[bool, int] = {}
-    alter_failed: list[str] = []
 
     def session(fault: bool) -> tuple[list, list]:
         _ask(client, "MovePTPJoints 0 -80 100 0 30 0")
@@ -247,14 +246,7 @@ def test_motion_unchanged_when_every_remote_host_is_partitioned(topology, client
             if fault:
                 with topology.partitioned("compute1", "compute2", "storage"):
                     _ptp(client)
-                    try:
-                        refused[fault] = _alter(client)
-                    except AssertionError as exc:  # see the xfail below
-                        if "unavailable" not in str(exc):
-                            raise
-                        alter_failed.append(str(exc).splitlines()[0])
-                        refused[fault] = -1
-                        _ask(client, "DisableAlter", attempts=10)
+                    refused[fault] = _alter(client)
             else:
                 _ptp(client)
                 refused[fault] = _alter(client)
@@ -274,21 +266,16 @@ def test_motion_unchanged_when_every_remote_host_is_partitioned(topology, client
         # a busy machine may make the driver miss cycles with or without faults: reported
         "driver cycles missed (reference, faulted)": [reference[-1].missed - reference[0].missed,
                                                       faulted[-1].missed - faulted[0].missed],
-        "samples not received by the probe (reference, faulted)": [
+        "cycles without a sample (at rest every 40 ms; else dropped on the way) (reference, faulted)": [
             s[-1].cycle - s[0].cycle + 1 - len(s) for s in (reference, faulted)],
         "Alter targets refused (reference, faulted)": [refused[False], refused[True]],
     }
     REPORT["motion under partition of every remote host"] = report
     assert same_motion(reference, faulted, _ptp_samples(ptp_ref)), "the PTP motion differs"
-    if refused[True] > 25:  # the same slowdown, seen on MoveRTJoints instead of EnableAlter
-        alter_failed.append(f"{refused[True]} of 500 Alter targets refused (reference: {refused[False]})")
-    if alter_failed:
-        # Known (deploy/MULTI_HOST.md, section 8): once the compute hosts have been cut off for
-        # longer than the lease (3 s), the robot PC's own gateway -> planner -> driver requests
-        # take ~250 ms and miss the 0.2 s bus timeout, so EnableAlter or targets are refused; the PTP
-        # under the same partition was checked above
-        report["Alter under partition"] = alter_failed[0]
-        pytest.xfail(f"Alter refused while the remote hosts are cut off: {alter_failed[0]}")
+    # a busy machine may refuse the odd target (the driver's reply later than the 0.2 s bus
+    # timeout) with or without faults; a partition must not add to that (it refused every
+    # target, 2 s in, while Zenoh held replies back for the partitioned routes: rob6.bus)
+    assert refused[True] <= refused[False] + 10, f"{refused[True]} of 500 Alter targets refused under the partition"
     assert all(abs(a - b) < 1e-6 for a, b in zip(faulted[-1].q, reference[-1].q, strict=True)), \
         (faulted[-1].q, reference[-1].q)
 
