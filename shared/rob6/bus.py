@@ -92,8 +92,9 @@ HEDGE_DELAY_S = 0.15
 
 #: every ``trace/<service>`` batch is kept this long by its (advanced) publisher, so a
 #: recorder partitioned away or restarted gets what it missed (``Bus.subscribe_traces``):
-#: batches leave at most every TRACE_BATCH_S, so 10 s are at most ~2,000 batches
-TRACE_CACHE_S = 10.0
+#: a 10 s partition of the storage host, the lease and the reconnection fit. Batches leave
+#: at most every TRACE_BATCH_S: at most ~6,000, a few MB at 250 Hz Alter
+TRACE_CACHE_S = 30.0
 TRACE_CACHE_SAMPLES = int(TRACE_CACHE_S / TRACE_BATCH_S)
 #: how often a trace publisher tells its subscribers the sequence number of its last
 #: batch, when it changed (a lost *last* batch is detected and recovered within this)

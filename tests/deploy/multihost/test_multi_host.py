@@ -283,3 +283,76 @@ def test_motion_unchanged_when_every_remote_host_is_partitioned(topology, client
 def _ptp_samples(states: list[list[float]]) -> int:
     """Samples of the PTP part: until A1 first reaches 30 deg."""
     return next((i for i, q in enumerate(states) if abs(q[0] - 30.0) < 1e-9), len(states))
+
+
+# ---------------------------------------------------------------------- recordings
+def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(topology, client, tmp_path):
+    """An Alter session at 250 Hz; the storage host cut off for 10 s, then its recorder
+    SIGKILLed and started again: every client exchange of the session (the gateway numbers
+    them, ``seq``) must be in the recorder's files, session and system alike. The batches
+    the recorder did not get wait in the publishers' caches (``TRACE_CACHE_S``)."""
+    import math
+
+    from rob6_recorder.reader import read_records
+
+    recorder = topology.container("recorder")
+    exchanges = 1  # the client fixture's "Hello Robot"
+    refused = 0
+
+    def ask(line: str) -> str:
+        nonlocal exchanges
+        reply = client.ask(line, timeout=30)
+        exchanges += 1
+        return reply
+
+    _ask(client, "MovePTPJoints 0 -80 100 0 30 0")
+    exchanges += 1
+    assert ask("EnableAlter") == "true\n"
+    here = [float(x) for x in ask("GetPositionJoints").split()]
+    k = 0
+
+    def stream(seconds: float) -> None:
+        nonlocal k, refused
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            target = list(here)
+            target[0] += 3.0 * math.sin(2 * math.pi * 0.5 * k / 250)
+            k += 1
+            reply = ask("MoveRTJoints " + " ".join(f"{x:f}" for x in target))
+            assert reply == "true\n" or reply.startswith("ERROR: driver"), reply
+            refused += reply != "true\n"
+            time.sleep(0.004)
+
+    stream(2.0)
+    with topology.partitioned("storage"):
+        stream(10.0)
+    stream(3.0)
+    run(["docker", "kill", "-s", "KILL", recorder])
+    stream(1.0)
+    run(["docker", "start", recorder])
+    stream(5.0)
+    assert ask("DisableAlter") == "true\n"
+    assert ask("Quit") == "bye!\n"
+    time.sleep(3.0)  # the last batches reach the recorder
+    run(["docker", "stop", "-t", "20", recorder])  # closes its files
+    try:
+        run(["docker", "cp", f"{recorder}:/data/logs", str(tmp_path)])
+    finally:
+        run(["docker", "start", recorder])
+    files = sorted((tmp_path / "logs").glob("*.mcap"))
+    client_in = {kind: [r.data for p in files if kind in p.name for r in read_records(p)
+                        if r.topic.endswith("/client_in")] for kind in ("_session", "_system")}
+    session = max(d["session"] for d in client_in["_system"])  # the newest session: this one
+    status = [r.data for p in files if "_system" in p.name for r in read_records(p, ["/recorder/status"])]
+    report: dict[str, object] = {"client exchanges": exchanges, "Alter targets refused": refused,
+                                 "what /recorder/status said": [s for s in status if s.get("missed")][:5]
+                                 or "no miss reported"}
+    lost = {}
+    for kind, records in client_in.items():
+        seqs = [d.get("seq") for d in records if d["session"] == session]
+        lost[kind] = sorted(set(range(1, exchanges + 1)) - set(seqs))
+        report[f"lost ({kind[1:]} files)"] = len(lost[kind])
+        report[f"recorded twice ({kind[1:]} files)"] = len(seqs) - len(set(seqs))
+    REPORT["storage partitioned 10 s, then the recorder SIGKILLed and restarted"] = report
+    for kind, missing in lost.items():
+        assert not missing, f"{kind[1:]} files: {len(missing)} of {exchanges} client records lost: {missing[:20]}"
