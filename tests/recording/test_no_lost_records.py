@@ -1,6 +1,6 @@
 """No lost records: a recorder SIGKILLed mid-session and restarted by the launcher still
 gets every client exchange of the session (the gateway's trace batches come from an
-advanced publisher that keeps 10 s of them; the restarted recorder's advanced subscriber
+advanced publisher that keeps 30 s of them; the restarted recorder's advanced subscriber
 asks for that history), and what it could not get it says on ``/recorder/status``.
 
 The gateway numbers the exchanges of a session (``seq`` 1, 2, ...): every number must be
