@@ -13,8 +13,11 @@ from tests.deploy.multihost.topology import TAG, Topology, run
 SCRIPT = r"""
 import json, signal, sys, threading, zenoh
 conf = zenoh.Config()
-conf.insert_json5("mode", '"client"')
+# a peer like the robot PC's services, linked to the driver directly: what a client of the
+# router receives depends on the router, which a partition of the other hosts can hold up
+conf.insert_json5("mode", '"peer"')
 conf.insert_json5("connect/endpoints", '["tcp/127.0.0.1:7447"]')
+conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
 conf.insert_json5("scouting/multicast/enabled", "false")
 session = zenoh.open(conf)
 def on_sample(sample):
