@@ -305,9 +305,17 @@ def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(t
         exchanges += 1
         return reply
 
-    _ask(client, "MovePTPJoints 0 -80 100 0 30 0")
-    exchanges += 1
-    assert ask("EnableAlter") == "true\n"
+    def ask_true(line: str) -> None:
+        """``true``; an ``ERROR: <robot-PC service> unavailable`` (the 0.2 s bus timeout
+        missed on a busy machine) is asked again, as ``_ask`` does, each one an exchange."""
+        for _ in range(3):
+            reply = ask(line)
+            if not reply.startswith("ERROR") or "unavailable" not in reply:
+                break
+        assert reply == "true\n", (line, reply)
+
+    ask_true("MovePTPJoints 0 -80 100 0 30 0")
+    ask_true("EnableAlter")
     here = [float(x) for x in ask("GetPositionJoints").split()]
     k = 0
 
@@ -332,7 +340,7 @@ def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(t
     stream(1.0)
     run(["docker", "start", recorder])
     stream(5.0)
-    assert ask("DisableAlter") == "true\n"
+    ask_true("DisableAlter")
     assert ask("Quit") == "bye!\n"
     time.sleep(3.0)  # the last batches reach the recorder
     run(["docker", "stop", "-t", "20", recorder])  # closes its files
