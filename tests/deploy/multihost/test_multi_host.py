@@ -103,7 +103,7 @@ def test_every_host_serves(topology, client):
     assert sum(c.ok for c in results) >= 0.9 * len(results)
     assert len(topology.containers("kinematics-c1")) == 2 and len(topology.containers("kinematics-c2")) == 1
     # the robot PC's own services through the gateway: planner, driver
-    assert client.ask("MovePTPJoints 10 -20 30 40 50 60", timeout=30) == "true\n"
+    _ask(client, "MovePTPJoints 10 -20 30 40 50 60")  # asked again if the 0.2 s bus timeout was missed
     assert client.ask("GetPositionJoints") == "10.000000 -20.000000 30.000000 40.000000 50.000000 60.000000\n"
     # each compute host serves: stop the other one's replicas, the calls still succeed
     for only in REMOTE_KINEMATICS:
@@ -179,7 +179,7 @@ def test_robot_pc_router_killed(topology, client):
         assert client.ask("CM_PING") == "PONG\n"
         assert client.ask("MovePTPJoints 12 -20 30 40 50 60", timeout=30) == "true\n"
         assert client.ask("GetPositionJoints") == "12.000000 -20.000000 30.000000 40.000000 50.000000 60.000000\n"
-        assert client.ask("MovePTPJoints 10 -20 30 40 50 60", timeout=30) == "true\n"
+        _ask(client, "MovePTPJoints 10 -20 30 40 50 60")  # asked again if the 0.2 s bus timeout was missed
         local = time.monotonic() - killed
         results = calls(client, line, 20, timeout=CALL_TIMEOUT)
         summary = assert_answered(results, "robot PC router killed")
