@@ -88,7 +88,10 @@ class DriverService:
         self.bus.publish("driver/state", message)
 
     def _publish_link_event(self, event: LinkEvent) -> None:
-        self.bus.publish("driver/link", event, reliable=True)
+        # a record, like the traces: queued, so the link's thread never waits for the network
+        # (a BLOCK publication could, towards a partitioned recorder), and kept in the trace
+        # cache for a recorder that was away
+        self.bus.trace("driver/link", event)
 
     def _on_event(self, event: dict) -> None:
         if event.get("type") == "violation":
