@@ -77,6 +77,7 @@ log = logging.getLogger("rob6.bus")
 T = TypeVar("T")
 
 _encoder = msgspec.json.Encoder()
+_DECODER_LOCK = threading.Lock()
 
 #: traces gather this long before they leave as one message: a request pays for a queue
 #: put, not for a thread wake-up and a publication of its own (the recording overhead)
@@ -352,7 +353,12 @@ class Bus:
     def _decoder(self, typ: Any) -> msgspec.json.Decoder[Any]:
         decoder = self._decoders.get(typ)
         if decoder is None:
-            decoder = self._decoders[typ] = msgspec.json.Decoder(typ)
+            # built under a lock: two threads building a decoder for the same generic type at
+            # once crashed the interpreter (SIGSEGV in msgspec's annotation walk, seen in CI)
+            with _DECODER_LOCK:
+                decoder = self._decoders.get(typ)
+                if decoder is None:
+                    decoder = self._decoders[typ] = msgspec.json.Decoder(typ)
         return decoder
 
     # ------------------------------------------------------------------ requests

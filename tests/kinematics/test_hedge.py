@@ -128,6 +128,20 @@ def test_the_hedge_goes_to_the_same_replica_when_it_is_the_only_one():
         assert only.calls == 3  # the warm-up, the slow copy and the hedge
 
 
+def test_the_hedge_goes_to_another_host():
+    # two replicas of one host hang (say, behind the same lost TCP segment): the second copy
+    # goes to the other host's replica, not to its hung neighbour (instance ids are host-suffix)
+    with _kinematics(("c1-aaaa", _never), ("c1-bbbb", _never), ("c2-cccc", _fast)) as (client, served):
+        first_c1 = 0
+        for _ in range(9):
+            before = served[0].calls + served[1].calls
+            started = time.monotonic()
+            assert client.request("kinematics", "fk", FkRequest(joints=[JOINTS])) == FK
+            assert time.monotonic() - started < HEDGE_DELAY_S + 0.25
+            first_c1 += served[0].calls + served[1].calls - before
+        assert first_c1 >= 2  # calls did go to c1 first, and the hedge never did
+
+
 def test_arequest_hedges_too():
     with _kinematics(("hung", _never), ("fast", _fast)) as (client, (hung, _fast_replica)):
         async def calls() -> list[float]:
