@@ -33,9 +33,10 @@ idle without this. When an instance vanishes mid-request (its token disappears) 
 does not answer in time, a request to an idempotent service is retried once on
 another instance; a hedged one (single-pose kinematics, ``Op.hedged``) not answered
 after ``HEDGE_DELAY_S`` is sent a second time, to another live instance (or the same
-one when it is the only one), and the first answer wins. Never for an owner service:
-one robot, one owner, a motion is never sent twice. Everything else fails with a
-structured ``BusError``.
+one when it is the only one), and the first answer wins. A retry or a hedge prefers an
+instance on another host (the host part of its id): its network path is not the first's.
+Never for an owner service: one robot, one owner, a motion is never sent twice.
+Everything else fails with a structured ``BusError``.
 
 Zenoh runs callbacks on its own threads: the callbacks here only hand data over
 (set a future, update a dict) and never block. Served requests are taken from a
@@ -104,6 +105,11 @@ TRACE_HEARTBEAT_S = 0.5
 TRACE_RESUBSCRIBE_S = 2.0
 
 _trace_batch = msgspec.json.Decoder(list[tuple[str, msgspec.Raw]])
+
+
+def _host(instance: str) -> str:
+    """The host part of an instance id (``rob6.config.default_instance``: host-suffix)."""
+    return instance.rpartition("-")[0] or instance
 
 
 def trace_records(payload: bytes) -> list[tuple[str, bytes]]:
@@ -271,6 +277,11 @@ class Bus:
             candidates = [i for i in live if i not in exclude]
             if not candidates:
                 return None
+            # a retry or a hedge goes to another host where there is one: the instances of
+            # one host share its network path, and a copy sent the same way would wait
+            # behind the same lost TCP segment or partition
+            elsewhere = [i for i in candidates if _host(i) not in {_host(t) for t in exclude}]
+            candidates = elsewhere or candidates
             start = next(self._rotation) % len(candidates)
             ordered = candidates[start:] + candidates[:start]
             return min(ordered, key=lambda i: self._inflight.get(i, 0))
