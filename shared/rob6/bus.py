@@ -20,6 +20,7 @@ away or restarted gets what it missed and learns of what it could not get
     trace/gateway/session                  each client line in / reply out
     trace/gateway/event                    a client session opening or closing
     log/<service>                          a log record (rob6.logs.BusLogHandler)
+    driver/link                            an event of the driver's robot link
 
 Requests go to one *instance*: the bus watches the liveliness tokens and spreads the
 calls of a replicated service (kinematics) over its live instances (least in flight,
@@ -52,7 +53,7 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from queue import Empty, SimpleQueue
 from typing import Any, TypeVar
@@ -103,6 +104,11 @@ TRACE_CACHE_SAMPLES = int(TRACE_CACHE_S / TRACE_BATCH_S)
 TRACE_HEARTBEAT_S = 0.5
 #: when the recorder's second trace subscriber comes (see ``_TraceSubscription``)
 TRACE_RESUBSCRIBE_S = 2.0
+#: the repair of what zenoh.ext's recovery left out (``_TraceSubscription._repair``): how
+#: often, how many asks before a missing batch is reported missed, how long each ask
+TRACE_REPAIR_S = 2.0
+TRACE_REPAIR_TRIES = 3
+TRACE_REPAIR_TIMEOUT_S = 5.0
 
 _trace_batch = msgspec.json.Decoder(list[tuple[str, msgspec.Raw]])
 
@@ -110,6 +116,21 @@ _trace_batch = msgspec.json.Decoder(list[tuple[str, msgspec.Raw]])
 def _host(instance: str) -> str:
     """The host part of an instance id (``rob6.config.default_instance``: host-suffix)."""
     return instance.rpartition("-")[0] or instance
+
+
+def _runs(keys: list[tuple[str, int]]) -> Iterator[tuple[str, int, int]]:
+    """``(source, first, last)`` for each run of consecutive numbers of one source in the
+    sorted ``keys``."""
+    run: list[Any] = []
+    for source, sn in keys:
+        if run and run[0] == source and run[2] + 1 == sn:
+            run[2] = sn
+            continue
+        if run:
+            yield run[0], run[1], run[2]
+        run = [source, sn, sn]
+    if run:
+        yield run[0], run[1], run[2]
 
 
 def trace_records(payload: bytes) -> list[tuple[str, bytes]]:
@@ -589,7 +610,8 @@ class Bus:
 
 
 class _TraceSubscription:
-    """``Bus.subscribe_traces``: a zenoh.ext advanced subscriber, declared twice.
+    """``Bus.subscribe_traces``: a zenoh.ext advanced subscriber, declared twice, and a
+    repair from the publishers' caches.
 
     Its history query reaches only the publishers whose cache this session already has a
     route to; right after the session opened it may come back without them, and the
@@ -598,7 +620,12 @@ class _TraceSubscription:
     in 6 lost the batches published while the recorder was down. So a second subscriber
     is declared ``TRACE_RESUBSCRIBE_S`` later, when the routes are there, whose history
     brings what the first missed; batches are passed on once (by publisher and sequence
-    number), and the first subscriber goes.
+    number), and the first subscriber goes. In a multi-host run even the second one's
+    history sometimes brought nothing from a publisher, and a batch now and then was
+    neither delivered nor reported missed (deploy/MULTI_HOST.md), so ``_repair`` asks the
+    publishers' caches directly for whatever is missing by sequence number, and reports
+    what they no longer have. It is the one reporter of misses: a miss zenoh.ext reports
+    leaves a hole that the repair asks for once more and then reports, so it is only logged.
     """
 
     def __init__(self, bus: Bus, on_batch: Callable[[str, bytes], None], on_miss: Callable[[str, int], None]):
@@ -606,11 +633,15 @@ class _TraceSubscription:
         self._lock = threading.Lock()
         self._sources: dict[str, str] = {}  # publisher's entity id -> "<key> <instance>"
         self._seen: dict[str, set[int]] = {}  # publisher's entity id -> sequence numbers passed on
+        self._caches: dict[str, str] = {}  # publisher's entity id -> key expression of its cache
+        self._backfilled: set[str] = set()  # publishers whose cache answered for what came before
         self._closed = False
         self._current: list[Any] = self._declare()
         self._timer = threading.Timer(TRACE_RESUBSCRIBE_S, self._redeclare)
         self._timer.daemon = True
         self._timer.start()
+        self._repairer = threading.Thread(target=self._repair, name="trace-repair", daemon=True)
+        self._repairer.start()
 
     def _declare(self) -> list[Any]:
         subscriber = zenoh.ext.declare_advanced_subscriber(
@@ -652,6 +683,9 @@ class _TraceSubscription:
                     seen.add(sn)
                     if len(seen) > 4 * TRACE_CACHE_SAMPLES:  # keep the newest, enough for any history
                         self._seen[source] = set(sorted(seen)[-2 * TRACE_CACHE_SAMPLES:])
+                    if source not in self._caches:
+                        self._caches[source] = "%s/@adv/pub/%s/%s/**" % (  # zenoh.ext's cache queryable
+                            sample.key_expr, info.source_id.zid, info.source_id.eid)
                     if source not in self._sources:
                         attachment = sample.attachment
                         self._sources[source] = "%s %s" % (sample.key_expr, attachment.to_bytes().decode(
@@ -660,12 +694,69 @@ class _TraceSubscription:
         except Exception:
             log.exception("trace subscriber failed")
 
-    def _missed(self, miss: zenoh.ext.Miss) -> None:
-        source = str(miss.source)
+    def _repair(self) -> None:
+        """From the time the second subscriber's history had, every ``TRACE_REPAIR_S``: ask
+        each publisher's cache for the batches missing here (zenoh.ext's own recovery left
+        them out, see the class): the ones before the first that came (until the cache
+        answers), and the holes between the ones that came, once a hole was seen twice in a
+        row (not merely on its way). A hole the cache no longer has after
+        ``TRACE_REPAIR_TRIES`` asks is reported missed, and not asked for again."""
+        time.sleep(TRACE_RESUBSCRIBE_S + 1.0)
+        asks: dict[tuple[str, int], int] = {}  # (publisher, sequence number) -> asks so far
+        previous: set[tuple[str, int]] = set()
+        while True:
+            with self._lock:
+                if self._closed:
+                    return
+                known = {source: (self._caches[source], min(seen), max(seen), set(seen))
+                         for source, seen in self._seen.items() if seen and source in self._caches}
+            holes: set[tuple[str, int]] = set()
+            for source, (cache, first, last, seen) in known.items():
+                if first > 0 and source not in self._backfilled and self._ask_cache(cache, f"..{first - 1}"):
+                    self._backfilled.add(source)
+                holes.update((source, sn) for sn in range(first, last) if sn not in seen)
+            for source, start, end in _runs(sorted(holes & previous)):  # seen twice: not on their way
+                self._ask_cache(known[source][0], f"{start}..{end}")
+                with self._lock:
+                    still = [sn for sn in range(start, end + 1) if sn not in self._seen[source]]
+                    for sn in still:
+                        asks[(source, sn)] = asks.get((source, sn), 0) + 1
+                    given_up = [sn for sn in still if asks[(source, sn)] >= TRACE_REPAIR_TRIES]
+                    self._seen[source].update(given_up)  # reported once, never asked for again
+                for sn in given_up:
+                    del asks[(source, sn)]
+                if given_up:
+                    self._report_missed(source, len(given_up))
+            previous = holes
+            time.sleep(TRACE_REPAIR_S)
+
+    def _ask_cache(self, cache: str, sn_range: str) -> int:
+        """Ask one publisher's cache for the batches with sequence numbers ``sn_range``
+        (``a..b``, ``..b`` or ``n``); each one that comes is passed on (once). Returns how
+        many came."""
+        got = 0
         try:
-            self.on_miss(self._sources.get(source, source), miss.nb)
+            for reply in self.bus.session.get(zenoh.Selector(cache, f"_sn={sn_range}"), target=zenoh.QueryTarget.ALL,
+                                              timeout=TRACE_REPAIR_TIMEOUT_S, consolidation=zenoh.ConsolidationMode.NONE,
+                                              accept_replies=zenoh.ReplyKeyExpr.ANY):  # the batches' own key
+                if reply.ok is not None:
+                    got += 1
+                    self._sample(reply.ok)
+        except Exception:
+            log.exception("asking %s for its batches %s failed", cache, sn_range)
+        log.info("trace repair: %s gave %d batches of %s", cache, got, sn_range)
+        return got
+
+    def _report_missed(self, source: str, count: int) -> None:
+        try:
+            self.on_miss(self._sources.get(source, source), count)
         except Exception:
             log.exception("trace miss listener failed")
+
+    def _missed(self, miss: zenoh.ext.Miss) -> None:
+        source = str(miss.source)
+        log.info("zenoh.ext missed %d trace batches of %s; the repair asks its cache once more",
+                 miss.nb, self._sources.get(source, source))
 
     def undeclare(self) -> None:
         self._timer.cancel()

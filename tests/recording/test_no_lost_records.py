@@ -1,7 +1,9 @@
 """No lost records: a recorder SIGKILLed mid-session and restarted by the launcher still
 gets every client exchange of the session (the gateway's trace batches come from an
 advanced publisher that keeps 30 s of them; the restarted recorder's advanced subscriber
-asks for that history), and what it could not get it says on ``/recorder/status``.
+asks for that history, and for what the history left out the cache is asked directly:
+rob6.bus ``_TraceSubscription._repair``), and what it could not get it says on
+``/recorder/status``.
 
 The gateway numbers the exchanges of a session (``seq`` 1, 2, ...): every number must be
 in the MCAP files (the killed recorder's unfinished files and the new recorder's)."""
@@ -12,8 +14,6 @@ import os
 import signal
 import time
 from pathlib import Path
-
-import pytest
 
 from rob6_recorder.reader import read_records
 from tests.system import running
@@ -81,13 +81,7 @@ def test_recorder_killed_and_restarted_mid_session_loses_no_client_record(tmp_pa
     for path in sorted(tmp_path.glob("*.mcap")):
         seqs = [r.data.get("seq") for r in read_records(path) if r.topic.endswith("/client_in")]
         print(f"{path.name}: seq {min(seqs, default=None)}..{max(seqs, default=None)} ({len(seqs)} records)")
-    for kind, missing in lost.items():
-        if missing and not replayed[kind]:
-            # known, intermittent (1 run in 6 here): neither of the restarted recorder's
-            # advanced subscribers got any history from the gateway's cache, so what the
-            # killed recorder had not yet flushed is lost, and the bus cannot tell (no miss)
-            pytest.xfail(f"{kind[1:]} files: no history after the restart, {len(missing)} of "
-                         f"{exchanges} client records lost")
+    for kind, missing in lost.items():  # what the history left out, the repair asked for (rob6.bus)
         assert not missing, f"{kind[1:]} files: {len(missing)} of {exchanges} client records lost: {missing[:20]}"
     # what the recorder knew it missed is on its status channel: nothing here
     assert not [s for s in status if s.get("missed")], status
