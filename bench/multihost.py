@@ -116,13 +116,8 @@ def partition_row(topo: Topology, client, line: str, seconds: float = 8.0, watch
 
 
 def loss_row(topo: Topology, client, line: str) -> tuple:
-    for host in ("compute1", "compute2"):
-        topo.netem(host, delay_ms=10, jitter_ms=10, loss=0.05)
-    try:
+    with topo.impaired(delay_ms=10, jitter_ms=10, loss=0.05):
         results = calls(client, line, COUNT)
-    finally:
-        for host in ("compute1", "compute2"):
-            topo.clear_netem(host)
     seconds = [c.seconds for c in results]
     ok = sum(c.ok for c in results)
     first_error = next((c.reply.strip() for c in results if c.error), "")

@@ -7,11 +7,12 @@ program takes the packets an iptables rule puts in a queue and gives each its ve
 
     iptables -I OUTPUT -d 10.5.0.2 -j NFQUEUE --queue-num 7 --queue-bypass
     iptables -I INPUT  -s 10.5.0.2 -j NFQUEUE --queue-num 7 --queue-bypass
-    nfq_netem.py --queue 7 --delay-ms 5 --jitter-ms 2 --loss 0.05
+    nfq_netem.py --queue 7 --delay-ms 5 --jitter-ms 2 --loss 0.05 --reorder 0.25
 
 Every queued packet is held ``delay ± jitter`` ms (uniform, like netem without a distribution
 table; jitter larger than the gaps between packets reorders them, as netem does) and dropped
-with probability ``loss``, then accepted. With the two rules above, each direction between
+with probability ``loss``, then accepted; with probability ``reorder`` a packet is not held
+at all, so it overtakes the ones held before it (netem's ``reorder``). With the two rules above, each direction between
 this network namespace and 10.5.0.2 gets the delay: ``--delay-ms 5`` is 5 ms one way, 10 ms
 round trip. Run it inside the namespace of the "host" to slow down, e.g. from the machine:
 ``nsenter -t <pid of the container> -n python3 nfq_netem.py ...`` (needs root: CAP_NET_ADMIN).
@@ -113,7 +114,7 @@ class Queue:
             self.sock.close()
 
 
-def run(queue: Queue, delay: float, jitter: float, loss: float, stats: bool) -> None:
+def run(queue: Queue, delay: float, jitter: float, loss: float, reorder: float, stats: bool) -> None:
     held: list[tuple[float, int, int]] = []  # (release time, order, packet id)
     order = 0
     stop = False
@@ -144,6 +145,8 @@ def run(queue: Queue, delay: float, jitter: float, loss: float, stats: bool) -> 
                     counts["dropped"] += 1
                     continue
                 hold = max(0.0, delay + random.uniform(-jitter, jitter)) if jitter else delay
+                if reorder and random.random() < reorder:
+                    hold = 0.0
                 if hold <= 0:
                     queue.verdict(packet_id, NF_ACCEPT)
                     counts["passed"] += 1
@@ -163,6 +166,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--delay-ms", type=float, default=0.0, help="added delay per packet")
     parser.add_argument("--jitter-ms", type=float, default=0.0, help="± uniform around the delay")
     parser.add_argument("--loss", type=float, default=0.0, help="drop probability per packet, 0..1")
+    parser.add_argument("--reorder", type=float, default=0.0,
+                        help="probability per packet of being sent at once, overtaking held ones, 0..1")
     parser.add_argument("--stats", action="store_true", help="one line of counts per second")
     args = parser.parse_args(argv)
     try:
@@ -170,10 +175,10 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"nfq_netem: cannot bind NFQUEUE {args.queue}: {exc} (root / CAP_NET_ADMIN needed)", file=sys.stderr)
         return 1
-    print(f"nfq_netem: queue {args.queue} delay {args.delay_ms} ms ± {args.jitter_ms} ms loss {args.loss:.1%}",
-          flush=True)
+    print(f"nfq_netem: queue {args.queue} delay {args.delay_ms} ms ± {args.jitter_ms} ms loss {args.loss:.1%} "
+          f"reorder {args.reorder:.1%}", flush=True)
     try:
-        run(queue, args.delay_ms / 1000, args.jitter_ms / 1000, args.loss, args.stats)
+        run(queue, args.delay_ms / 1000, args.jitter_ms / 1000, args.loss, args.reorder, args.stats)
     finally:
         queue.close()
     return 0

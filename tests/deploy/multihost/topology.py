@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import random
 import shutil
+import socket
 import subprocess
 import sys
 import threading
@@ -35,14 +37,33 @@ from tests.deploy.compose import compose_cmd, project_containers, run
 
 REPO = Path(__file__).resolve().parents[3]
 COMPOSE_FILE = REPO / "deploy" / "multihost" / "docker-compose.yml"
+REALTIME_FILE = REPO / "deploy" / "multihost" / "realtime.yml"
+#: Docker's parent cgroup on a cgroup v1 host (cgroupfs driver): its real-time budget bounds
+#: the containers' (deploy/multihost/realtime.yml)
+DOCKER_RT_RUNTIME = Path("/sys/fs/cgroup/cpu/docker/cpu.rt_runtime_us")
+#: of every second, for each of the driver and the stand-in KR C4: a real-time task past its
+#: budget is stopped for the rest of the second (measured with 100 ms: the KR C4 lost the link
+#: for 100 ms and counted 60-80 late packets a second), so the budget is not what limits them
+RT_RUNTIME_US = 400_000
 NETEM = REPO / "deploy" / "multihost" / "nfq_netem.py"
 TAG = os.environ.get("ROB6_TAG", "e2e")
 HOSTS = ("robot-pc", "compute1", "compute2", "storage")
 SERVICES = ("router-pc", "gateway", "planner", "driver", "gripper", "router-compute", "kinematics-c1",
             "kinematics-c2", "recorder")
 REMOTE_KINEMATICS = ("kinematics-c1", "kinematics-c2")
+REMOTE_HOSTS = ("compute1", "compute2")  # the compute hosts, whose links the faults slow down
 FK_LINE = "ForwardCalc 10 -20 30 40 50 60"
 JOINTS = (10.0, -20.0, 30.0, 40.0, 50.0, 60.0)
+
+
+def cannot_run() -> str | None:
+    """Why the multi-host suites cannot run here (None: they can): a Docker engine, compose,
+    and the tools to make faults."""
+    if not shutil.which("docker") or subprocess.run(["docker", "info"], capture_output=True, timeout=30).returncode:
+        return "no Docker engine here"
+    if compose_cmd() is None:
+        return "no docker compose here"
+    return fault_tools_missing()
 
 
 def fault_tools_missing() -> str | None:
@@ -75,6 +96,8 @@ class Topology:
     project: str
     replicas_c1: int = 2
     local_kinematics: bool = False
+    #: the driver on RSI to the stand-in KR C4 on the robot network (kr16rt, --profile rsi)
+    rsi: bool = False
     port: int = field(default_factory=free_port)
     subnet: str = field(default_factory=free_subnet)
 
@@ -87,21 +110,44 @@ class Topology:
         self.env_file.write_text("")
         self.env = {**os.environ, "ROB6_TAG": TAG, "ROB6_PORT": str(self.port), "ROB6_LAB_SUBNET": self.subnet,
                     "ROB6_HEALTH_INTERVAL": "2s"}
+        self.control_port = free_port() if self.rsi else 0
+        self._docker_rt_before: str | None = None
+        if self.rsi:
+            self.env.update(ROB6_ROBOT="kr16rt", ROB6_LINK="rsi", ROB6_KUKA_SIM_CONTROL_PORT=str(self.control_port),
+                            ROB6_RT_RUNTIME=self._realtime_budget())
         self._netem: list[tuple[str, subprocess.Popen, list[list[str]]]] = []
 
     # ------------------------------------------------------------------ compose
     def compose(self, *args: str, timeout: float = 300, check: bool = True) -> subprocess.CompletedProcess:
-        profiles = ["--profile", "local-kinematics"] if self.local_kinematics else []
-        return run([*self._compose, "-p", self.project, "-f", str(COMPOSE_FILE), "--env-file", str(self.env_file),
+        profiles = [*(["--profile", "local-kinematics"] if self.local_kinematics else []),
+                    *(["--profile", "rsi"] if self.rsi else [])]
+        files = ["-f", str(COMPOSE_FILE), *(["-f", str(REALTIME_FILE)] if self.rsi else [])]
+        return run([*self._compose, "-p", self.project, *files, "--env-file", str(self.env_file),
                     *profiles, *args], timeout=timeout, check=check, env=self.env, cwd=REPO)
+
+    def _realtime_budget(self) -> str:
+        """ROB6_RT_RUNTIME for realtime.yml. On a cgroup v1 host Docker's parent cgroup gets
+        room for the two real-time containers first (its default is none; given back in
+        ``down``); a cgroup v2 host has no real-time group budget to set: 0ms."""
+        if not DOCKER_RT_RUNTIME.exists():
+            return "0ms"
+        current = DOCKER_RT_RUNTIME.read_text().strip()
+        if int(current) < 2 * RT_RUNTIME_US:
+            DOCKER_RT_RUNTIME.write_text(str(2 * RT_RUNTIME_US))
+            self._docker_rt_before = current
+        return f"{RT_RUNTIME_US // 1000}ms"
 
     def up(self, timeout: float = 240) -> float:
         """Start everything; seconds until every service is healthy."""
         start = time.monotonic()
-        services = [*HOSTS, *SERVICES, *(["kinematics-pc"] if self.local_kinematics else [])]
+        services = [*HOSTS, *self._services()]
         self.compose("up", "-d", "--no-build", "--scale", f"kinematics-c1={self.replicas_c1}", *services)
         self.wait_healthy(timeout=timeout)
         return time.monotonic() - start
+
+    def _services(self) -> list[str]:
+        return [*SERVICES, *(["kinematics-pc"] if self.local_kinematics else []),
+                *(["kuka-rsi-sim"] if self.rsi else [])]
 
     def containers(self, service: str | None = None) -> list[str]:
         return project_containers(self.project, service)
@@ -117,7 +163,7 @@ class Topology:
 
     def wait_healthy(self, services: tuple[str, ...] | None = None, timeout: float = 240) -> None:
         deadline = time.monotonic() + timeout
-        wanted = services or (*SERVICES, *(["kinematics-pc"] if self.local_kinematics else []))
+        wanted = services or self._services()
         while True:
             pending = []
             for service in wanted:
@@ -143,6 +189,9 @@ class Topology:
             return
         self.compose("down", "-v", "--remove-orphans", "-t", "3", check=False, timeout=180)
         self.env_file.unlink(missing_ok=True)
+        if self._docker_rt_before is not None:
+            with contextlib.suppress(OSError):  # refused while another container keeps a budget
+                DOCKER_RT_RUNTIME.write_text(self._docker_rt_before)
 
     # ------------------------------------------------------------------ hosts
     @property
@@ -157,9 +206,9 @@ class Topology:
 
     # ------------------------------------------------------------------ faults
     def netem(self, host: str, *, delay_ms: float = 0.0, jitter_ms: float = 0.0, loss: float = 0.0,
-              peer: str = "robot-pc") -> None:
-        """Delay/jitter/loss on every packet between ``host`` and ``peer``, both ways (so
-        ``delay_ms`` is the added one-way delay), until ``clear_netem(host)``."""
+              reorder: float = 0.0, peer: str = "robot-pc") -> None:
+        """Delay/jitter/loss/reordering on every packet between ``host`` and ``peer``, both
+        ways (so ``delay_ms`` is the added one-way delay), until ``clear_netem(host)``."""
         self.clear_netem(host)
         pid, peer_ip = self.pid(host), self.ip(peer)
         queue = 10 + HOSTS.index(host)
@@ -169,7 +218,7 @@ class Topology:
         # on the CPU (that would add the machine's scheduling delay to the one asked for)
         rt = ["chrt", "-f", "20"] if shutil.which("chrt") else []
         proc = subprocess.Popen([*ns, *rt, sys.executable, str(NETEM), "--queue", str(queue), "--delay-ms", str(delay_ms),
-                                 "--jitter-ms", str(jitter_ms), "--loss", str(loss)],
+                                 "--jitter-ms", str(jitter_ms), "--loss", str(loss), "--reorder", str(reorder)],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         line = proc.stdout.readline() if proc.stdout else ""
         if not line.startswith("nfq_netem: queue"):
@@ -196,6 +245,18 @@ class Topology:
             self._netem.remove(entry)
 
     @contextlib.contextmanager
+    def impaired(self, hosts: tuple[str, ...] = REMOTE_HOSTS, *, delay_ms: float = 0.0, jitter_ms: float = 0.0,
+                 loss: float = 0.0, reorder: float = 0.0) -> Iterator[None]:
+        """``netem`` on each of ``hosts``' links with the robot PC until the block ends."""
+        for host in hosts:
+            self.netem(host, delay_ms=delay_ms, jitter_ms=jitter_ms, loss=loss, reorder=reorder)
+        try:
+            yield
+        finally:
+            for host in hosts:
+                self.clear_netem(host)
+
+    @contextlib.contextmanager
     def partitioned(self, *hosts: str) -> Iterator[None]:
         """The hosts lose the lab network (cable pulled) until the block ends."""
         addresses = {h: self.ip(h) for h in hosts}
@@ -206,6 +267,15 @@ class Topology:
         finally:
             for host, address in addresses.items():
                 run(["docker", "network", "connect", "--ip", address, "--alias", host, self.lab, self.container(host)])
+
+    # ------------------------------------------------------------------ the KR C4 (rsi)
+    def kuka(self) -> dict:
+        """The stand-in KR C4's status (its control channel): state, trips, late_total, aipos..."""
+        with socket.create_connection(("127.0.0.1", self.control_port), timeout=10) as sock, \
+                sock.makefile("rwb") as control:
+            control.write(b'{"cmd": "status"}\n')
+            control.flush()
+            return json.loads(control.readline())
 
     # ------------------------------------------------------------------ the client's side
     def client(self, attempts: int = 50) -> Client:
@@ -236,6 +306,43 @@ def backward_line(client: Client) -> str:
         if time.monotonic() > deadline:
             raise RuntimeError(f"{FK_LINE} -> {reply.strip()}")
         time.sleep(0.2)
+
+
+def ask_answered(client: Client, line: str, expected: str = "true\n", attempts: int = 3) -> int:
+    """``line`` answered ``expected``; an ``ERROR: <robot-PC service> unavailable`` (the 0.2 s
+    bus timeout missed on a busy machine) is asked again. Returns how often it was asked."""
+    asked = 0
+    while True:
+        reply = client.ask(line, timeout=30)
+        asked += 1
+        if not reply.startswith("ERROR") or "unavailable" not in reply or asked == attempts:
+            break
+    assert reply == expected, (line, reply)
+    return asked
+
+
+def alter_session(client: Client) -> int:
+    """2 s of Alter targets at 250 Hz (a sine on A1), then a final one, reached; returns how
+    many targets were refused with an ERROR line (a busy machine: the driver's reply came
+    later than the 0.2 s bus timeout; the next target replaces it)."""
+    ask_answered(client, "EnableAlter")
+    here = [float(x) for x in client.ask("GetPositionJoints").split()]
+    refused = 0
+    for k in range(500):
+        target = list(here)
+        target[0] += 3.0 * math.sin(2 * math.pi * 0.5 * k / 250)
+        reply = client.ask("MoveRTJoints " + " ".join(f"{x:f}" for x in target))
+        assert reply == "true\n" or reply.startswith("ERROR: driver"), reply
+        refused += reply != "true\n"
+        time.sleep(0.004)
+    final = list(here)
+    final[0] += 2.0
+    ask_answered(client, "MoveRTJoints " + " ".join(f"{x:f}" for x in final))
+    time.sleep(1.5)
+    reached = [float(x) for x in client.ask("GetPositionJoints").split()]
+    assert all(abs(a - b) < 1e-3 for a, b in zip(reached, final, strict=True)), (reached, final)
+    ask_answered(client, "DisableAlter")
+    return refused
 
 
 def correct(reply: str) -> bool:
@@ -337,8 +444,8 @@ def ensure_images() -> str:
     env_file = Path(os.environ.get("TMPDIR", "/tmp")) / "rob6mhbuild.env"
     env_file.write_text("")
     env = {**os.environ, "ROB6_TAG": TAG, "ROB6_BASE_IMAGE": base}
-    services = ("router", "gateway", "kinematics", "planner", "driver", "gripper", "recorder")
-    run([*cmd, "-p", "rob6mhbuild", "-f", str(REPO / "docker-compose.yml"), "--env-file", str(env_file), "build",
-         *services], timeout=1800, env=env, cwd=REPO)
+    services = ("router", "gateway", "kinematics", "planner", "driver", "gripper", "recorder", "kuka-rsi-sim")
+    run([*cmd, "-p", "rob6mhbuild", "-f", str(REPO / "docker-compose.yml"), "--env-file", str(env_file),
+         "--profile", "rsi", "build", *services], timeout=1800, env=env, cwd=REPO)
     env_file.unlink(missing_ok=True)
     return f"images rob6/*:{TAG} ready in {time.monotonic() - start:.0f} s"
