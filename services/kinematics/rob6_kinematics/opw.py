@@ -75,10 +75,16 @@ class Geometry:
 
 
 # --------------------------------------------------------------------------- helpers
+#: an angle this close above -180 deg is the same joint position as 180: it is reported as 180.
+#: Without it the result depended on the CPU: a J4 of +-pi came out of numpy's SIMD arctan2 as
+#: 180 and out of math.atan2 as -179.99999999999994, printed "-180.000000" (seen on AVX-512)
+WRAP_EPS_DEG = 1e-9
+
+
 def wrap180(q):
     """Map angles (deg) into (-180, 180]."""
-    q = np.asarray(q, dtype=float)
-    return 180.0 - np.mod(180.0 - q, 360.0)
+    q = 180.0 - np.mod(180.0 - np.asarray(q, dtype=float), 360.0)
+    return np.where(q < -180.0 + WRAP_EPS_DEG, q + 360.0, q)
 
 
 def as_poses(T) -> np.ndarray:
@@ -437,7 +443,8 @@ def _wrist(W) -> list[tuple[float, float, float]]:
 
 
 def _wrap180(x: float) -> float:
-    return 180.0 - (180.0 - x) % 360.0
+    x = 180.0 - (180.0 - x) % 360.0
+    return x + 360.0 if x < -180.0 + WRAP_EPS_DEG else x
 
 
 def ik_one(g: Geometry, T, *, clamp_tol: float = CLAMP_TOL) -> list[list[float] | None]:
