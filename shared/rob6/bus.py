@@ -202,6 +202,12 @@ def zenoh_config(settings: BusSettings, *, mode: str | None = None,
     return config
 
 
+def open_session(settings: BusSettings, *, mode: str | None = None,
+                 listen: tuple[str, ...] | None = None) -> zenoh.Session:
+    zenoh.try_init_log_from_env()  # Zenoh's own log on stderr, only when RUST_LOG asks for it
+    return zenoh.open(zenoh_config(settings, mode=mode, listen=listen))
+
+
 class Bus:
     """One Zenoh session of one rob6 process (a service instance, the gateway, a tool)."""
 
@@ -211,7 +217,7 @@ class Bus:
         self.service = service
         self.instance = settings.instance
         self.prefix = f"rob6/{settings.robot_id}"
-        self.session = zenoh.open(zenoh_config(settings, mode=mode, listen=listen))
+        self.session = open_session(settings, mode=mode, listen=listen)
         self._lock = threading.Lock()
         self._live: dict[str, list[str]] = {}
         self._inflight: dict[str, int] = {}

@@ -13,7 +13,7 @@ import threading
 
 import zenoh
 
-from .bus import zenoh_config
+from .bus import open_session
 from .config import BusSettings
 from .ownership import EXIT_REFUSED
 from .service import fail
@@ -26,7 +26,7 @@ def run(settings: BusSettings, listen: tuple[str, ...]) -> None:
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda *_: stop.set())
     try:
-        session = zenoh.open(zenoh_config(settings, mode="router", listen=listen))
+        session = open_session(settings, mode="router", listen=listen)
     except zenoh.ZError as exc:  # almost always: the port is taken
         log.debug("the router could not start", exc_info=True)
         in_use = "in use" in str(exc).lower()

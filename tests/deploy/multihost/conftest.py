@@ -1,0 +1,14 @@
+"""A failed multi-host test prints what the containers said last: the services' warnings and
+Zenoh's own (RUST_LOG=zenoh=warn in the compose file), which a report alone cannot show."""
+
+import pytest
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    topology = item.funcargs.get("topology") if hasattr(item, "funcargs") else None
+    if report.when == "call" and report.failed and topology is not None:
+        logs = topology.compose("logs", "--no-color", "--timestamps", "--tail", "40", check=False).stdout
+        report.sections.append(("containers' last log lines", logs[-20000:]))
