@@ -37,7 +37,9 @@ after ``HEDGE_DELAY_S`` is sent a second time, to another live instance (or the 
 one when it is the only one), and the first answer wins. A retry or a hedge prefers an
 instance on another host (the host part of its id): its network path is not the first's.
 Never for an owner service: one robot, one owner, a motion is never sent twice.
-Everything else fails with a structured ``BusError``.
+Everything else fails with a structured ``BusError``. A service with no live instance
+is waited for (``LIVELINESS_GRACE_S``, within the call's deadline) before the call fails
+``unavailable``: a token can vanish for a moment while its instance lives on.
 
 Zenoh runs callbacks on its own threads: the callbacks here only hand data over
 (set a future, update a dict) and never block. Served requests are taken from a
@@ -92,6 +94,13 @@ TRACE_BATCH_MAX = 256
 #: something only when the first is already late; below TCP's 200 ms retransmission
 #: timeout, so the copy is out before a stalled exchange would recover by itself.
 HEDGE_DELAY_S = 0.15
+#: how long a call waits for a service with no live instance before it answers
+#: ``unavailable`` (never past its deadline). The gateway lost the planner's token for a
+#: moment while it kept answering (multi-host tests, a restarted recorder catching up):
+#: Zenoh withdraws a token when one route to it goes and declares it again when the route
+#: is back (a peer reconnects to its router within 0.25-1 s). A service really gone costs
+#: its callers this long once per call.
+LIVELINESS_GRACE_S = 1.0
 
 #: every ``trace/<service>`` batch is kept this long by its (advanced) publisher, so a
 #: recorder partitioned away or restarted gets what it missed (``Bus.subscribe_traces``):
@@ -411,7 +420,8 @@ class Bus:
         """
         call = _Request(self, service, op, body, timeout, cid, instance)
         while True:
-            target = call.next_target()
+            while (target := call.next_target()) is None:
+                time.sleep(0.005)
             waiter = _Waiter()
             self._send(call, target, waiter)
             try:
@@ -437,7 +447,8 @@ class Bus:
         call = _Request(self, service, op, body, timeout, cid, instance)
         loop = asyncio.get_running_loop()
         while True:
-            target = call.next_target()
+            while (target := call.next_target()) is None:
+                await asyncio.sleep(0.005)
             waiter = _Waiter(loop)
             self._send(call, target, waiter)
             hedge_at = call.hedge_at()
@@ -783,7 +794,9 @@ class _Request:
                  cid: str | None, instance: str | None):
         self.bus, self.service, self.op, self.instance = bus, service, op, instance
         self.spec = OPS[(service, op)]
-        self.deadline = time.monotonic() + (self.spec.timeout if timeout is None else timeout)
+        start = time.monotonic()
+        self.deadline = start + (self.spec.timeout if timeout is None else timeout)
+        self.grace_end = min(self.deadline, start + LIVELINESS_GRACE_S)
         self.payload = _encoder.encode(RequestEnvelope(v=SCHEMA_VERSION, cid=cid or new_cid(), body=body))
         self.retry = instance is None and service in IDEMPOTENT_SERVICES and service not in OWNER_SERVICES
         self.hedged = self.retry and self.spec.hedged
@@ -804,12 +817,14 @@ class _Request:
         at = time.monotonic() + HEDGE_DELAY_S
         return at if at < self.deadline else None
 
-    def next_target(self) -> str:
+    def next_target(self) -> str | None:
+        """The instance to send to; None: none live yet, ask again (``LIVELINESS_GRACE_S``)."""
         target = self.instance or self.bus._pick(self.service, self.tried)
         if target is None:
             if self.tried:
                 raise BusError("timeout", f"{self.service} did not answer {self.op} in time")
-            raise BusError("unavailable", f"{self.service} unavailable")
+            if time.monotonic() >= self.grace_end:
+                raise BusError("unavailable", f"{self.service} unavailable")
         return target
 
     def lost(self, target: str, exc: Exception) -> None:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from rob6 import logs
 from rob6.bus import Bus, BusError
 from rob6.messages import (
+    OWNER_SERVICES,
     AlterTarget,
     BackwardCalcRequest,
     ClientExchange,
@@ -101,8 +102,11 @@ class Gateway:
         # a service (re)appearing gets the current verbosity, so all processes agree
         bus.on_liveliness(self._on_liveliness)
 
-    def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:
-        if alive and service != "gateway":
+    def _on_liveliness(self, service: str, instance: str, alive: bool) -> None:
+        if not alive:  # its commands answer "ERROR: <service> unavailable" until it is back
+            log.log(logging.WARNING if service in OWNER_SERVICES else logging.INFO,
+                    "%s instance %s went away", service, instance)
+        elif service != "gateway":
             self.bus.publish("control/verbosity", Verbosity(level=self.verbosity))
 
     async def execute(self, session: Session, line: str) -> str | None:
