@@ -16,26 +16,14 @@ from contextlib import contextmanager
 from typing import Any
 
 import pytest
-import zenoh
 
 from rob6 import bus as bus_module
-from rob6.bus import HEDGE_DELAY_S, Bus, BusError, Context, zenoh_config
+from rob6.bus import HEDGE_DELAY_S, Bus, BusError, Context
 from rob6.config import BusSettings
 from rob6.messages import OPS, REMOTE_POSE_TIMEOUT, Empty, FkReply, FkRequest, Op, PingReply
-from tests.system import free_port
+from tests.system import zenoh_router
 
 JOINTS = [10.0, -60.0, 80.0, 20.0, 40.0, 30.0]
-
-
-@contextmanager
-def _router() -> Iterator[BusSettings]:
-    """A Zenoh router on a free port, and the settings of a client of it."""
-    port = free_port()
-    router = zenoh.open(zenoh_config(BusSettings(), mode="router", listen=(f"tcp/127.0.0.1:{port}",)))
-    try:
-        yield BusSettings(robot_id="hedge", connect=(f"tcp/127.0.0.1:{port}",))
-    finally:
-        router.close()
 
 
 class _Replica:
@@ -79,7 +67,7 @@ FK = FkReply(poses=[[1.0] * 12], status=["ok"])
 
 @contextmanager
 def _kinematics(*replicas: tuple[str, Callable[[int], float | None]]) -> Iterator[tuple[Bus, list[_Replica]]]:
-    with _router() as settings:
+    with zenoh_router("hedge") as settings:
         served = [_Replica(settings, "kinematics", "fk", name, delays, FK) for name, delays in replicas]
         client = Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance="client"), "test")
         try:
@@ -180,7 +168,7 @@ def test_an_owner_service_is_never_sent_a_request_twice(monkeypatch):
     # even if its operation were marked hedged and idempotent by mistake: one robot, one owner
     monkeypatch.setitem(OPS, ("driver", "ping"), Op(Empty, PingReply, timeout=1.0, hedged=True))
     monkeypatch.setattr(bus_module, "IDEMPOTENT_SERVICES", frozenset({"kinematics", "driver"}))
-    with _router() as settings:
+    with zenoh_router("hedge") as settings:
         driver = _Replica(settings, "driver", "ping", "driver1", lambda n: 0.5,
                           PingReply(robot_time=1.0, wall_time=2.0))
         client = Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance="client"), "test")

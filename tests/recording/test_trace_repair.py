@@ -21,9 +21,9 @@ import pytest
 import zenoh
 
 from rob6 import bus as bus_module
-from rob6.bus import Bus, trace_records, zenoh_config
+from rob6.bus import Bus, trace_records
 from rob6.config import BusSettings
-from tests.system import free_port
+from tests.system import zenoh_router
 
 RECORDS = 80
 
@@ -54,33 +54,30 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
             original(self, sample)
 
         monkeypatch.setattr(bus_module._TraceSubscription, "_sample", dropping)
-    port = free_port()
-    router = zenoh.open(zenoh_config(BusSettings(), mode="router", listen=(f"tcp/127.0.0.1:{port}",)))
-    settings = BusSettings(robot_id="repair", connect=(f"tcp/127.0.0.1:{port}",))
-    publisher = Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance="pub"), "gateway")
-    recorder = Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance="rec"), "recorder")
-    received: list[int] = []
-    misses: list[tuple[str, int]] = []
-    lock = threading.Lock()
-    subscriptions = []
+    with zenoh_router("repair") as settings:
+        publisher = Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance="pub"), "gateway")
+        recorder = Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance="rec"), "recorder")
+        received: list[int] = []
+        misses: list[tuple[str, int]] = []
+        lock = threading.Lock()
+        subscriptions = []
 
-    def on_batch(_key: str, payload: bytes) -> None:
-        with lock:
-            received.extend(msgspec.json.decode(record)["n"] for suffix, record in trace_records(payload)
-                            if suffix == "trace/gateway/test")
+        def on_batch(_key: str, payload: bytes) -> None:
+            with lock:
+                received.extend(msgspec.json.decode(record)["n"] for suffix, record in trace_records(payload)
+                                if suffix == "trace/gateway/test")
 
-    def subscribe() -> Bus:
-        subscriptions.append(recorder.subscribe_traces(on_batch, lambda source, count: misses.append((source, count))))
-        return recorder
+        def subscribe() -> Bus:
+            subscriptions.append(recorder.subscribe_traces(on_batch, lambda source, count: misses.append((source, count))))
+            return recorder
 
-    try:
-        yield publisher, subscribe, received, misses
-    finally:
-        for subscription in subscriptions:
-            subscription.undeclare()
-        recorder.close()
-        publisher.close()
-        router.close()
+        try:
+            yield publisher, subscribe, received, misses
+        finally:
+            for subscription in subscriptions:
+                subscription.undeclare()
+            recorder.close()
+            publisher.close()
 
 
 def _publish(publisher: Bus, numbers: range) -> None:

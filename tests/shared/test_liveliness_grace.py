@@ -9,23 +9,18 @@ import threading
 import time
 
 import pytest
-import zenoh
 
 from rob6 import bus as bus_module
-from rob6.bus import Bus, BusError, zenoh_config
+from rob6.bus import Bus, BusError
 from rob6.config import BusSettings
 from rob6.messages import Empty, MoveRequest, PingReply
-from tests.system import free_port
+from tests.system import zenoh_router
 
 
 @pytest.fixture
 def settings():
-    port = free_port()
-    router = zenoh.open(zenoh_config(BusSettings(), mode="router", listen=(f"tcp/127.0.0.1:{port}",)))
-    try:
-        yield BusSettings(robot_id="grace", connect=(f"tcp/127.0.0.1:{port}",))
-    finally:
-        router.close()
+    with zenoh_router("grace") as settings:
+        yield settings
 
 
 def _bus(settings: BusSettings, service: str, instance: str) -> Bus:
