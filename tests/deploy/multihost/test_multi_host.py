@@ -333,6 +333,9 @@ def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(t
         lost[kind] = sorted(set(range(1, exchanges + 1)) - set(seqs))
         report[f"lost ({kind[1:]} files)"] = len(lost[kind])
         report[f"recorded twice ({kind[1:]} files)"] = len(seqs) - len(set(seqs))
+    gateway_log = run(["docker", "logs", "-t", topology.container("gateway")])
+    gone = [line for line in (gateway_log.stdout + gateway_log.stderr).splitlines() if "went away" in line]
+    report["owner instances the gateway saw go away (their calls wait up to 1 s)"] = gone[:5] or "none"
     REPORT["storage partitioned 10 s, then the recorder SIGKILLed and restarted"] = report
     for kind, missing in lost.items():  # the partition: the cache brought back every record
         partition = [seq for seq in missing if seq <= at_heal]
