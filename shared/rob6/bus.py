@@ -39,7 +39,7 @@ instance on another host (the host part of its id): its network path is not the 
 Never for an owner service: one robot, one owner, a motion is never sent twice.
 Everything else fails with a structured ``BusError``. A service with no live instance
 is waited for (``LIVELINESS_GRACE_S``, within the call's deadline) before the call fails
-``unavailable``: a token can vanish for a moment while its instance lives on.
+``unavailable``: a token can be missing for a moment (an instance reconnecting).
 
 Zenoh runs callbacks on its own threads: the callbacks here only hand data over
 (set a future, update a dict) and never block. Served requests are taken from a
@@ -95,11 +95,10 @@ TRACE_BATCH_MAX = 256
 #: timeout, so the copy is out before a stalled exchange would recover by itself.
 HEDGE_DELAY_S = 0.15
 #: how long a call waits for a service with no live instance before it answers
-#: ``unavailable`` (never past its deadline). The gateway lost the planner's token for a
-#: moment while it kept answering (multi-host tests, a restarted recorder catching up):
-#: Zenoh withdraws a token when one route to it goes and declares it again when the route
-#: is back (a peer reconnects to its router within 0.25-1 s). A service really gone costs
-#: its callers this long once per call.
+#: ``unavailable`` (never past its deadline). In full multi-host test runs the gateway lost
+#: the planner's token right after the recorder restarted, cause not known
+#: (deploy/MULTI_HOST.md); a peer that reconnects is back within 0.25-1 s. A service really
+#: gone costs its callers this long once per call.
 LIVELINESS_GRACE_S = 1.0
 
 #: every ``trace/<service>`` batch is kept this long by its (advanced) publisher, so a
