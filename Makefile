@@ -13,13 +13,14 @@ SHARED_TRUTH ?= ../shared
 # `make test PYTEST_ARGS="-m 'not docker'"` skips the slow Docker end-to-end tests
 PYTEST_ARGS ?=
 
-.PHONY: help install run test test-fast check bench lock clean transcripts python-version
+.PHONY: help install run test test-fast check bench images lock clean transcripts python-version
 
 help:
 	@echo "make run    start router, services and gateway (simulated KR16 on port 5005)"
 	@echo "make test   run every test (set ROB6_SKIP_DOCKER=1 to skip the Docker e2e tests)"
 	@echo "make check  lint (ruff) and type-check (mypy), configured in pyproject.toml"
 	@echo "make bench  run the benchmarks and print the tables"
+	@echo "make images build every container image offline (deploy/build-images.sh)"
 
 # rob6 runs on CPython 3.11-3.13 (uv.lock resolves for all three; every dependency has wheels)
 python-version:
@@ -58,6 +59,10 @@ check: install
 
 bench: install
 	$(BIN)/python -m bench
+
+# every rob6 image, offline (the tests build them themselves, once per run, before the first test)
+images: install
+	UV=$(UV) bash deploy/build-images.sh
 
 # the original's transcripts travel with the tests: refresh the copy from the ground truth
 transcripts:

@@ -23,13 +23,13 @@ import sys
 import time
 from collections.abc import Callable
 
+from tests.deploy import images
 from tests.deploy.multihost.topology import (
     REMOTE_KINEMATICS,
     Load,
     Topology,
     backward_line,
     calls,
-    ensure_images,
     fault_tools_missing,
     percentile,
     recovery,
@@ -165,7 +165,11 @@ def multihost_table(table: Table) -> None:
     if why:
         print(f"\nmulti-host bench skipped: {why}")
         return
-    print("\n" + ensure_images())
+    outcome = images.build()
+    print("\n" + "\n".join(outcome.steps))
+    if outcome.error:
+        print(f"multi-host bench skipped: rob6 images not built: {outcome.error}")
+        return
     topo = Topology(f"rob6mhbench{os.getpid()}", local_kinematics=True)
     try:
         print(f"multi-host topology up in {topo.up():.0f} s")

@@ -1,8 +1,11 @@
-"""Shared pytest configuration: Docker tests can be skipped locally with ROB6_SKIP_DOCKER=1."""
+"""Shared pytest configuration: the Docker tests' images, built once before the first test;
+ROB6_SKIP_DOCKER=1 skips the Docker tests."""
 
 import os
 
 import pytest
+
+from tests.deploy import images
 
 
 def pytest_collection_modifyitems(config, items):
@@ -12,3 +15,31 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "docker" in item.keywords:
             item.add_marker(skip)
+
+
+def pytest_collection_finish(session):
+    """Build the images here, after selection (-k, -m) and before any test: outside every
+    test's timeout, once for all Docker suites."""
+    selected = [item for item in session.items
+                if "docker" in item.keywords and not item.get_closest_marker("skip")]
+    if not selected or session.config.option.collectonly or images.docker_missing():
+        return  # the suites skip themselves where no Docker engine answers
+    terminal = session.config.pluginmanager.get_plugin("terminalreporter")
+    if terminal is not None:
+        terminal.write_line(f"building the rob6 images (rob6/*:{images.TAG}) for {len(selected)} Docker tests ...")
+    images.OUTCOME = images.build()
+    if terminal is not None:
+        for line in images.OUTCOME.steps:
+            terminal.write_line(line)
+        terminal.write_line(f"rob6 images: {images.OUTCOME.error or 'ready'} ({images.OUTCOME.seconds:.0f} s)")
+
+
+@pytest.fixture(scope="session")
+def rob6_images() -> images.Outcome:
+    """The images every Docker test runs; a failed build fails the test with its one-line reason."""
+    outcome = images.OUTCOME
+    if outcome is None:
+        pytest.fail("no rob6 image was built before this test (pytest_collection_finish did not run)", pytrace=False)
+    if outcome.error:
+        pytest.fail(f"rob6 images not built: {outcome.error}", pytrace=False)
+    return outcome

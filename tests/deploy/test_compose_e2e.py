@@ -2,9 +2,9 @@
 
     .venv/bin/python -m pytest tests/deploy/test_compose_e2e.py -s     # -s shows timings and sizes
 
-Builds offline (deploy/build-base.sh: reused when rob6/base:bookworm exists; deploy/wheelhouse.sh;
-`compose build` with the build network off), starts the stack under a unique project name,
-replays a conformance subset through the gateway port, kills kinematics mid-session, scales
+Runs the images tests/conftest.py built before the first test (deploy/build-images.sh: the
+base image, the wheelhouse, `compose build` with the build network off), starts the stack
+under a unique project name, replays a conformance subset through the gateway port, kills kinematics mid-session, scales
 it, stops everything and reads the MCAP recordings from the volume; then the rsi profile (the
 driver on RSI drives the stand-in KR C4 container) and the adept profile (the driver on
 simple_message drives the stand-in Adept container); then the secure profile:
@@ -35,6 +35,7 @@ from rob6.testing import free_port
 from tests.conformance import load, same
 from tests.deploy import zenoh_probe
 from tests.deploy.compose import compose_cmd, project_containers, run
+from tests.deploy.images import BASE_IMAGE, TAG
 from tests.system import CONFORMANCE, Client
 
 pytestmark = pytest.mark.docker
@@ -42,8 +43,6 @@ pytestmark = pytest.mark.docker
 REPO = Path(__file__).resolve().parents[2]
 DEPLOY = REPO / "deploy"
 SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder")
-TAG = "e2e"
-BASE_IMAGE = os.environ.get("ROB6_BASE_IMAGE", "rob6/base:bookworm")
 ROBOT = "kr16"
 FK = "ForwardCalc 10 -60 80 20 40 30"  # first record of conformance/kr16/fk.jsonl
 SUBSET = {"GetRobot", "CM_PING", "GetVersion"}  # + each session's handshake line
@@ -193,25 +192,9 @@ def image_report() -> dict[str, str]:
 
 # ---------------------------------------------------------------------- fixtures
 @pytest.fixture(scope="module")
-def built():
-    """Base image (reused if present), wheelhouse, `compose build`; all timed."""
-    start = time.monotonic()
-    have_base = run(["docker", "image", "inspect", BASE_IMAGE], check=False).returncode == 0
-    if not have_base:
-        if BASE_IMAGE != "rob6/base:bookworm" or os.geteuid() != 0:
-            pytest.skip(f"{BASE_IMAGE} missing and cannot be made here (deploy/build-base.sh needs root)")
-        run(["bash", str(DEPLOY / "build-base.sh")], timeout=1200)
-    REPORT["base image"] = f"{time.monotonic() - start:.0f} s ({'reused' if have_base else 'built'})"
-    t = time.monotonic()
-    # offline when the wheelhouse is complete (only the rob6 wheels are rebuilt), else download
-    if run(["bash", str(DEPLOY / "wheelhouse.sh"), "--offline"], check=False).returncode != 0:
-        run(["bash", str(DEPLOY / "wheelhouse.sh")], timeout=1200)
-    REPORT["wheelhouse"] = f"{time.monotonic() - t:.0f} s"
-    t = time.monotonic()
-    builder = Stack("rob6e2ebuild")
-    builder.compose("build", timeout=1800)
-    builder.env_file.unlink(missing_ok=True)
-    REPORT["compose build (network none)"] = f"{time.monotonic() - t:.0f} s"
+def built(rob6_images):
+    """The images (built once per run by tests/conftest.py); their build times and sizes."""
+    REPORT["build (deploy/build-images.sh)"] = [*rob6_images.steps, f"{rob6_images.seconds:.0f} s in all"]
     REPORT["images"] = image_report()
     yield
     print("\n--- rob6 deploy e2e report ---\n" + json.dumps(REPORT, indent=2))
@@ -473,7 +456,7 @@ print(json.dumps(out))
 def controller_stack(profile: str, controller: str, *, robot: str, link: str,
                      control_port_setting: str) -> Iterator[tuple[Stack, Callable[[], dict]]]:
     """The stack of compose profile ``profile`` with the driver on ``link`` to the stand-in
-    controller container ``controller`` (its image built here): up and healthy. Yields the
+    controller container ``controller``: up and healthy. Yields the
     stack and the controller's status request (its control channel, published on the port
     the compose setting ``control_port_setting`` names); the stack is removed at the end."""
     control_port = free_port()
@@ -482,10 +465,9 @@ def controller_stack(profile: str, controller: str, *, robot: str, link: str,
         control_port_setting: str(control_port)}, profiles=(profile,))
     try:
         t = time.monotonic()
-        stack.compose("build", controller, timeout=900)
         stack.compose("up", "-d", "--no-build")
         stack.wait_healthy(("router", *SERVICES, controller))
-        REPORT[f"{profile}: build the controller image, up until all healthy"] = f"{time.monotonic() - t:.0f} s"
+        REPORT[f"{profile}: up until all healthy"] = f"{time.monotonic() - t:.0f} s"
         with socket.create_connection(("127.0.0.1", control_port), timeout=10) as sock, \
                 sock.makefile("rwb") as control:
 

@@ -24,6 +24,7 @@ import time
 
 import pytest
 
+from tests.deploy.images import TAG
 from tests.deploy.multihost.topology import (
     REMOTE_KINEMATICS,
     Load,
@@ -33,7 +34,6 @@ from tests.deploy.multihost.topology import (
     backward_line,
     calls,
     cannot_run,
-    ensure_images,
     percentile,
     recovery,
     run,
@@ -49,8 +49,8 @@ CALL_TIMEOUT = 10.0  # a reply later than this is a hang
 
 
 @pytest.fixture(scope="module")
-def topology():
-    REPORT["images"] = ensure_images()
+def topology(rob6_images):
+    REPORT["images"] = f"rob6/*:{TAG} ready in {rob6_images.seconds:.0f} s"
     topo = Topology(f"rob6mh{os.getpid()}")
     try:
         REPORT["up until healthy"] = f"{topo.up():.0f} s"

@@ -17,12 +17,12 @@ import time
 
 import pytest
 
+from tests.deploy.images import TAG
 from tests.deploy.multihost.topology import (
     Topology,
     alter_session,
     ask_answered,
     cannot_run,
-    ensure_images,
     run,
 )
 
@@ -37,8 +37,8 @@ TARGET = [30.0, -70.0, 90.0, 10.0, 40.0, 20.0]
 
 
 @pytest.fixture(scope="module")
-def topology():
-    REPORT["images"] = ensure_images()
+def topology(rob6_images):
+    REPORT["images"] = f"rob6/*:{TAG} ready in {rob6_images.seconds:.0f} s"
     topo = Topology(f"rob6mhrsi{os.getpid()}", rsi=True)
     try:
         REPORT["up until healthy"] = f"{topo.up():.0f} s"

@@ -12,7 +12,7 @@ storage). Faults are made from this machine with the real tools:
   with the same address (a pulled cable, not a new machine);
 - ``docker kill`` / ``pause`` of a container (a router, a host).
 
-Images: ``rob6/<service>:<tag>`` as built by tests/deploy/test_compose_e2e.py (``built``).
+Images: ``rob6/<service>:<tag>`` as deploy/build-images.sh builds them (tests/deploy/images.py).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from pathlib import Path
 
 from rob6.testing import Client, free_port
 from tests.deploy.compose import compose_cmd, project_containers, run
+from tests.deploy.images import TAG
 
 REPO = Path(__file__).resolve().parents[3]
 COMPOSE_FILE = REPO / "deploy" / "multihost" / "docker-compose.yml"
@@ -46,7 +47,6 @@ DOCKER_RT_RUNTIME = Path("/sys/fs/cgroup/cpu/docker/cpu.rt_runtime_us")
 #: for 100 ms and counted 60-80 late packets a second), so the budget is not what limits them
 RT_RUNTIME_US = 400_000
 NETEM = REPO / "deploy" / "multihost" / "nfq_netem.py"
-TAG = os.environ.get("ROB6_TAG", "e2e")
 HOSTS = ("robot-pc", "compute1", "compute2", "storage")
 SERVICES = ("router-pc", "gateway", "planner", "driver", "gripper", "router-compute", "kinematics-c1",
             "kinematics-c2", "recorder")
@@ -425,27 +425,3 @@ def recovery(calls_: list[Call], since: float, streak: int = 20) -> float | None
         else:
             length = 0
     return None
-
-
-def ensure_images() -> str:
-    """The rob6 images with tag TAG, as tests/deploy/test_compose_e2e.py builds them (base image
-    reused, wheelhouse offline when complete, `compose build` of docker-compose.yml); returns
-    what it did. Docker's layer cache makes this a few seconds when nothing changed."""
-    base = os.environ.get("ROB6_BASE_IMAGE", "rob6/base:bookworm")
-    start = time.monotonic()
-    if run(["docker", "image", "inspect", base], check=False).returncode != 0:
-        if os.geteuid() != 0:
-            raise RuntimeError(f"{base} missing and deploy/build-base.sh needs root")
-        run(["bash", str(REPO / "deploy" / "build-base.sh")], timeout=1200)
-    if run(["bash", str(REPO / "deploy" / "wheelhouse.sh"), "--offline"], check=False, timeout=600).returncode != 0:
-        run(["bash", str(REPO / "deploy" / "wheelhouse.sh")], timeout=1200)
-    cmd = compose_cmd()
-    assert cmd is not None
-    env_file = Path(os.environ.get("TMPDIR", "/tmp")) / "rob6mhbuild.env"
-    env_file.write_text("")
-    env = {**os.environ, "ROB6_TAG": TAG, "ROB6_BASE_IMAGE": base}
-    services = ("router", "gateway", "kinematics", "planner", "driver", "gripper", "recorder", "kuka-rsi-sim")
-    run([*cmd, "-p", "rob6mhbuild", "-f", str(REPO / "docker-compose.yml"), "--env-file", str(env_file),
-         "--profile", "rsi", "build", *services], timeout=1800, env=env, cwd=REPO)
-    env_file.unlink(missing_ok=True)
-    return f"images rob6/*:{TAG} ready in {time.monotonic() - start:.0f} s"
