@@ -307,9 +307,11 @@ class GripperCommand(Struct):
 
 
 class GripperReply(Struct):
+    """What the gripper did; the gateway turns it into the protocol's reply lines."""
+
     ok: bool
-    lines: list[str] = []  # extra reply lines before true/false (e.g. "Start moving with ...")
-    reason: str = ""
+    reason: str = ""  # why ok is False (one sentence, shown to the client as ERROR: <reason>)
+    position: float | None = None  # m, the opening afterwards, when the gripper told it
 
 
 class GripperState(Struct):

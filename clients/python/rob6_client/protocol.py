@@ -254,7 +254,8 @@ def parse_bool(name: str) -> Exchange:
 
 
 def parse_bool_after_info(name: str) -> Exchange:
-    """Gripper commands: lines such as ``Start moving with amperage -1.000``, then true/false."""
+    """Gripper commands: lines such as ``Start moving with amperage -1.000`` or ``Gripper at
+    0.0400 m`` (logged), then true/false; on a failure ``ERROR: <reason>`` and ``false``."""
     while True:
         line = yield from _line(name)
         if line in ("true", "false"):
