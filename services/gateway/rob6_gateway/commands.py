@@ -33,10 +33,12 @@ from rob6.messages import (
     MotionKind,
     MoveRequest,
     SessionEvent,
+    SignalRequest,
     Verbosity,
 )
 from rob6.robots import RobotModel
 from rob6.state import JointStateMirror
+from rob6.vplus import SignalError, parse_signal
 
 from .args import Args, ParseError
 from .state import ConfigMirror, Session
@@ -660,13 +662,25 @@ command("GripperMoveToPosition")(_gripper("GripperMoveToPosition", True))
 
 @command("DirectAdeptCmd")
 async def direct_adept_cmd(gw, session, args):
-    if not gw.robot.is_adept:
+    """The V+ SIGNAL instruction (``signal 5, -6``) reaches the Adept's digital outputs, by
+    default: it switches outputs and nothing else, and clients (RobPraktikum's suction cup)
+    need it unchanged. Any other V+ instruction has no channel to the controller."""
+    if not gw.robot.is_adept:  # the original: false, arguments not read
         return FALSE
+    try:
+        signals = parse_signal(args.text)
+    except SignalError as exc:
+        return error(f"DirectAdeptCmd: {exc}; nothing was switched")
+    if signals is not None:
+        ack = await gw.call(session, "driver", "signal", SignalRequest(signals=signals))
+        if not ack.ok:
+            return error(f"driver: {ack.error}" if ack.error else f"DirectAdeptCmd: {ack.reason}")
+        return TRUE  # the protocol description's reply to a DirectAdeptCmd that ran
     if not gw.options.allow_direct_adept_cmd:
         return error("DirectAdeptCmd is disabled on this server (it forwards raw controller "
                      "commands; start the gateway with --allow-direct-adept-cmd)")
     # neither link has a channel for text: the V+ server program's ports carry trajectory
     # points, state and I/O signals only (deploy/adept/README.md)
     return error("DirectAdeptCmd: raw V+ commands cannot reach the controller (neither the simulation "
-                 "nor the simple_message link has a V+ command channel); nothing was sent")
-
+                 "nor the simple_message link has a V+ command channel; only SIGNAL is carried); "
+                 "nothing was sent")
