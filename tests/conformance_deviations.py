@@ -99,19 +99,22 @@ def bare_command_error(send: str) -> str | None:
 
 # ad850: the original hung on every gripper command and on DirectAdeptCmd (dummy mode,
 # no gripper attached) and answered nothing afterwards. rob6 answers each of them
-# (simulated gripper: home, close by current, move to position) and the session goes on.
+# (simulated gripper: home, close by current, move to position) and the session goes on,
+# with the line counts of the protocol description (docs/COMPATIBILITY.md).
+_HOME = "Start moving to home position\nGripper at 0.0400 m\ntrue\n"
+_TO_0025 = "Start moving to position 0.0250 m\nGripper at 0.0250 m\ntrue\n"
 _ZERO = "0.000000 0.000000 0.000000 0.000000 0.000000 0.000000\n"
 _DIRECT_DISABLED = ("ERROR: DirectAdeptCmd is disabled on this server (it forwards raw controller "
                     "commands; start the gateway with --allow-direct-adept-cmd)\nfalse\n")
-for _file, _first in (("adept_grippergohome", "true\n"),
+for _file, _first in (("adept_grippergohome", _HOME),
                       ("adept_grippermove", "Start moving with amperage -1.000\ntrue\n"),
                       ("adept_grippermove_noarg", "ERROR: incorrect value\nfalse\n"),
-                      ("adept_grippermovetopos", "true\n"),
+                      ("adept_grippermovetopos", _TO_0025),
                       ("adept_directcmd", _DIRECT_DISABLED),
                       ("adept_directcmd_noarg", _DIRECT_DISABLED)):
     for _number, _answer in ((4, _first), (5, "ad850\n"), (6, _ZERO), (7, "bye!\n")):
         DEVIATIONS[("ad850", _file, _number)] = _always(_answer)
-DEVIATIONS[("ad850", "debug_grippergohome", 5)] = lambda robot, records: "true\n"
+DEVIATIONS[("ad850", "debug_grippergohome", 5)] = lambda robot, records: _HOME
 DEVIATIONS[("ad850", "debug_grippergohome", 6)] = lambda robot, records: "ad850\n"
 
 
@@ -160,12 +163,14 @@ class Modes:
 # ad850 limits.jsonl: GripperGoHome (record 559) hung the original for the rest of the
 # script; rob6 answers every command of it.
 _AD850_LIMITS_TAIL = {
-    559: "true\n", 560: "Start moving with amperage -1.000\ntrue\n",
+    559: _HOME, 560: "Start moving with amperage -1.000\ntrue\n",
     561: "Start moving with amperage 1.000\ntrue\n", 562: "ERROR: incorrect value\nfalse\n",
-    563: "true\n", 564: "ERROR: GripperMoveToPosition: position -1.0000 m is outside the stroke 0.000..0.070 m\nfalse\n",
-    565: "ERROR: incorrect value\nfalse\n", 566: _DIRECT_DISABLED, 567: _DIRECT_DISABLED,
+    563: _TO_0025,
+    564: "Gripper at 0.0250 m\nERROR: GripperMoveToPosition: position -1.0000 m is outside the stroke "
+         "0.000..0.070 m\nfalse\n",
+    565: "Gripper not moved\nERROR: incorrect value\nfalse\n", 566: _DIRECT_DISABLED, 567: _DIRECT_DISABLED,
     568: _DIRECT_DISABLED, 570: SKIP, 571: "true\n", 573: "true\n", 575: "true\n", 577: "true\n",
-    579: "ERROR: incorrect value\nfalse\n", 581: "ERROR: incorrect value\nfalse\n", 583: SKIP, 586: SKIP,
+    579: "ERROR: incorrect value\nfalse\n", 581: "Gripper not moved\nERROR: incorrect value\nfalse\n", 583: SKIP, 586: SKIP,
     587: SKIP, 591: "bye!\n",
 }
 for _number in range(559, 592):  # the records not listed are GetRobot

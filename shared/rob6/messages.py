@@ -110,6 +110,8 @@ class JointState(Struct):
     late: int = 0  # packets the robot controller counted late so far (RSI's Delay, summed over runs)
     q_actual: Joints | None = None  # where the robot reports it is (RSI's AIPos); None: the simulation
     instance: str = ""  # the driver instance that published it (one robot, one owner)
+    #: the Adept's digital outputs switched so far, V+ SIGNAL style, by number: 5 on, -6 off
+    outputs: list[int] = []
 
 
 class Trajectory(Struct):
@@ -156,6 +158,13 @@ class AlterMode(Struct):
     enable: bool
     synchronized: bool = False  # RTSpeedControl 0: axes arrive together
     timeout_s: float = 0.5  # stop if no target arrives for this long
+
+
+class SignalRequest(Struct):
+    """Switch the Adept's digital outputs as V+ ``SIGNAL 5, -6`` does (rob6.vplus): a
+    positive number on, a negative one off, in this order."""
+
+    signals: list[int]
 
 
 class LinkQuery(Struct):
@@ -307,9 +316,11 @@ class GripperCommand(Struct):
 
 
 class GripperReply(Struct):
+    """What the gripper did; the gateway turns it into the protocol's reply lines."""
+
     ok: bool
-    lines: list[str] = []  # extra reply lines before true/false (e.g. "Start moving with ...")
-    reason: str = ""
+    reason: str = ""  # why ok is False (one sentence, shown to the client as ERROR: <reason>)
+    position: float | None = None  # m, the opening afterwards, when the gripper told it
 
 
 class GripperState(Struct):
@@ -383,6 +394,7 @@ OPS: dict[tuple[str, str], Op] = {
     ("driver", "alter_target"): Op(AlterTarget, Ack),
     ("driver", "stop"): Op(Empty, Ack, timeout=5.0),
     ("driver", "link"): Op(LinkQuery, LinkStatus),
+    ("driver", "signal"): Op(SignalRequest, Ack, timeout=10.0),
     ("kinematics", "fk"): Op(FkRequest, FkReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
     ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
     ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),

@@ -1,7 +1,7 @@
 """Test helper: the simulated Adept controller (adept-sm-sim) as a subprocess.
 
     with AdeptController() as ctl:
-        ctl.motion, ctl.state          # (host, port) of the simple_message ports
+        ctl.motion, ctl.state, ctl.io  # (host, port) of the simple_message ports and the I/O port
         ctl.status()["position_rob6_deg"]
         ctl.estop(); ctl.release(); ctl.drives(True)
 """
@@ -27,7 +27,7 @@ class AdeptController:
     """Starts ``python -m adept_sm_sim`` on free ports; extra CLI flags via ``args``."""
 
     def __init__(self, *args: str, byte_order: str = "big", start_timeout: float = 20.0):
-        self.args = ["--motion-port", "0", "--state-port", "0", "--control", "127.0.0.1:0",
+        self.args = ["--motion-port", "0", "--state-port", "0", "--io-port", "0", "--control", "127.0.0.1:0",
                      "--byte-order", byte_order, *args]
         self.start_timeout = start_timeout
         self.proc: subprocess.Popen | None = None

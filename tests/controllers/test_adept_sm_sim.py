@@ -169,7 +169,7 @@ def test_ready_line_and_clean_exit_on_sigterm_and_sigint():
         ctl = AdeptController().start()
         assert ctl.motion is not None and ctl.state is not None and ctl.control is not None and ctl.proc is not None
         assert ctl.motion[1] > 0 and ctl.state[1] > 0 and ctl.control[1] > 0
-        assert ctl.io is None
+        assert ctl.io is not None and ctl.io[1] > 0
         # with clients connected and a motion under way
         motion, state = Motion(ctl.motion, ">"), State(ctl.state, ">")
         assert motion.point(0, (90, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
@@ -488,23 +488,46 @@ def test_control_channel_rejects_bad_requests_and_stays_up(sim):
     assert sim.proc.wait(10) == 0
 
 
-@pytest.mark.parametrize("sim", [("--io-port", "0")], indirect=True)
+def io_ask(io: socket.socket, mode: int, number: int) -> str:
+    """One request as the V+ program needs it: the mode and the number as two records (the
+    ROS node pauses 1/socket_rate = 0.1 s between them), then its answer."""
+    io.sendall(struct.pack(">i", mode))
+    time.sleep(0.1)
+    io.sendall(struct.pack(">i", number))
+    return io.recv(64).decode()
+
+
 def test_io_port_reads_and_writes_signals(sim):
     assert sim.io is not None
     io = socket.create_connection(sim.io, timeout=10)
-
-    def ask(mode, number):
-        io.sendall(struct.pack(">i", mode))
-        io.sendall(struct.pack(">i", number))
-        return io.recv(64).decode()
-
-    assert ask(1, 5) == "0"
-    assert ask(2, 5) == "1"
-    assert ask(1, 5) == "-1"  # V+ TRUE
-    assert ask(2, -5) == "1"
-    assert ask(1, 5) == "0"
-    assert ask(2, 1001) == "0"  # an input cannot be written
+    assert io_ask(io, 1, 5) == "0"
+    assert io_ask(io, 2, 5) == "1"
+    assert io_ask(io, 1, 5) == "-1"  # V+ TRUE
+    assert io_ask(io, 0, -6) == "1"  # any mode but 1 writes
+    assert io_ask(io, 2, 2001) == "1"  # a software signal
+    assert sim.status()["outputs"] == [5, -6, 2001]
+    assert io_ask(io, 2, -5) == "1"
+    assert io_ask(io, 1, 5) == "0"
+    assert io_ask(io, 2, 1001) == "0"  # an input cannot be written
+    st = sim.status()
+    assert st["outputs"] == [-5, -6, 2001] and st["io_requests"] == 8 and st["clients"]["io"] == 1
     io.close()
+
+
+def test_io_port_reads_one_record_per_number_like_v_plus(sim):
+    """Both numbers in one write are one record: the program takes the mode from its first
+    four bytes, loses the rest and reads the number from the next record."""
+    assert sim.io is not None
+    io = socket.create_connection(sim.io, timeout=10)
+    io.sendall(struct.pack(">ii", 2, 7))  # mode and number at once: 7 is lost
+    time.sleep(0.1)
+    io.sendall(struct.pack(">i", 8))  # taken as the number
+    assert io.recv(64) == b"1"
+    assert sim.status()["outputs"] == [8]
+    io.sendall(b"\x00\x00")  # a record shorter than LNGB's four bytes ends the connection
+    assert closed_by_peer(io)
+    st = sim.status()
+    assert st["io_errors"] == 1 and st["clients"]["io"] == 0 and st["outputs"] == [8]
 
 
 def test_a_port_in_use_is_a_clear_error():

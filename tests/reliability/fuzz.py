@@ -36,7 +36,7 @@ from rob6.bus import Bus
 from rob6.status import STATUS_WORDS as _CATEGORIES
 from rob6.testing import System
 from rob6_gateway.args import Args, ParseError
-from rob6_gateway.commands import COMMANDS, Close, Gateway, Options, _split_command
+from rob6_gateway.commands import COMMANDS, GRIPPER_REPLY_LINES, Close, Gateway, Options, _split_command
 from rob6_gateway.framing import Framer, _clean
 
 COMMAND_NAMES = sorted(COMMANDS)
@@ -65,6 +65,10 @@ def reply_problem(line_text: str, reply: str | None) -> str | None:
         return None if name == "SetAllowedStatus" else "no reply"
     if len(lines) == 1:
         return None
+    if len(lines) == GRIPPER_REPLY_LINES.get(name):  # the gripper's fixed counts (docs/COMPATIBILITY.md)
+        info, last = lines[:-1], lines[-1]
+        if last in ("true", "false") and not {"true", "false"} & set(info):
+            return None
     if len(lines) == 2:
         if lines[0].startswith("ERROR:") and lines[1] == "false":
             return None

@@ -356,9 +356,9 @@ class RobotCommands:
 
         Protocol: ``GripperMoveToPosition``."""
     def direct_adept_cmd(self, command: str, *, timeout: float | None = None) -> bool:
-        """Run a V+ command on the Adept controller.
+        """Run a V+ command on the Adept controller (rob6: only ``signal 5, -6``, V+ SIGNAL).
 
-        Original rob6server: ad850 in dummy mode never answers (Rob6Timeout). rob6 refuses it with Rob6Error unless started with --allow-direct-adept-cmd.
+        Original rob6server: ad850 in dummy mode never answers (Rob6Timeout). rob6 switches digital outputs with ``signal n[, m ...]`` (True) and refuses every other V+ command with Rob6Error.
 
         Protocol: ``DirectAdeptCmd``."""
 
@@ -714,8 +714,8 @@ class AsyncRobotCommands:
 
         Protocol: ``GripperMoveToPosition``."""
     async def direct_adept_cmd(self, command: str, *, timeout: float | None = None) -> bool:
-        """Run a V+ command on the Adept controller.
+        """Run a V+ command on the Adept controller (rob6: only ``signal 5, -6``, V+ SIGNAL).
 
-        Original rob6server: ad850 in dummy mode never answers (Rob6Timeout). rob6 refuses it with Rob6Error unless started with --allow-direct-adept-cmd.
+        Original rob6server: ad850 in dummy mode never answers (Rob6Timeout). rob6 switches digital outputs with ``signal n[, m ...]`` (True) and refuses every other V+ command with Rob6Error.
 
         Protocol: ``DirectAdeptCmd``."""

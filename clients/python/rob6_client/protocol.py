@@ -254,7 +254,8 @@ def parse_bool(name: str) -> Exchange:
 
 
 def parse_bool_after_info(name: str) -> Exchange:
-    """Gripper commands: lines such as ``Start moving with amperage -1.000``, then true/false."""
+    """Gripper commands: lines such as ``Start moving with amperage -1.000`` or ``Gripper at
+    0.0400 m`` (logged), then true/false; on a failure ``ERROR: <reason>`` and ``false``."""
     while True:
         line = yield from _line(name)
         if line in ("true", "false"):
@@ -512,7 +513,8 @@ COMMANDS: dict[str, Command] = _table(
     ("GripperMove", "current:float", BOOL_INFO,
      "Move the gripper with this current (A): negative closes, positive opens.", LONG),
     ("GripperMoveToPosition", "position:float", BOOL_INFO, "Move the gripper to an opening (m).", LONG),
-    ("DirectAdeptCmd", "command:text", BOOL_INFO, "Run a V+ command on the Adept controller.", LONG),
+    ("DirectAdeptCmd", "command:text", BOOL_INFO,
+     "Run a V+ command on the Adept controller (rob6: only ``signal 5, -6``, V+ SIGNAL).", LONG),
 )
 
 # Where the original rob6server 0.1.01 (REFERENCE.md) differs from rob6 (docs/COMPATIBILITY.md)
@@ -532,8 +534,8 @@ ORIGINAL: dict[str, str] = {
     "MoveLINHomRowWise": "False (kr16: crash after EnableLin).",
     "MoveRTJoints": "False unless Alter mode is on, which the original never granted in dummy mode.",
     "GripperGoHome": "ad850 in dummy mode never answers, nor anything after it: Rob6Timeout.",
-    "DirectAdeptCmd": "ad850 in dummy mode never answers (Rob6Timeout). rob6 refuses it with Rob6Error "
-                      "unless started with --allow-direct-adept-cmd.",
+    "DirectAdeptCmd": "ad850 in dummy mode never answers (Rob6Timeout). rob6 switches digital outputs "
+                      "with ``signal n[, m ...]`` (True) and refuses every other V+ command with Rob6Error.",
 }
 for _name in ("MoveRTHomRowWise", "MoveRTHomRowWiseStatus", "DoAlterJoint", "DoAlterCart"):
     ORIGINAL[_name] = ORIGINAL["MoveRTJoints"]

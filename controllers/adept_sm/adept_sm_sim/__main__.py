@@ -19,6 +19,12 @@ def _host_port(value: str) -> tuple[str, int]:
     return host, int(port)
 
 
+def _port(value: str, option: str) -> int:
+    if not value.isdigit() or int(value) > 65535:
+        raise click.BadParameter(f"{option}: expected a port 0..65535 or off, got {value!r}")
+    return int(value)
+
+
 def _pose(value: str) -> tuple[float, ...]:
     try:
         q = tuple(float(x) for x in value.replace(",", " ").split())
@@ -40,8 +46,8 @@ def _pose(value: str) -> tuple[float, ...]:
               help="JOINT_TRAJ_PT in (0: any free port).")
 @click.option("--state-port", default=11002, show_default=True, type=click.IntRange(0, 65535),
               help="JOINT_POSITION and STATUS out (0: any free port).")
-@click.option("--io-port", default=None, type=click.IntRange(0, 65535),
-              help="Serve the V+ program's digital I/O port too (its default is 11001).")
+@click.option("--io-port", default="11001", show_default=True,
+              help="The V+ program's digital I/O port (0: any free port; off: none).")
 @click.option("--control", default="127.0.0.1:0", show_default=True,
               help="HOST:PORT of the JSON fault-injection channel.")
 @click.option("--byte-order", default="big", show_default=True,
@@ -68,8 +74,9 @@ def main(host, motion_port, state_port, io_port, control, byte_order, start_pose
     """A simulated Adept Viper s850 controller running the ROS-Industrial V+ server
     (simple_message over TCP), for testing rob6's simple_message link."""
     control_host, control_port = _host_port(control)
+    io = None if io_port == "off" else _port(io_port, "--io-port")
     cfg = Config(
-        host=host, motion_port=motion_port, state_port=state_port, io_port=io_port,
+        host=host, motion_port=motion_port, state_port=state_port, io_port=io,
         control_host=control_host, control_port=control_port, byte_order=byte_order,
         start_pose_ctrl=_pose(start_pose), state_period=state_period, timing=timing,
         monitor_speed=monitor_speed, queue_depth=queue_depth, status_fields=status_fields,

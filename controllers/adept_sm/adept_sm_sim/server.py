@@ -31,6 +31,8 @@ from .convention import (
 TICK_S = 0.004  # how often the arm is advanced between requests while it moves
 IDLE_TICK_S = 0.05
 IO_MAX_CLIENTS = 5  # V+ "/CLIENTS 5" on the I/O port
+IO_BUFFER = 1024  # V+ "/BUFFER_SIZE 1024" on the I/O port
+VPLUS_CYCLE_S = 0.016  # a V+ task's READ returns what arrived within about one system cycle
 MODE_AUTO = 2  # simple_message RobotMode AUTO (the V+ program's mapping of STATE(5) = 1)
 LATENCY_WINDOW = 10000
 
@@ -44,7 +46,7 @@ class Config:
     host: str = "127.0.0.1"
     motion_port: int = 11000
     state_port: int = 11002
-    io_port: int | None = None
+    io_port: int | None = 11001
     control_host: str = "127.0.0.1"
     control_port: int = 0
     byte_order: str = "big"
@@ -72,6 +74,7 @@ class Controller:
         self.state_client: asyncio.StreamWriter | None = None
         self.io_clients: set[asyncio.StreamWriter] = set()
         self.signals: dict[int, bool] = {}
+        self.io_requests = self.io_errors = 0
         self.room = asyncio.Event()  # set whenever the queue shrinks or is flushed
         self.generation = 0  # bumped by every stop: points waiting for room are void
         self.done = asyncio.Event()
@@ -267,24 +270,56 @@ class Controller:
 
     # ---- wire: I/O port ------------------------------------------------------------
     async def serve_io(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
-        """The program's own I/O protocol: int32 mode (1 read, else write), int32 signal
-        (negative: switch off), both big-endian (V+ LNGB); the answer is ASCII."""
+        """The program's own I/O protocol (``ros.io``): two V+ READs per request, each
+        taking what has arrived as one record, and a big-endian int32 (LNGB) from the first
+        four bytes of each: the mode (1 read, anything else write), then the signal
+        (negative: switch off). The answer is ASCII without a line end: SIG(n) as $ENCODE
+        writes it (-1 on, 0 off) for a read, ``1`` after SIGNAL(n) for a write."""
         if len(self.io_clients) >= IO_MAX_CLIENTS:
             event(f"io: {IO_MAX_CLIENTS} clients already connected, refusing another")
             writer.close()
             return
         self.io_clients.add(writer)
         try:
-            while True:
-                mode = int.from_bytes(await reader.readexactly(4), "big", signed=True)
-                number = int.from_bytes(await reader.readexactly(4), "big", signed=True)
+            while (mode := await self._io_record(reader)) is not None:
+                number = await self._io_record(reader)
+                if number is None:
+                    break
+                self.io_requests += 1
                 writer.write(self._io(mode, number).encode())
                 await writer.drain()
-        except (asyncio.IncompleteReadError, ConnectionError, OSError):
+        except (ConnectionError, OSError):
             pass
         finally:
             self.io_clients.discard(writer)
             writer.close()
+
+    async def _io_record(self, reader: asyncio.StreamReader) -> int | None:
+        """One V+ READ: the bytes that arrived within one V+ cycle of the first (at most the
+        port's 1024-byte buffer; a record's bytes beyond the first four are lost), as LNGB
+        reads them; None at the end of the connection, or for a record shorter than four
+        bytes (V+ LNGB fails: the program's task would end)."""
+        record = await reader.read(IO_BUFFER)
+        if not record:
+            return None
+        await asyncio.sleep(VPLUS_CYCLE_S)
+        while len(record) < IO_BUFFER:
+            try:
+                more = await asyncio.wait_for(reader.read(IO_BUFFER - len(record)), 0.001)
+            except asyncio.TimeoutError:
+                break
+            if not more:
+                break
+            record += more
+        if len(record) < 4:
+            self.io_errors += 1
+            event(f"io: a record of {len(record)} byte(s); LNGB needs 4 (V+ would end the I/O "
+                  "server with an error): closing the connection")
+            return None
+        if len(record) > 4:
+            event(f"io: a record of {len(record)} bytes, the V+ program reads the first 4 "
+                  "(send the mode and the number as separate records)")
+        return int.from_bytes(record[:4], "big", signed=True)
 
     def _io(self, mode: int, number: int) -> str:
         n = abs(number)
@@ -298,6 +333,7 @@ class Controller:
             event(f"io: write of signal {number}: not an output or soft signal")
             return "0"
         self.signals[n] = number > 0
+        event(f"io: SIGNAL {number}")
         return "1"
 
     # ---- connections ----------------------------------------------------------------
@@ -361,6 +397,9 @@ class Controller:
                 "max": round(lat[-1], 3) if lat else 0.0,
             },
             "slow_ack_ms": self.slow_ack_ms,
+            "outputs": [n if on else -n for n, on in sorted(self.signals.items())],
+            "io_requests": self.io_requests,
+            "io_errors": self.io_errors,
             "clients": {
                 "motion": self.motion_client is not None,
                 "state": self.state_client is not None,

@@ -15,6 +15,7 @@ from rob6.robots import get_robot
 from .links.adept import (
     DEFAULT_BYTE_ORDER,
     DEFAULT_HOST,
+    DEFAULT_IO_PORT,
     DEFAULT_MOTION_PORT,
     DEFAULT_PERIOD_S,
     DEFAULT_STATE_PORT,
@@ -41,6 +42,9 @@ from .service import DriverService
               type=int, help="simple_message: the controller's motion port [env ROB6_SM_MOTION_PORT].")
 @click.option("--sm-state-port", envvar="ROB6_SM_STATE_PORT", default=DEFAULT_STATE_PORT, show_default=True,
               type=int, help="simple_message: the controller's state port [env ROB6_SM_STATE_PORT].")
+@click.option("--sm-io-port", envvar="ROB6_SM_IO_PORT", default=DEFAULT_IO_PORT, show_default=True,
+              type=int, help="simple_message: the V+ program's digital I/O port, for DirectAdeptCmd signal "
+                             "[env ROB6_SM_IO_PORT].")
 @click.option("--sm-byte-order", envvar="ROB6_SM_BYTE_ORDER", default=DEFAULT_BYTE_ORDER, show_default=True,
               type=click.Choice(["big", "little"]),
               help="simple_message: the controller's byte order (the Adept V+ program: big) "
@@ -49,10 +53,10 @@ from .service import DriverService
               help="simple_message: seconds between streamed points, rounded to controller cycles "
                    "[env ROB6_SM_PERIOD].")
 def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_motion_port, sm_state_port,
-         sm_byte_order, sm_period):
+         sm_io_port, sm_byte_order, sm_period):
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
-    sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port,
+    sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,
                        byte_order=sm_byte_order, period_s=sm_period)
     if link in ("simple_message", "adept"):
         if not robot.is_adept:

@@ -7,6 +7,10 @@ the plant: ``sim``, the simulation (default), ``rsi``, a KUKA KR C4 over RSI, or
 ``simple_message`` (also called ``adept``), an Adept V+ controller over ROS-Industrial
 simple_message. A motion's ``true`` waits for the link to confirm the robot arrived.
 
+The Adept's digital outputs (``signal``: V+ SIGNAL, DirectAdeptCmd signal 5, -6) are
+switched through the link (the simulation's own, or the V+ program's I/O port) and
+published with every joint state (``outputs``).
+
 A failure of the plant (robot not connected, link lost) comes back in the replies'
 ``error`` field, which the gateway shows the client as ``ERROR: driver: <error>``;
 an ordinary refusal (busy, limits) only has ``reason`` and the client sees ``false``.
@@ -15,6 +19,7 @@ an ordinary refusal (busy, limits) only has ``reason`` and the client sees ``fal
 from __future__ import annotations
 
 import logging
+import threading
 import time
 
 from rob6.bus import Bus
@@ -31,8 +36,10 @@ from rob6.messages import (
     LinkQuery,
     LinkStatus,
     PingReply,
+    SignalRequest,
 )
 from rob6.robots import RobotModel
+from rob6.vplus import check_signals
 
 from .links import Link
 from .links.adept import AdeptLink, AdeptSettings
@@ -49,6 +56,8 @@ EXECUTE_MARGIN_S = 5.0  # beyond the trajectory's own duration
 #: until the next state, the robot is where the last one says. Below the gateway's
 #: rob6.state.STATE_STALE_S, so a silent driver is still told from a resting robot.
 REST_STATE_PERIOD_S = 0.04
+#: at most this long a switched output waits for the next cycle's state to carry it
+SIGNAL_PUBLISH_WAIT_S = 0.5
 
 
 class DriverService:
@@ -60,6 +69,8 @@ class DriverService:
         self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
         self._published: tuple | None = None  # the last published state without t and cycle
         self._published_t = 0.0
+        self._published_outputs: list[int] = []  # in the last published state
+        self._outputs_published = threading.Condition()
         self.link: Link
         if link == "rsi":
             self.link = RsiLink(self.core, robot, rsi_listen, self._publish, self._publish_link_event,
@@ -75,17 +86,22 @@ class DriverService:
         link = self.link
         return JointState(t=state.t, cycle=state.cycle, q=state.q.tolist(), qd=state.qd.tolist(),
                           moving=bool(state.moving), mode=state.mode, missed=link.missed,
-                          instance=self.bus.instance, link=link.state, late=link.late, q_actual=link.q_actual)
+                          instance=self.bus.instance, link=link.state, late=link.late, q_actual=link.q_actual,
+                          outputs=link.outputs())
 
     def _publish(self, state: CoreState) -> None:
         """Every cycle's state, except at rest (``REST_STATE_PERIOD_S``)."""
         message = self.joint_state(state)
         content = (message.q, message.qd, message.moving, message.mode, message.missed, message.link,
-                   message.late, message.q_actual)
+                   message.late, message.q_actual, message.outputs)
         if content == self._published and 0.0 <= message.t - self._published_t < REST_STATE_PERIOD_S:
             return
         self._published, self._published_t = content, message.t
         self.bus.publish("driver/state", message)
+        if message.outputs != self._published_outputs:
+            with self._outputs_published:
+                self._published_outputs = message.outputs
+                self._outputs_published.notify_all()
 
     def _publish_link_event(self, event: LinkEvent) -> None:
         # a record, like the traces: queued, so the link's thread never waits for the network
@@ -155,6 +171,24 @@ class DriverService:
         motion = self.core.stop("stop requested")
         return Ack(ok=motion.wait(4.0) and bool(motion.ok), reason=motion.reason or "")
 
+    def signal(self, req: SignalRequest, _ctx) -> Ack:
+        """Switch the Adept's digital outputs; the numbers are checked again here (rob6.vplus),
+        so nothing reaches the controller that V+ SIGNAL would not take."""
+        if not self.robot.is_adept:
+            return Ack(ok=False, reason=f"{self.robot.name} has no V+ digital outputs")
+        problem = check_signals(req.signals)
+        if problem:
+            return Ack(ok=False, reason=problem)
+        failed = self.link.signal(req.signals)
+        if failed:
+            return Ack(ok=False, reason=failed, error=failed)
+        # answered once a published state shows them (the next cycle): whoever reads the
+        # state after the reply sees the change, and the recording has every change
+        switched = self.link.outputs()
+        with self._outputs_published:
+            self._outputs_published.wait_for(lambda: self._published_outputs == switched, SIGNAL_PUBLISH_WAIT_S)
+        return Ack()
+
     def link_status(self, req: LinkQuery, _ctx) -> LinkStatus:
         return self.link.status(reset=req.reset)
 
@@ -171,7 +205,7 @@ class DriverService:
         self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,
                         "limits": self.limits, "alter_mode": self.alter_mode,
                         "alter_target": self.alter_target, "stop": self.stop,
-                        "link": self.link_status}, workers=4,
+                        "link": self.link_status, "signal": self.signal}, workers=4,
                        inline=("ping", "state", "alter_target", "link"))
 
     def shutdown(self) -> None:

@@ -33,10 +33,12 @@ from rob6.messages import (
     MotionKind,
     MoveRequest,
     SessionEvent,
+    SignalRequest,
     Verbosity,
 )
 from rob6.robots import RobotModel
 from rob6.state import JointStateMirror
+from rob6.vplus import SignalError, parse_signal
 
 from .args import Args, ParseError
 from .state import ConfigMirror, Session
@@ -597,19 +599,58 @@ async def move_lin(gw, session, args):
 
 
 # ====================================================================== gripper and Adept
-def _gripper(name, needs_value):
+#: How many lines each gripper command answers on the Adept, ``true``/``false`` included:
+#: the protocol description's examples (section 3.4), which clients written against the
+#: original with its serial gripper read as a fixed count (rob-chess reads three lines for
+#: GripperGoHome and GripperMoveToPosition and checks the third is ``true``). A failure
+#: answers as many lines, the last two being ``ERROR: <reason>`` and ``false``, so such a
+#: client never waits for a line that does not come, nor falls a reply behind.
+GRIPPER_REPLY_LINES = {"HasGripper": 1, "GripperMove": 2, "GripperGoHome": 3, "GripperMoveToPosition": 3}
+
+
+def _where(position: float | None) -> str:
+    """The informational line saying where the jaws are (never a bare number)."""
+    return "Gripper position unknown" if position is None else f"Gripper at {position:.4f} m"
+
+
+def _gripper_announcement(name: str, value: float | None) -> str:
+    """The first line of a successful move: what the gripper was told to do."""
+    if name == "GripperMove":
+        return f"Start moving with amperage {value:.3f}"  # the original's words (protocol 3.4)
+    if name == "GripperGoHome":
+        return "Start moving to home position"
+    return f"Start moving to position {value:.4f} m"
+
+
+def _gripper_failure(name: str, reason: str, info: str) -> str:
+    """``ERROR: <reason>`` and ``false`` after as many ``info`` lines as make the command's
+    line count (GRIPPER_REPLY_LINES)."""
+    lines = GRIPPER_REPLY_LINES[name]
+    if lines == 1:  # HasGripper: the one line every one-line command gets when a service fails
+        return f"ERROR: {reason}\n"
+    return "".join(info + "\n" for _ in range(lines - 2)) + error(reason)
+
+
+def _gripper(name: str, needs_value: bool):
     async def handler(gw, session, args):
-        if not gw.robot.is_adept:
+        if not gw.robot.is_adept:  # the original: false, arguments not read
             return FALSE
         value = None
         if needs_value:
             value = args.double()
             if value is None:
-                raise ParseError("value")
-        reply = await gw.call(session, "gripper", "command", GripperCommand(command=name, value=value))
-        if not reply.ok and reply.reason:
-            return "".join(line + "\n" for line in reply.lines) + error(reply.reason)
-        return "".join(line + "\n" for line in reply.lines) + boolean(reply.ok)
+                return _gripper_failure(name, "incorrect value", "Gripper not moved")
+        try:
+            reply = await gw.call(session, "gripper", "command", GripperCommand(command=name, value=value))
+        except BusError as exc:
+            log.warning("%s failed: %s (%s)", name, exc.message, exc.code)
+            return _gripper_failure(name, exc.message, _where(None))
+        if name == "HasGripper":
+            return boolean(reply.ok)
+        if not reply.ok:
+            return _gripper_failure(name, reply.reason or f"{name} failed", _where(reply.position))
+        lines = [_gripper_announcement(name, value), _where(reply.position)]
+        return "".join(line + "\n" for line in lines[:GRIPPER_REPLY_LINES[name] - 1]) + TRUE
     return handler
 
 
@@ -621,13 +662,25 @@ command("GripperMoveToPosition")(_gripper("GripperMoveToPosition", True))
 
 @command("DirectAdeptCmd")
 async def direct_adept_cmd(gw, session, args):
-    if not gw.robot.is_adept:
+    """The V+ SIGNAL instruction (``signal 5, -6``) reaches the Adept's digital outputs, by
+    default: it switches outputs and nothing else, and clients (RobPraktikum's suction cup)
+    need it unchanged. Any other V+ instruction has no channel to the controller."""
+    if not gw.robot.is_adept:  # the original: false, arguments not read
         return FALSE
+    try:
+        signals = parse_signal(args.text)
+    except SignalError as exc:
+        return error(f"DirectAdeptCmd: {exc}; nothing was switched")
+    if signals is not None:
+        ack = await gw.call(session, "driver", "signal", SignalRequest(signals=signals))
+        if not ack.ok:
+            return error(f"driver: {ack.error}" if ack.error else f"DirectAdeptCmd: {ack.reason}")
+        return TRUE  # the protocol description's reply to a DirectAdeptCmd that ran
     if not gw.options.allow_direct_adept_cmd:
         return error("DirectAdeptCmd is disabled on this server (it forwards raw controller "
                      "commands; start the gateway with --allow-direct-adept-cmd)")
     # neither link has a channel for text: the V+ server program's ports carry trajectory
     # points, state and I/O signals only (deploy/adept/README.md)
     return error("DirectAdeptCmd: raw V+ commands cannot reach the controller (neither the simulation "
-                 "nor the simple_message link has a V+ command channel); nothing was sent")
-
+                 "nor the simple_message link has a V+ command channel; only SIGNAL is carried); "
+                 "nothing was sent")

@@ -34,18 +34,16 @@ class GripperService:
         if value is None:  # the gateway sends one with every move (it answers ParseError otherwise)
             return GripperReply(ok=False, reason=f"{name} without a value")
         if name == "GripperMove":
-            # the original announces the move before it waits for its end
-            return self._reply(self.backend.move_current(value, self.timeout),
-                               [f"Start moving with amperage {value:.3f}"])
+            return self._reply(self.backend.move_current(value, self.timeout))
         if name == "GripperMoveToPosition":
             return self._reply(self.backend.move_to_position(value, self.timeout))
         return GripperReply(ok=False, reason=f"unknown gripper command {name!r}")
 
     @staticmethod
-    def _reply(result: Result, lines: list[str] | None = None) -> GripperReply:
+    def _reply(result: Result) -> GripperReply:
         if not result.ok:
             log.warning("gripper: %s", result.error)
-        return GripperReply(ok=result.ok, lines=lines or [], reason=result.error)
+        return GripperReply(ok=result.ok, reason=result.error, position=result.position)
 
     def state(self, _req: Empty, _ctx: Context) -> GripperState:
         return GripperState(**self.backend.state().as_dict())

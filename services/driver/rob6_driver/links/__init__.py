@@ -8,9 +8,10 @@ simple_message points to an Adept V+ controller. Another controller (Kawasaki)
 becomes one more ``Link`` beside these, without touching the motion core.
 
 What the service needs from a link is small: ``start``/``stop``, the plant's state for
-each published joint state (``state``, ``late``, ``missed``, ``q_actual``) and a
-status report (``status``), and ``settle`` after a motion the core has finished (a
-robot that lags behind its setpoints: has it arrived?). A link calls
+each published joint state (``state``, ``late``, ``missed``, ``q_actual``, ``outputs``) and
+a status report (``status``), ``settle`` after a motion the core has finished (a
+robot that lags behind its setpoints: has it arrived?), and ``signal`` for a plant with
+digital outputs (the Adept's V+ SIGNAL; numbers checked by the service). A link calls
 ``core.offline(reason)`` when the plant cannot be reached and ``core.online(q_actual)``
 when it can again.
 """
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import queue
+import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 
@@ -57,6 +59,15 @@ class Link(ABC):
     def status(self, reset: bool = False) -> LinkStatus:
         """The link's state and statistics; ``reset`` starts the latency statistics afresh."""
 
+    def signal(self, signals: list[int]) -> str:
+        """Switch digital outputs (V+ SIGNAL: n on, -n off, in this order); "" when done,
+        else why not. Links of robots without V+ outputs refuse."""
+        return f"the {self.kind} link has no digital outputs"
+
+    def outputs(self) -> list[int]:
+        """The outputs switched so far, V+ style (5 on, -6 off), by number."""
+        return []
+
     def settle(self, q_final, timeout: float | None = None) -> str:
         """After a motion ended at ``q_final`` (deg): wait until the robot is there.
         "" when it is, else why not (the motion then fails with that error). Links
@@ -77,3 +88,19 @@ class Link(ABC):
                     self.on_event(event)
                 except Exception:
                     log.debug("publishing a link event failed", exc_info=True)
+
+
+class Outputs:
+    """The digital outputs a link has switched: thread-safe, V+ style (n on, -n off)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._on: dict[int, bool] = {}
+
+    def switched(self, signal: int) -> None:
+        with self._lock:
+            self._on[abs(signal)] = signal > 0
+
+    def as_list(self) -> list[int]:
+        with self._lock:
+            return [n if on else -n for n, on in sorted(self._on.items())]

@@ -1,11 +1,13 @@
 """The simple_message link: drives an Adept Viper s850 (``ad850``) through the V+ server
 program of the ROS-Industrial Adept packages, over ROS-Industrial simple_message.
 
-The controller is the TCP server, rob6 the client on two ports (``ROB6_SM_HOST``):
+The controller is the TCP server, rob6 the client on its ports (``ROB6_SM_HOST``):
 
 * motion (11000): rob6 streams JOINT_TRAJ_PT service requests and waits for each
   acknowledgement before it sends the next;
-* state (11002): the controller sends JOINT_POSITION and STATUS about every 0.1 s.
+* state (11002): the controller sends JOINT_POSITION and STATUS about every 0.1 s;
+* I/O (11001, the program's own protocol, ``adept_io.py``): opened on the first
+  ``signal`` (DirectAdeptCmd signal 5, -6), which switches digital outputs.
 
 The clock is the driver's own (like the simulation): every ``robot.cycle_s`` (16 ms) the
 motion core steps, and while the robot moves every ``period_s`` (default 48 ms, three
@@ -73,7 +75,8 @@ from rob6.robots import RobotModel
 
 from ..loop import CycleRunner
 from ..motion import MotionCore
-from . import Link, Publish
+from . import Link, Outputs, Publish
+from .adept_io import AdeptIoPort, IoPortError
 from .simple_message import (
     BYTE_ORDERS,
     END_TRAJECTORY,
@@ -94,6 +97,7 @@ log = logging.getLogger("rob6.driver")
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_MOTION_PORT = 11000
 DEFAULT_STATE_PORT = 11002
+DEFAULT_IO_PORT = 11001
 DEFAULT_BYTE_ORDER = "big"
 #: time between streamed points (rounded to whole controller cycles)
 DEFAULT_PERIOD_S = 0.048
@@ -162,6 +166,7 @@ class AdeptSettings:
     host: str = DEFAULT_HOST
     motion_port: int = DEFAULT_MOTION_PORT
     state_port: int = DEFAULT_STATE_PORT
+    io_port: int = DEFAULT_IO_PORT
     byte_order: str = DEFAULT_BYTE_ORDER
     period_s: float = DEFAULT_PERIOD_S
 
@@ -169,7 +174,8 @@ class AdeptSettings:
         """ValueError (one line, naming the setting) when a value cannot work."""
         if not self.host.strip():
             raise ValueError("ROB6_SM_HOST is empty: give the controller's address")
-        for name, port in (("ROB6_SM_MOTION_PORT", self.motion_port), ("ROB6_SM_STATE_PORT", self.state_port)):
+        for name, port in (("ROB6_SM_MOTION_PORT", self.motion_port), ("ROB6_SM_STATE_PORT", self.state_port),
+                           ("ROB6_SM_IO_PORT", self.io_port)):
             if not 1 <= int(port) <= 65535:
                 raise ValueError(f"{name}={port}: expected a TCP port 1..65535")
         if self.byte_order not in BYTE_ORDERS:
@@ -222,6 +228,8 @@ class AdeptLink(Link):
         self.motion_name = _name(self.motion_addr)
         self.state_name = _name(self.state_addr)
         self.runner = CycleRunner(self._cycle, core.dt, publish, name="driver-cycle")
+        self.io = AdeptIoPort(host, int(settings.io_port))
+        self._outputs = Outputs()
         self._cond = threading.Condition(threading.RLock())
         # the controller, as the connections report it (guarded by _cond)
         self.state = "waiting"
@@ -299,6 +307,7 @@ class AdeptLink(Link):
             self._threads[0].join(1.0)
         self._wake_r.close()
         self._wake_w.close()
+        self.io.close()
         log.info("driver: simple_message link closed: %d points acknowledged, %d merged, %d refused, "
                  "%d connections", self.packets, self.late, self.refused, self.runs)
 
@@ -318,6 +327,26 @@ class AdeptLink(Link):
         return LinkStatus(link="simple_message", state=self.state, address=self.motion_name, peer=self.state_name,
                           packets=self.packets, late=self.late, missed=self.missed, runs=self.runs,
                           garbage=self.garbage, latency_us=latency)
+
+    # ------------------------------------------------------------------ digital outputs
+    def signal(self, signals: list[int]) -> str:
+        """SIGNAL each number through the program's I/O port, in order; stops at the first
+        the controller does not confirm (the ones before it stay switched)."""
+        done: list[int] = []
+        for signal in signals:
+            try:
+                self.io.write(signal)
+            except IoPortError as exc:
+                before = f"{', '.join(map(str, done))} switched before" if done else "nothing switched"
+                log.warning("driver: SIGNAL %d failed: %s (%s)", signal, exc, before)
+                return f"{exc} ({before})"
+            self._outputs.switched(signal)
+            done.append(signal)
+        log.info("driver: SIGNAL %s done", ", ".join(map(str, signals)))
+        return ""
+
+    def outputs(self) -> list[int]:
+        return self._outputs.as_list()
 
     # ------------------------------------------------------------------ arrival
     def settle(self, q_final, timeout: float | None = None) -> str:

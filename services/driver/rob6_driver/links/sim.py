@@ -1,7 +1,8 @@
 """The simulation link (the default): the driver's own real-time clock, perfect tracking.
 
 Every ``robot.cycle_s`` the cycle runner steps the motion core and the setpoint is
-where the robot is; nothing can be lost, so the link is always connected.
+where the robot is; nothing can be lost, so the link is always connected. The simulated
+Adept's digital outputs switch at once (``signal``).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from rob6.messages import LinkStatus
 
 from ..loop import CycleRunner
 from ..motion import CoreState, MotionCore
-from . import Link, Publish
+from . import Link, Outputs, Publish
 
 
 class SimLink(Link):
@@ -20,10 +21,19 @@ class SimLink(Link):
         self.core = core
         self._publish = publish
         self.runner = CycleRunner(core.step, core.dt, self._cycle_done, name="driver-cycle")
+        self._outputs = Outputs()
 
     def _cycle_done(self, state: CoreState) -> None:
         self.missed = self.runner.stats.missed  # cycles the runner skipped (the machine was too busy)
         self._publish(state)
+
+    def signal(self, signals: list[int]) -> str:
+        for signal in signals:
+            self._outputs.switched(signal)
+        return ""
+
+    def outputs(self) -> list[int]:
+        return self._outputs.as_list()
 
     def start(self) -> None:
         self.runner.start()

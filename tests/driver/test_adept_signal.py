@@ -1,0 +1,55 @@
+"""DirectAdeptCmd signal over the simple_message link: the whole system (``rob6 run --robot
+ad850 --link simple_message``) switches the outputs of the stand-in controller (adept-sm-sim,
+a separate process) through the V+ program's I/O port, byte for byte as the program reads
+it (the mode and the number as two records); the controller's outputs and the driver's
+state agree afterwards. A port that cannot be reached fails with ``ERROR: driver: ...`` and
+``false`` and switches nothing; the motion link is not disturbed either way."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.controllers.adept_controller import AdeptController
+from tests.system import Client, driver_state, free_port, running
+
+pytestmark = pytest.mark.slow
+
+
+def adept_system(ctl: AdeptController, io_port: int):
+    assert ctl.motion is not None and ctl.state is not None
+    return running("ad850", dummy=False, extra_env={
+        "ROB6_LINK": "simple_message", "ROB6_SM_HOST": "127.0.0.1", "ROB6_SM_MOTION_PORT": str(ctl.motion[1]),
+        "ROB6_SM_STATE_PORT": str(ctl.state[1]), "ROB6_SM_IO_PORT": str(io_port)})
+
+
+def test_signal_switches_the_controllers_outputs():
+    with AdeptController("--state-period", "0.02") as ctl:
+        assert ctl.io is not None
+        with adept_system(ctl, ctl.io[1]) as system, Client(system.port) as client:
+            assert client.ask("DirectAdeptCmd signal 5, -6") == "true\n"
+            st = ctl.status()
+            assert st["outputs"] == [5, -6] and st["io_requests"] == 2 and st["io_errors"] == 0
+            assert driver_state(system).outputs == [5, -6]
+            # malformed: refused before anything is sent
+            assert client.ask("DirectAdeptCmd signal 7, 1005", lines=2).endswith("nothing was switched\nfalse\n")
+            assert ctl.status()["io_requests"] == 2
+            # the controller closed the kept I/O connection: rob6 reconnects and switches
+            assert ctl.drop_connection("io")
+            assert client.ask("DirectAdeptCmd SIGNAL -5 6 2001") == "true\n"
+            st = ctl.status()
+            assert st["outputs"] == [-5, 6, 2001] and st["io_requests"] == 5 and st["io_errors"] == 0
+            assert driver_state(system).outputs == [-5, 6, 2001]
+            # the motion link went on meanwhile
+            assert client.ask("MovePTPJoints 10 -60 40 0 30 0", timeout=30) == "true\n"
+            assert client.read_quiet(0.3) == ""
+
+
+def test_an_unreachable_io_port_fails_and_switches_nothing():
+    closed = free_port()
+    with AdeptController("--state-period", "0.02") as ctl:
+        with adept_system(ctl, closed) as system, Client(system.port) as client:
+            reply = client.ask("DirectAdeptCmd signal 5, -6", lines=2)
+            assert reply == (f"ERROR: driver: cannot reach the controller's I/O port 127.0.0.1:{closed}: "
+                             "Connection refused (nothing switched)\nfalse\n")
+            assert driver_state(system).outputs == [] and ctl.status()["outputs"] == []
+            assert client.ask("GetRobot") == "ad850\n"
