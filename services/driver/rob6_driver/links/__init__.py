@@ -57,6 +57,11 @@ class Link(ABC):
     def status(self, reset: bool = False) -> LinkStatus:
         """The link's state and statistics; ``reset`` starts the latency statistics afresh."""
 
+    @property
+    def settle_bound_s(self) -> float:
+        """The longest ``settle`` waits (its own timeouts), seconds."""
+        return 0.0
+
     def settle(self, q_final, timeout: float | None = None) -> str:
         """After a motion ended at ``q_final`` (deg): wait until the robot is there.
         "" when it is, else why not (the motion then fails with that error). Links
