@@ -39,7 +39,15 @@ instance on another host (the host part of its id): its network path is not the 
 Never for an owner service: one robot, one owner, a motion is never sent twice.
 Everything else fails with a structured ``BusError``. A service with no live instance
 is waited for (``LIVELINESS_GRACE_S``, within the call's deadline) before the call fails
-``unavailable``: a token can be missing for a moment (an instance reconnecting).
+``unavailable``: a token can be missing for a moment (an instance reconnecting). Only
+then, or when the instance goes away mid-request: a live instance that does not answer
+in time fails the call ``timeout`` (``BusTimeout``), naming what it waited for.
+
+A reply that waits for the arm (``Op.waits``: a motion, a stop, the gripper) is not
+bounded by the quick-call deadline: the handler announces how long and for what
+(``Context.waiting``, an interim reply), and the caller's deadline becomes that plus
+``rob6.deadlines.HOP_S``; a caller that is itself a handler passes the announcement on
+(``request(..., waiting=ctx.waiting)``), so each hop outward waits a little longer.
 
 Zenoh runs callbacks on its own threads: the callbacks here only hand data over
 (set a future, update a dict) and never block. Served requests are taken from a
@@ -50,6 +58,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import functools
 import itertools
 import logging
 import threading
@@ -65,6 +74,7 @@ import zenoh
 import zenoh.ext
 
 from .config import BusSettings
+from .deadlines import HOP_S
 from .messages import (
     IDEMPOTENT_SERVICES,
     OPS,
@@ -74,6 +84,7 @@ from .messages import (
     ErrorCode,
     ReplyEnvelope,
     RequestEnvelope,
+    Waiting,
 )
 
 log = logging.getLogger("rob6.bus")
@@ -119,6 +130,15 @@ TRACE_REPAIR_TRIES = 3
 TRACE_REPAIR_TIMEOUT_S = 5.0
 
 _trace_batch = msgspec.json.Decoder(list[tuple[str, msgspec.Raw]])
+_waiting = msgspec.json.Decoder(Waiting)
+#: the Zenoh attachment of an interim reply (``Context.waiting``)
+WAITING = b"waiting"
+#: a waiting operation's Zenoh query lives this long at most: its real deadline is the
+#: bus's own, which the service's announcements move; the query is cancelled with it
+WAITING_QUERY_S = 24 * 3600.0
+#: a caller's own deadline fires this long after the service's, so a reply sent just in
+#: time is not lost to the caller's timer
+REPLY_GRACE_S = 0.05
 
 
 def _host(instance: str) -> str:
@@ -155,16 +175,39 @@ class BusError(Exception):
         self.message = message
 
 
+class BusTimeout(BusError):
+    """A live instance did not answer in time: ``seconds`` waited, ``waiting_for`` what the
+    service said it waited for ("" when it said nothing: a quick call)."""
+
+    def __init__(self, service: str, op: str, seconds: float, waiting_for: str):
+        detail = f" ({waiting_for})" if waiting_for else ""
+        super().__init__("timeout", f"{service}: no reply to {op} within {seconds:.1f} s{detail}")
+        self.service, self.op, self.seconds, self.waiting_for = service, op, seconds, waiting_for
+
+
 class _InstanceLost(Exception):
-    """The instance vanished or did not answer; the request may be retried elsewhere."""
+    """The instance vanished (``gone``) or did not answer; the request may be retried elsewhere."""
+
+    def __init__(self, message: str, gone: bool = False):
+        super().__init__(message)
+        self.gone = gone
+
+
+def _no_announcement(seconds: float, what: str) -> None:
+    """Operations that never wait have no one to tell."""
 
 
 @dataclass(frozen=True)
 class Context:
-    """What a request handler knows about the call."""
+    """What a request handler knows about the call.
+
+    ``waiting(seconds, what)``: the reply will take up to ``seconds`` more, waiting for
+    ``what`` ("waiting for the arm to stop"); the caller's deadline follows (``Op.waits``
+    operations only). Announce before the wait, as soon as its bound is known."""
 
     cid: str
     op: str
+    waiting: Callable[[float, str], None] = _no_announcement
 
 
 #: a request handler: ``handler(request body, ctx) -> reply body``, of the types
@@ -274,7 +317,7 @@ class Bus:
                 instances.remove(instance)
             lost = self._pending.pop(instance, set()) if not alive else set()
         for waiter, attempt in lost:
-            waiter.fail(attempt, _InstanceLost(f"{service} instance {instance} went away"))
+            waiter.fail(attempt, _InstanceLost(f"{service} instance {instance} went away", gone=True))
         for listener in list(self._listeners):
             try:
                 listener(service, instance, alive)
@@ -381,7 +424,8 @@ class Bus:
             cid = envelope.cid
             if envelope.v != SCHEMA_VERSION:
                 raise BusError("schema", f"schema version {envelope.v}, expected {SCHEMA_VERSION}")
-            body = handlers[op](envelope.body, Context(cid=cid, op=op))
+            waiting = functools.partial(self._announce, query) if spec.waits else _no_announcement
+            body = handlers[op](envelope.body, Context(cid=cid, op=op, waiting=waiting))
             reply: ReplyEnvelope[Any] = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=True, instance=self.instance, body=body)
         except BusError as exc:
             reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance,
@@ -396,6 +440,10 @@ class Bus:
         self.trace(f"trace/{self.service}/{op}", b'{"t":%.6f,"dt":%.6f,"instance":"%s","request":%s,"reply":%s}' % (
             started, time.time() - started, self.instance.encode(), raw or b"null", payload))
 
+    def _announce(self, query: zenoh.Query, seconds: float, what: str) -> None:
+        """An interim reply: the final one takes up to ``seconds`` more (``Context.waiting``)."""
+        query.reply(query.key_expr, _encoder.encode(Waiting(seconds=seconds, what=what)), attachment=WAITING)
+
     def _decoder(self, typ: Any) -> msgspec.json.Decoder[Any]:
         decoder = self._decoders.get(typ)
         if decoder is None:
@@ -409,15 +457,19 @@ class Bus:
 
     # ------------------------------------------------------------------ requests
     def request(self, service: str, op: str, body: object, *, timeout: float | None = None,
-                cid: str | None = None, instance: str | None = None) -> Any:
+                cid: str | None = None, instance: str | None = None,
+                waiting: Callable[[float, str], None] | None = None) -> Any:
         """Send ``body`` to ``service.op`` and return the typed reply body.
 
-        Raises ``BusError`` with code ``unavailable`` (no live instance), ``timeout``,
-        or whatever the service answered (``rejected``, ``invalid``, ``internal``...).
-        A hedged operation (``Op.hedged``) not answered after ``HEDGE_DELAY_S`` is sent
-        a second time, to another replica when there is one: the first answer wins.
+        Raises ``BusError`` with code ``unavailable`` (no live instance), ``timeout``
+        (``BusTimeout``: a live instance did not answer in time), or whatever the service
+        answered (``rejected``, ``invalid``, ``internal``...). A hedged operation
+        (``Op.hedged``) not answered after ``HEDGE_DELAY_S`` is sent a second time, to
+        another replica when there is one: the first answer wins. ``waiting``: called with
+        what the service announces it waits for (``Context.waiting``), each time plus
+        ``HOP_S``: a handler passes its own ``ctx.waiting`` to tell its caller in turn.
         """
-        call = _Request(self, service, op, body, timeout, cid, instance)
+        call = _Request(self, service, op, body, timeout, cid, instance, waiting)
         while True:
             while (target := call.next_target()) is None:
                 time.sleep(0.005)
@@ -429,21 +481,25 @@ class Bus:
                 if outcome is None:
                     if hedge_at:
                         self._hedge(call, waiter)
-                    outcome = waiter.result(call.remaining() + 0.05)
+                    # the deadline moves when the service announces a wait: wait again
+                    while (outcome := waiter.result(call.remaining() + REPLY_GRACE_S)) is None \
+                            and call.remaining() + REPLY_GRACE_S > 0:
+                        pass
                 if outcome is None:
                     raise _InstanceLost("no reply in time")
                 return call.decode(*outcome)
             except _InstanceLost as exc:
                 call.lost(target, exc)
             finally:
-                self._done(waiter)
+                self._done(call, waiter)
 
     async def arequest(self, service: str, op: str, body: object, *, timeout: float | None = None,
                        cid: str | None = None, instance: str | None = None) -> Any:
         """``request`` for asyncio code: the reply wakes the event loop straight from
         Zenoh's callback thread (no executor thread in between). The hedge is a timer on
-        the loop that sends the second copy itself: no task, no wake-up of the caller."""
-        call = _Request(self, service, op, body, timeout, cid, instance)
+        the loop that sends the second copy itself: no task, no wake-up of the caller.
+        Cancelled, it cancels the query too."""
+        call = _Request(self, service, op, body, timeout, cid, instance, None)
         loop = asyncio.get_running_loop()
         while True:
             while (target := call.next_target()) is None:
@@ -453,13 +509,13 @@ class Bus:
             hedge_at = call.hedge_at()
             hedge = loop.call_later(hedge_at - time.monotonic(), self._hedge, call, waiter) if hedge_at else None
             try:
-                return call.decode(*await waiter.aresult(call.remaining() + 0.05))
+                return call.decode(*await waiter.aresult(call.remaining))
             except _InstanceLost as exc:
                 call.lost(target, exc)
             finally:
                 if hedge is not None:
                     hedge.cancel()
-                self._done(waiter)
+                self._done(call, waiter)
 
     def _hedge(self, call: "_Request", waiter: "_Waiter") -> None:
         """No answer yet: the second copy, to another live instance (the same one if it is
@@ -480,7 +536,12 @@ class Bus:
 
         def on_reply(reply: zenoh.Reply) -> None:
             ok, err = reply.ok, reply.err  # exactly one of them is set
-            if ok is not None:
+            if ok is not None and ok.attachment is not None and ok.attachment.to_bytes() == WAITING:
+                try:
+                    call.announced(_waiting.decode(ok.payload.to_bytes()))
+                except Exception:  # an announcement must not break the call: its reply still comes
+                    log.exception("bad announcement from %s.%s", service, call.op)
+            elif ok is not None:
                 waiter.resolve(attempt, ok.payload.to_bytes())
             elif err is not None:
                 message = err.payload.to_string()
@@ -497,16 +558,21 @@ class Bus:
         with self._lock:
             self._pending.setdefault(instance, set()).add((waiter, attempt))
             self._inflight[instance] = self._inflight.get(instance, 0) + 1
+        # a waiting operation's deadline moves with what the service announces; Zenoh's
+        # timeout cannot, so the query lives long and is cancelled when the call ends
+        timeout = WAITING_QUERY_S if call.spec.waits else max(call.remaining(), 0.001)
         # no consolidation: the reply is passed on when it arrives. Zenoh's default holds it
         # back until every route has sent its final, and a route through a router whose link
         # to a partitioned host is still open never does before the timeout: measured, every
         # gateway -> driver call on the robot PC timed out 2 s into a partition of the
         # remote hosts (deploy/MULTI_HOST.md). The key names one instance: one reply.
         self.session.get(self.key(service, instance, call.op), zenoh.handlers.Callback(on_reply, on_done),
-                         payload=call.payload, timeout=max(call.remaining(), 0.001),
-                         consolidation=zenoh.ConsolidationMode.NONE)
+                         payload=call.payload, timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE,
+                         cancellation_token=call.token)
 
-    def _done(self, waiter: "_Waiter") -> None:
+    def _done(self, call: "_Request", waiter: "_Waiter") -> None:
+        if call.token is not None and not waiter.settled:
+            call.token.cancel()  # nobody waits for its reply any more
         with self._lock:
             for attempt, instance in enumerate(waiter.targets):
                 self._pending.get(instance, set()).discard((waiter, attempt))
@@ -790,12 +856,18 @@ class _Request:
     """One request: its encoded payload, deadline and the instances tried so far."""
 
     def __init__(self, bus: Bus, service: str, op: str, body: object, timeout: float | None,
-                 cid: str | None, instance: str | None):
+                 cid: str | None, instance: str | None, waiting: Callable[[float, str], None] | None):
         self.bus, self.service, self.op, self.instance = bus, service, op, instance
         self.spec = OPS[(service, op)]
-        start = time.monotonic()
-        self.deadline = start + (self.spec.timeout if timeout is None else timeout)
-        self.grace_end = min(self.deadline, start + LIVELINESS_GRACE_S)
+        self.start = start = time.monotonic()
+        self.timeout = self.spec.timeout if timeout is None else timeout
+        self.deadline = start + self.timeout
+        self.waiting_for = ""  # what the service announced it waits for
+        self.relay = waiting
+        self.token = zenoh.CancellationToken() if self.spec.waits else None
+        # a quick call finds its instance within its deadline; a waiting one's deadline
+        # counts from when it was sent (until the service announces more)
+        self.grace_end = start + LIVELINESS_GRACE_S if self.spec.waits else min(self.deadline, start + LIVELINESS_GRACE_S)
         self.payload = _encoder.encode(RequestEnvelope(v=SCHEMA_VERSION, cid=cid or new_cid(), body=body))
         self.retry = instance is None and service in IDEMPOTENT_SERVICES and service not in OWNER_SERVICES
         self.hedged = self.retry and self.spec.hedged
@@ -804,6 +876,18 @@ class _Request:
 
     def remaining(self) -> float:
         return self.deadline - time.monotonic()
+
+    def announced(self, waiting: Waiting) -> None:
+        """The service waits ``waiting.seconds`` more for ``waiting.what`` (Zenoh's thread):
+        the deadline follows, with a hop's margin, and the caller's caller is told."""
+        seconds = waiting.seconds + HOP_S
+        self.deadline = max(self.deadline, time.monotonic() + seconds)
+        self.waiting_for = waiting.what
+        if self.relay is not None:
+            self.relay(seconds, waiting.what)
+
+    def late(self) -> BusTimeout:
+        return BusTimeout(self.service, self.op, self.deadline - self.start, self.waiting_for)
 
     def sent(self, target: str) -> None:
         self.tried.add(target)
@@ -821,18 +905,23 @@ class _Request:
         target = self.instance or self.bus._pick(self.service, self.tried)
         if target is None:
             if self.tried:
-                raise BusError("timeout", f"{self.service} did not answer {self.op} in time")
+                raise self.late()
             if time.monotonic() >= self.grace_end:
                 raise BusError("unavailable", f"{self.service} unavailable")
+        elif self.spec.waits and not self.tried:
+            self.deadline = max(self.deadline, time.monotonic() + self.timeout)
         return target
 
-    def lost(self, target: str, exc: Exception) -> None:
-        """The target vanished or did not answer: raise, or return to try another replica."""
+    def lost(self, target: str, exc: _InstanceLost) -> None:
+        """The target vanished or did not answer: raise, or return to try another replica.
+        ``unavailable`` only when the instance went away (or no query reached it) and no
+        other live one can be asked; a live instance that did not answer is late."""
         self.tried.add(target)
         remaining = self.remaining()
         if not self.retry or self.sends >= 2 or remaining <= 0:
-            code: ErrorCode = "timeout" if remaining <= 0 else "unavailable"
-            raise BusError(code, f"{self.service} unavailable ({exc})") from None
+            if exc.gone or (remaining > 0 and target not in self.bus.instances(self.service)):
+                raise BusError("unavailable", f"{self.service} unavailable ({exc})") from None
+            raise self.late() from None
         log.warning("retrying %s.%s on another instance: %s", self.service, self.op, exc)
 
     def decode(self, raw: bytes, target: str) -> Any:
@@ -882,13 +971,24 @@ class _Waiter:
         except concurrent.futures.TimeoutError:
             return None
 
-    async def aresult(self, timeout: float) -> tuple[bytes, str]:
+    async def aresult(self, remaining: Callable[[], float]) -> tuple[bytes, str]:
+        """The outcome; ``_InstanceLost`` once ``remaining()`` (which an announcement of
+        the service may raise meanwhile) has run out."""
         assert isinstance(self.future, asyncio.Future) and self.loop is not None  # made with the running loop
-        # a timer on the loop, not asyncio.wait_for: that costs a task switch per request
-        timer = self.loop.call_later(timeout, self._complete_in_loop, self.future.set_exception,
-                                     _InstanceLost("no reply in time"))
+        loop, future = self.loop, self.future
+        timer: asyncio.TimerHandle | None = None
+
+        def expire() -> None:  # a timer on the loop, not asyncio.wait_for: no task switch per request
+            nonlocal timer
+            left = remaining() + REPLY_GRACE_S
+            if left > 0:  # the deadline moved
+                timer = loop.call_later(left, expire)
+            else:
+                self._complete_in_loop(future.set_exception, _InstanceLost("no reply in time"))
+
+        timer = loop.call_later(remaining() + REPLY_GRACE_S, expire)
         try:
-            return await self.future
+            return await future
         finally:
             timer.cancel()
 

@@ -20,6 +20,8 @@ from typing import Generic, Literal, NamedTuple, TypeVar, get_args
 
 import msgspec
 
+from .deadlines import CONFIG_CHANGE_S, IK_BATCH_S, QUICK_S, REMOTE_POSE_S
+
 SCHEMA_VERSION = 1
 
 T = TypeVar("T")
@@ -81,6 +83,14 @@ class ReplyEnvelope(msgspec.Struct, Generic[T], omit_defaults=True):
 # ---------------------------------------------------------------- common
 class Empty(Struct):
     pass
+
+
+class Waiting(Struct):
+    """An interim reply (``rob6.bus.Context.waiting``): the final one will take up to
+    ``seconds`` more, because the service waits for ``what`` (the arm to stop...)."""
+
+    seconds: float
+    what: str
 
 
 class Ack(Struct):
@@ -295,6 +305,13 @@ class MoveRequest(Struct):
     #: where the motion starts: the gateway's copy of the driver's state (the route test's
     #: position for a dry run); None: the planner asks the driver
     start: Joints | None = None
+    session: str = ""  # the client session (SessionEnd.session): none of its motions starts after it ended
+
+
+class SessionEnd(Struct):
+    """The client left: its motion stops, and none of its motions starts any more."""
+
+    session: str = ""  # the gateway instance and the session's number
 
 
 class MoveReply(Struct):
@@ -366,46 +383,45 @@ class SessionEvent(Struct):
     peer: str
     t: float
     greeting: str = ""
+    reason: str = ""  # why a session closed other than by Quit or the client's close between commands
 
 
 class Op(NamedTuple):
     request: type
     reply: type
-    timeout: float = 0.2  # default per-call timeout, seconds
+    #: how long the caller waits (rob6.deadlines): ``QUICK_S``, or the bound of the
+    #: service's own work; a service that waits for the arm announces more (``waits``)
+    timeout: float = QUICK_S
     #: a second copy goes to another replica when the first has not answered after
     #: ``rob6.bus.HEDGE_DELAY_S`` (idempotent services only, never an owner service)
     hedged: bool = False
-
-
-#: the deadline of a single-pose kinematics call, which may go to a replica on another
-#: host: a lost TCP segment on the way stalls the exchange for TCP's retransmission
-#: timeout (>= 200 ms on Linux, doubling on a second loss), so the 0.2 s default turned
-#: 5-12 % of the calls into errors under 5 % packet loss (deploy/MULTI_HOST.md section 8)
-REMOTE_POSE_TIMEOUT = 1.0
+    #: the reply may wait for the arm, the gripper or the link: the service announces how
+    #: long (``rob6.bus.Context.waiting``) and the caller's deadline follows
+    waits: bool = False
 
 
 #: Every request/reply operation on the bus.
 OPS: dict[tuple[str, str], Op] = {
     ("driver", "ping"): Op(Empty, PingReply),
     ("driver", "state"): Op(Empty, JointState),
-    ("driver", "execute"): Op(ExecuteRequest, ExecuteReply, timeout=600.0),
+    ("driver", "execute"): Op(ExecuteRequest, ExecuteReply, waits=True),
     ("driver", "limits"): Op(LimitsUpdate, Ack),
-    ("driver", "alter_mode"): Op(AlterMode, Ack),
+    ("driver", "alter_mode"): Op(AlterMode, Ack, waits=True),
     ("driver", "alter_target"): Op(AlterTarget, Ack),
-    ("driver", "stop"): Op(Empty, Ack, timeout=5.0),
+    ("driver", "stop"): Op(Empty, Ack, waits=True),
     ("driver", "link"): Op(LinkQuery, LinkStatus),
     ("driver", "signal"): Op(SignalRequest, Ack, timeout=10.0),
-    ("kinematics", "fk"): Op(FkRequest, FkReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
-    ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
-    ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
-    ("kinematics", "ik_batch"): Op(IkBatchRequest, IkBatchReply, timeout=2.0),
-    ("kinematics", "select"): Op(SelectRequest, JointsReply, timeout=REMOTE_POSE_TIMEOUT, hedged=True),
+    ("kinematics", "fk"): Op(FkRequest, FkReply, timeout=REMOTE_POSE_S, hedged=True),
+    ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply, timeout=REMOTE_POSE_S, hedged=True),
+    ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply, timeout=REMOTE_POSE_S, hedged=True),
+    ("kinematics", "ik_batch"): Op(IkBatchRequest, IkBatchReply, timeout=IK_BATCH_S),
+    ("kinematics", "select"): Op(SelectRequest, JointsReply, timeout=REMOTE_POSE_S, hedged=True),
     ("planner", "config"): Op(Empty, MotionConfig),
-    ("planner", "config_change"): Op(ConfigChange, ConfigReply),
-    ("planner", "move"): Op(MoveRequest, MoveReply, timeout=600.0),
-    ("planner", "mode"): Op(ModeRequest, Ack),
-    ("planner", "session_end"): Op(Empty, Ack, timeout=1.0),
-    ("gripper", "command"): Op(GripperCommand, GripperReply, timeout=30.0),
+    ("planner", "config_change"): Op(ConfigChange, ConfigReply, timeout=CONFIG_CHANGE_S),
+    ("planner", "move"): Op(MoveRequest, MoveReply, waits=True),
+    ("planner", "mode"): Op(ModeRequest, Ack, waits=True),
+    ("planner", "session_end"): Op(SessionEnd, Ack, waits=True),
+    ("gripper", "command"): Op(GripperCommand, GripperReply, waits=True),
     ("gripper", "state"): Op(Empty, GripperState),
 }
 

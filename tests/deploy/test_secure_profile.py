@@ -78,7 +78,7 @@ def test_rob6_processes_through_the_secure_router(certs, tmp_path):
     with the files the containers use: the ACL must let the system work, and stop the rest."""
     from rob6.bus import Bus, BusError
     from rob6.config import BusSettings
-    from rob6.messages import Ack, AlterTarget, Empty, PingReply
+    from rob6.messages import Ack, AlterTarget, Empty, PingReply, SessionEnd
 
     port = free_port()
     endpoint = f"tls/127.0.0.1:{port}"
@@ -115,9 +115,9 @@ def test_rob6_processes_through_the_secure_router(certs, tmp_path):
         assert gateway.request("driver", "alter_target", AlterTarget(q=[0.0] * 6), timeout=2.0).ok
         with pytest.raises(BusError):
             gateway.request("driver", "stop", Empty(), timeout=1.0)  # ... but not command
-        assert gateway.request("planner", "session_end", Empty(), timeout=2.0).ok
+        assert gateway.request("planner", "session_end", SessionEnd(session="gateway-1:1"), timeout=2.0).ok
         with pytest.raises(BusError):
-            driver.request("planner", "session_end", Empty(), timeout=1.0)
+            driver.request("planner", "session_end", SessionEnd(session="gateway-1:1"), timeout=1.0)
 
         def health(name: str, service: str) -> int:
             cfg = localize_config(ZENOH_DIR / "client-secure.json5", tmp_path / f"h-{name}.json5", certs, name)

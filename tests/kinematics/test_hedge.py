@@ -20,7 +20,8 @@ import pytest
 from rob6 import bus as bus_module
 from rob6.bus import HEDGE_DELAY_S, Bus, BusError, Context
 from rob6.config import BusSettings
-from rob6.messages import OPS, REMOTE_POSE_TIMEOUT, Empty, FkReply, FkRequest, Op, PingReply
+from rob6.deadlines import REMOTE_POSE_S
+from rob6.messages import OPS, Empty, FkReply, FkRequest, Op, PingReply
 from tests.system import zenoh_router
 
 JOINTS = [10.0, -60.0, 80.0, 20.0, 40.0, 30.0]
@@ -86,10 +87,10 @@ def _kinematics(*replicas: tuple[str, Callable[[int], float | None]]) -> Iterato
 
 def test_single_pose_ops_are_hedged_with_a_longer_deadline():
     for op in ("fk", "forward_calc", "backward_calc", "select"):
-        assert OPS[("kinematics", op)].hedged and OPS[("kinematics", op)].timeout == REMOTE_POSE_TIMEOUT
+        assert OPS[("kinematics", op)].hedged and OPS[("kinematics", op)].timeout == REMOTE_POSE_S
     assert not OPS[("kinematics", "ik_batch")].hedged
     assert not any(spec.hedged for (service, _op), spec in OPS.items() if service != "kinematics")
-    assert HEDGE_DELAY_S < 0.2 < REMOTE_POSE_TIMEOUT  # out before TCP's retransmission timeout
+    assert HEDGE_DELAY_S < 0.2 < REMOTE_POSE_S  # out before TCP's retransmission timeout
 
 
 def test_a_never_answering_replica_costs_the_hedge_delay_not_the_timeout():

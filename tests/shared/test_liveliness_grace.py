@@ -55,7 +55,7 @@ def test_no_instance_fails_unavailable_after_the_grace_within_the_deadline(setti
     client = _bus(settings, "test", "client")
     try:
         started = time.monotonic()
-        with pytest.raises(BusError) as error:  # a 600 s deadline: the grace decides
+        with pytest.raises(BusError) as error:  # a waiting operation: the grace decides
             client.request("planner", "move", MoveRequest(kind="MovePTPJoints", joints=[0.0] * 6))
         took = time.monotonic() - started
         assert (error.value.code, error.value.message) == ("unavailable", "planner unavailable")

@@ -64,6 +64,7 @@ from dataclasses import dataclass
 import numpy as np
 import ruckig
 
+from rob6.deadlines import stop_s
 from rob6.robots import RobotModel, get_robot
 from rob6.units import JERK_RAMP_S, accel_si, jerk_si, speed_si
 
@@ -277,6 +278,18 @@ class MotionCore:
         """The limits the monitor checks right now (wider than ``limits()`` only in a transition)."""
         with self._lock:
             return self._mon.copy()
+
+    def stop_bound_s(self) -> float:
+        """The longest a controlled stop can take now (controller seconds): a stop may use
+        what the monitor allows, and the robot moves within it."""
+        with self._lock:
+            lim = self._mon
+            return stop_s(lim.vmax, lim.amax, lim.jmax)
+
+    def stopping(self) -> Motion | None:
+        """The stop in progress (completes at rest), or None."""
+        with self._lock:
+            return self._stop_motion
 
     # ------------------------------------------------------------------ events
     def _event(self, **event) -> None:

@@ -22,7 +22,8 @@ import logging
 import threading
 import time
 
-from rob6.bus import Bus
+from rob6.bus import Bus, Context
+from rob6.deadlines import arm_s
 from rob6.messages import (
     Ack,
     AlterMode,
@@ -45,11 +46,11 @@ from .links import Link
 from .links.adept import AdeptLink, AdeptSettings
 from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, RsiLink
 from .links.sim import SimLink
-from .motion import CoreState, MotionCore, Offline
+from .motion import CoreState, Motion, MotionCore, Offline
 
 log = logging.getLogger("rob6.driver")
 
-EXECUTE_MARGIN_S = 5.0  # beyond the trajectory's own duration
+STOPPING = "waiting for the arm to stop"
 #: a state that differs from the last one published only in its time and cycle (the robot
 #: at rest) is published this often, not every cycle: each subscriber of a 250 Hz stream
 #: (gateway, recorder, live view) pays 2-4 % of a core for it (issue 13). Nothing is lost:
@@ -122,13 +123,15 @@ class DriverService:
     def state(self, _req: Empty, _ctx) -> JointState:
         return self.joint_state(self.core.state())
 
-    def execute(self, req: ExecuteRequest, _ctx) -> ExecuteReply:
+    def execute(self, req: ExecuteRequest, ctx: Context) -> ExecuteReply:
         trajectory = req.trajectory
         motion = self.core.execute(trajectory.q, trajectory.dt, trajectory.qd, trajectory.qdd)
         if not req.wait and not (motion.done.is_set() and not motion.ok):
             return ExecuteReply(ok=True)
         duration = len(trajectory.q) * trajectory.dt
-        if not motion.wait(duration + EXECUTE_MARGIN_S):
+        bound = arm_s(duration)  # then the link's own check that the robot arrived
+        ctx.waiting(bound + self.link.settle_bound_s, f"waiting for the {duration:.1f} s motion")
+        if not motion.wait(bound):
             self.core.stop("the motion did not end in time")
             return ExecuteReply(ok=False, reason="the motion did not end in time",
                                 state=self.joint_state(self.core.state()))
@@ -150,14 +153,25 @@ class DriverService:
                                           req.max_change)
         return Ack(ok=ok, reason=reason)
 
-    def alter_mode(self, req: AlterMode, _ctx) -> Ack:
+    def _at_rest(self, stop: Motion, ctx: Context) -> bool:
+        """Wait for ``stop`` to complete (the robot at rest), bounded by the stop ramp."""
+        if stop.done.is_set():
+            return True
+        bound = arm_s(self.core.stop_bound_s())
+        ctx.waiting(bound, STOPPING)
+        return stop.wait(bound)
+
+    def alter_mode(self, req: AlterMode, ctx: Context) -> Ack:
         if req.enable:
+            stop = self.core.stopping()  # Alter starts at rest: a stop in progress ends first
+            if stop is not None and not self._at_rest(stop, ctx):
+                return Ack(ok=False, reason="the robot did not come to rest in time")
             try:
                 ok, reason = self.core.enable_alter(req.synchronized, req.timeout_s)
             except Offline as exc:
                 return Ack(ok=False, reason=str(exc), error=str(exc))
             return Ack(ok=ok, reason=reason)
-        stopped = self.core.disable_alter().wait(10.0)  # done once the robot is at rest
+        stopped = self._at_rest(self.core.disable_alter(), ctx)  # done once the robot is at rest
         return Ack(ok=stopped, reason="" if stopped else "the robot did not come to rest in time")
 
     def alter_target(self, req: AlterTarget, _ctx) -> Ack:
@@ -167,9 +181,10 @@ class DriverService:
             return Ack(ok=False, reason=str(exc), error=str(exc))
         return Ack(ok=ok, reason=reason)
 
-    def stop(self, _req: Empty, _ctx) -> Ack:
-        motion = self.core.stop("stop requested")
-        return Ack(ok=motion.wait(4.0) and bool(motion.ok), reason=motion.reason or "")
+    def stop(self, _req: Empty, ctx: Context) -> Ack:
+        """Stop whatever runs (a trajectory, Alter) with the ramp; ``ok``: at rest."""
+        stopped = self._at_rest(self.core.stop("stop requested"), ctx)
+        return Ack(ok=stopped, reason="" if stopped else "the robot did not come to rest in time")
 
     def signal(self, req: SignalRequest, _ctx) -> Ack:
         """Switch the Adept's digital outputs; the numbers are checked again here (rob6.vplus),
@@ -209,7 +224,7 @@ class DriverService:
                        inline=("ping", "state", "alter_target", "link"))
 
     def shutdown(self) -> None:
-        self.core.stop("driver shutting down").wait(2.0)
+        self.core.stop("driver shutting down").wait(arm_s(self.core.stop_bound_s()))
         self.link.stop()
         status = self.link.status()
         log.info("driver: %d cycles, %d missed, %d late", status.packets, status.missed, status.late)

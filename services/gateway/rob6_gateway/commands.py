@@ -3,9 +3,11 @@
 Every handler gets the parsed-on-demand argument cursor and returns the complete
 reply text (all lines, each ending in ``\\n``) or ``None`` for the few commands the
 original answers with nothing (``SetAllowedStatus``). Parsing errors use the
-original's words (``ERROR: incorrect joints`` + ``false``); an unreachable service
-gives ``ERROR: <service> unavailable`` within the bus timeout. Command names are
-case-sensitive, extra arguments are ignored, as in the original.
+original's words (``ERROR: incorrect joints`` + ``false``). A failed service call
+gives ``ERROR: <service> unavailable`` (no live instance) or ``ERROR: <service>: no
+reply to <command> within <s> s (<what it waited for>)``, followed by ``false`` when
+the command's reply can be ``false`` (``value=False`` commands: a value, no ``false``).
+Command names are case-sensitive, extra arguments are ignored, as in the original.
 """
 
 from __future__ import annotations
@@ -15,9 +17,10 @@ import logging
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 from rob6 import logs
-from rob6.bus import Bus, BusError
+from rob6.bus import Bus, BusError, BusTimeout
 from rob6.messages import (
     OWNER_SERVICES,
     AlterTarget,
@@ -32,6 +35,7 @@ from rob6.messages import (
     MotionConfig,
     MotionKind,
     MoveRequest,
+    SessionEnd,
     SessionEvent,
     SignalRequest,
     Verbosity,
@@ -45,8 +49,14 @@ from .state import ConfigMirror, Session
 
 log = logging.getLogger("rob6.gateway")
 
+T = TypeVar("T")
+
 VERSION = "0.1.01"
 TRUE, FALSE = "true\n", "false\n"
+
+
+class ClientGone(Exception):
+    """The client's connection closed while it waited for a move (the move is abandoned)."""
 
 
 class Close(Exception):
@@ -55,6 +65,20 @@ class Close(Exception):
     def __init__(self, reply: str, shutdown: bool = False):
         self.reply = reply
         self.shutdown = shutdown
+
+
+async def unless_gone(session: Session, work: Awaitable[T], command: str) -> T:
+    """``work``'s result; ``ClientGone`` (``work`` cancelled) when the client goes first."""
+    task = asyncio.ensure_future(work)
+    watch = asyncio.ensure_future(session.gone.wait())
+    try:
+        await asyncio.wait({task, watch}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        watch.cancel()
+    if task.done():
+        return task.result()
+    task.cancel()
+    raise ClientGone(f"the client left during {command}: the robot stops")
 
 
 def fmt(values) -> str:
@@ -79,14 +103,35 @@ class Options:
 
 Handler = Callable[["Gateway", Session, Args], Awaitable[str | None]]
 COMMANDS: dict[str, Handler] = {}
+#: commands whose reply is a value (or nothing), never ``false``: an error is its only line
+VALUE_REPLIES: set[str] = set()
 
 
-def command(*names: str):
+def command(*names: str, value: bool = False):
+    """Register a handler; ``value``: the command answers a value, never ``false``."""
     def register(func: Handler) -> Handler:
         for name in names:
             COMMANDS[name] = func
+            if value:
+                VALUE_REPLIES.add(name)
         return func
     return register
+
+
+def failure(name: str, exc: BusError) -> str:
+    """The text of the ``ERROR:`` line for command ``name`` whose service call failed."""
+    if isinstance(exc, BusTimeout):  # the gateway's own call: named by the client's command
+        waited = f" ({exc.waiting_for})" if exc.waiting_for else ""
+        return f"{exc.service}: no reply to {name} within {exc.seconds:.1f} s{waited}"
+    return exc.message
+
+
+def reached(exc: BusError) -> bool:
+    """Did the service take the request that failed? It answered (with an error), or it
+    announced what it waited for before it was late."""
+    if isinstance(exc, BusTimeout):
+        return bool(exc.waiting_for)
+    return exc.code != "unavailable"
 
 
 class Gateway:
@@ -101,6 +146,8 @@ class Gateway:
         self.verbosity = 2
         self.alter = False  # EnableAlter succeeded (the planner owns the mode; this is its echo)
         self.shutdown_requested = asyncio.Event()
+        self._ending: asyncio.Task[None] | None = None  # the last session's end: its robot stopping
+        self._ends: set[asyncio.Task[None]] = set()  # sessions' ends still under way
         # a service (re)appearing gets the current verbosity, so all processes agree
         bus.on_liveliness(self._on_liveliness)
 
@@ -116,13 +163,16 @@ class Gateway:
         handler = COMMANDS.get(name)
         if handler is None:
             return f"ERROR: {line}\n"
+        if self._ending is not None and not self._ending.done():
+            # the last client left with the robot moving: this one starts with it at rest
+            await asyncio.shield(self._ending)
         try:
             return await handler(self, session, Args(rest))
         except ParseError as exc:
             return error(str(exc))
         except BusError as exc:
             log.warning("%s failed: %s (%s)", name, exc.message, exc.code)
-            return f"ERROR: {exc.message}\n"
+            return error(failure(name, exc), with_false=name not in VALUE_REPLIES)
 
     async def call(self, session: Session, service: str, op: str, body, **kwargs):
         return await self.bus.arequest(service, op, body, cid=session.cid, **kwargs)
@@ -147,17 +197,38 @@ class Gateway:
             t_out=time.time(), line=line.text if not line.too_long else f"<{line.too_long} bytes>",
             reply=reply, seq=session.seq))
 
-    def record_event(self, session: Session, event: str, greeting: str = "") -> None:
+    def record_event(self, session: Session, event: str, greeting: str = "", reason: str = "") -> None:
         self.bus.trace("trace/gateway/event", SessionEvent(
-            session=session.number, event=event, peer=session.peer, t=time.time(), greeting=greeting))
+            session=session.number, event=event, peer=session.peer, t=time.time(), greeting=greeting,
+            reason=reason))
 
-    async def session_end(self, session: Session) -> None:
-        """The client left: the planner stops any real-time motion (Alter mode)."""
+    def session_id(self, session: Session) -> str:
+        """Names the session across gateway restarts (``SessionEnd.session``)."""
+        return f"{self.bus.instance}:{session.number}"
+
+    def end_session(self, session: Session, abandoned: bool = False) -> None:
+        """The session ended (Quit, the client's close): whatever it left running stops in
+        the background. When the arm may be moving (Alter on, or a move ``abandoned`` by a
+        client gone), the next session's commands wait for that."""
+        moving = self.alter or abandoned
         self.alter = False
+        ending = asyncio.get_running_loop().create_task(self._session_end(session))
+        self._ends.add(ending)  # a reference until it is done (the loop keeps only a weak one)
+        ending.add_done_callback(self._ends.discard)
+        if moving:
+            self._ending = ending
+
+    async def _session_end(self, session: Session) -> None:
+        """The planner stops whatever the client left running (Alter, a move), with the
+        ramp, and answers at rest."""
         try:
-            await self.call(session, "planner", "session_end", Empty())
+            reply = await self.call(session, "planner", "session_end", SessionEnd(session=self.session_id(session)))
         except BusError as exc:
-            log.warning("planner did not confirm the end of session %d: %s", session.number, exc.message)
+            log.warning("planner did not confirm the end of session %d: %s", session.number,
+                        failure("the end of the session", exc))
+            return
+        if not reply.ok:
+            log.warning("session %d ended: %s", session.number, reply.reason)
 
 
 def _split_command(line: str) -> tuple[str, str, str]:
@@ -169,7 +240,7 @@ def _split_command(line: str) -> tuple[str, str, str]:
 
 
 # ====================================================================== management
-@command("GetRobot")
+@command("GetRobot", value=True)
 async def get_robot(gw, session, args):
     return gw.robot.name + "\n"
 
@@ -187,22 +258,22 @@ command("IsKR3")(_identity(lambda r: r.is_kr3))
 command("IsKR16")(_identity(lambda r: r.is_kr16))
 
 
-@command("GetVersion")
+@command("GetVersion", value=True)
 async def get_version(gw, session, args):
     return VERSION + "\n"
 
 
-@command("GetTimestamp")
+@command("GetTimestamp", value=True)
 async def get_timestamp(gw, session, args):
     return "%.3f\n" % time.time()
 
 
-@command("CM_PING")
+@command("CM_PING", value=True)
 async def cm_ping(gw, session, args):
     return "PONG\n"
 
 
-@command("GetVerbosity")
+@command("GetVerbosity", value=True)
 async def get_verbosity(gw, session, args):
     return f"{gw.verbosity}\n"
 
@@ -232,7 +303,7 @@ async def shutdown(gw, session, args):
     raise Close("bye!\nshutting down ...\n", shutdown=True)
 
 
-@command("PingRobot")
+@command("PingRobot", value=True)
 async def ping_robot(gw, session, args):
     """n round trips gateway -> driver, ``wait`` ms apart (default 10, 0).
 
@@ -276,18 +347,18 @@ def _drift_fit(points: list[tuple[float, float]]) -> tuple[float, float]:
 
 
 # ====================================================================== position
-@command("GetPositionJoints")
+@command("GetPositionJoints", value=True)
 async def get_position_joints(gw, session, args):
     return fmt(await gw.current(session)) + "\n"
 
 
-@command("GetPositionHomRowWise")
+@command("GetPositionHomRowWise", value=True)
 async def get_position_hom(gw, session, args):
     reply = await gw.call(session, "kinematics", "fk", FkRequest(joints=[await gw.current(session)]))
     return fmt(reply.poses[0]) + "\n"
 
 
-@command("GetStatus")
+@command("GetStatus", value=True)
 async def get_status(gw, session, args):
     return " ".join(gw.robot.status(await gw.current(session))) + "\n"
 
@@ -308,12 +379,12 @@ def _config_getter(field: str):
     return handler
 
 
-command("GetJointsMaxSpeed")(_config_getter("speed"))
-command("GetJointsMaxAcceleration")(_config_getter("accel"))
-command("GetJointsMaxChange")(_config_getter("max_change"))
-command("GetJointsMaxTurnMax")(_config_getter("turn_max"))
-command("GetJointsMaxTurnMin")(_config_getter("turn_min"))
-command("GetMinChangeWeights")(_config_getter("weights"))
+command("GetJointsMaxSpeed", value=True)(_config_getter("speed"))
+command("GetJointsMaxAcceleration", value=True)(_config_getter("accel"))
+command("GetJointsMaxChange", value=True)(_config_getter("max_change"))
+command("GetJointsMaxTurnMax", value=True)(_config_getter("turn_max"))
+command("GetJointsMaxTurnMin", value=True)(_config_getter("turn_min"))
+command("GetMinChangeWeights", value=True)(_config_getter("weights"))
 
 
 async def _change(gw, session, name: str, values=(), words=()) -> bool:
@@ -362,12 +433,12 @@ command("ResetMinChangeWeights")(_reset("ResetMinChangeWeights"))
 command("ResetAllowedStatus")(_reset("ResetAllowedStatus"))
 
 
-@command("GetAllowedStatus")
+@command("GetAllowedStatus", value=True)
 async def get_allowed_status(gw, session, args):
     return " ".join((await _config(gw, session)).allowed) + "\n"
 
 
-@command("SetAllowedStatus")
+@command("SetAllowedStatus", value=True)
 async def set_allowed_status(gw, session, args):
     try:
         words = args.status()
@@ -377,7 +448,7 @@ async def set_allowed_status(gw, session, args):
     return None  # the original sends nothing on success; its clients do not read a reply
 
 
-@command("GetRTSpeedControl")
+@command("GetRTSpeedControl", value=True)
 async def get_rt_speed_control(gw, session, args):
     return f"{(await _config(gw, session)).rt_speed_control}\n"
 
@@ -450,8 +521,9 @@ async def _move(gw, session, kind: MotionKind, **fields) -> str:
     if session.routetest is not None:  # real moves are refused while route testing
         return FALSE
     state = gw.joints.get()  # the planner starts from it rather than follow the state itself
-    reply = await gw.call(session, "planner", "move", MoveRequest(
-        kind=kind, start=state.q if state is not None else None, **fields))
+    # the client may leave mid-move: the move is abandoned, the session's end stops the robot
+    reply = await unless_gone(session, gw.call(session, "planner", "move", MoveRequest(
+        kind=kind, start=state.q if state is not None else None, session=gw.session_id(session), **fields)), kind)
     if reply.state is not None:
         gw.joints.update(reply.state)
     if not reply.ok and reply.error:  # the robot failed (not connected, link lost), not the command
@@ -530,7 +602,14 @@ async def routetest_row_wise_status(gw, session, args):
 # ---------------------------------------------------------------------- real-time (Alter) and LIN modes
 def _mode(name):
     async def handler(gw, session, args):
-        reply = await gw.call(session, "planner", "mode", ModeRequest(command=name))
+        try:
+            reply = await gw.call(session, "planner", "mode", ModeRequest(command=name))
+        except BusError as exc:
+            if name != "DisableAlter" or not reached(exc):
+                raise
+            gw.alter = False  # the planner turns Alter off before it waits for the arm
+            log.warning("%s failed: %s (%s)", name, exc.message, exc.code)
+            return error(failure(name, exc) + "; Alter mode is off")
         if name in ("EnableAlter", "EnableAdeptAlter") and reply.ok:
             gw.alter = True
         elif name == "DisableAlter":

@@ -2,7 +2,10 @@
 
 Like the original, the server talks to one client at a time. Unlike the original
 (whose second client hung and was then reset), a second client gets one clear line
-and is closed, without disturbing the first.
+and is closed, without disturbing the first. A client whose connection closes while
+it waits for a move is gone (``Session.gone``): the move is abandoned, the session ends
+at once (its close event says why) and the robot stops (``Gateway.end_session``), so
+the next client is accepted instead of waiting for the end of a move nobody waits for.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import time
 
 from rob6.bus import new_cid
 
-from .commands import Close, Gateway
+from .commands import ClientGone, Close, Gateway
 from .framing import MAX_LINE, Framer, Line
 from .state import Session
 
@@ -56,27 +59,33 @@ class Server:
         self.active = session
         log.info("session %d: client %s connected", session.number, peer_text)
         self.gateway.record_event(session, "open", GREETING.decode())
+        reason = ""
         try:
             await self._run(session, reader, writer)
         except (ConnectionError, asyncio.IncompleteReadError):
             log.info("session %d: connection to client lost", session.number)
+        except ClientGone as exc:
+            reason = str(exc)
+            log.warning("session %d: %s", session.number, reason)
         finally:
             self.active = None
+            self.gateway.end_session(session, abandoned=bool(reason))  # the robot stops (if it moves) from now
             await _close(writer)
             log.info("session %d ended", session.number)
-            self.gateway.record_event(session, "close")
-            asyncio.get_running_loop().create_task(self.gateway.session_end(session))
+            self.gateway.record_event(session, "close", reason=reason)
 
     async def _run(self, session: Session, reader, writer) -> None:
         writer.write(GREETING)
         lines: asyncio.Queue[Line | None] = asyncio.Queue(QUEUE_LIMIT)
-        read_task = asyncio.create_task(self._read(reader, lines))
+        read_task = asyncio.create_task(self._read(reader, lines, session.gone))
         try:
             await self._serve(session, lines, writer)
         finally:
             read_task.cancel()
 
-    async def _read(self, reader: asyncio.StreamReader, lines: asyncio.Queue) -> None:
+    async def _read(self, reader: asyncio.StreamReader, lines: asyncio.Queue, gone: asyncio.Event) -> None:
+        """Lines into ``lines`` (None at the end); ``gone`` set when the client closed (not
+        at the idle timeout)."""
         framer = Framer(self.max_line)
         try:
             while True:
@@ -91,13 +100,14 @@ class Server:
                         await lines.put(line)
                     continue
                 if not data:
+                    gone.set()
                     for line in framer.flush():
                         await lines.put(line)
                     break
                 for line in framer.feed(data):
                     await lines.put(line)
         except (ConnectionError, OSError):
-            pass
+            gone.set()
         finally:
             await lines.put(None)
 
@@ -125,6 +135,9 @@ class Server:
                     reply = await gateway.execute(session, line.text)
                 except Close as exc:
                     reply, close, shutdown = exc.reply, True, exc.shutdown
+                except ClientGone:
+                    gateway.record(session, received, line, None)
+                    raise
             if reply:
                 writer.write(reply.encode("latin-1"))  # the whole reply in one send
                 await writer.drain()

@@ -8,6 +8,7 @@ trip, not two.
 
 from __future__ import annotations
 
+import asyncio
 import threading
 from dataclasses import dataclass, field
 
@@ -69,3 +70,5 @@ class Session:
     cid: str = field(default_factory=new_cid)  # of the command being executed
     routetest: list[float] | None = None  # the virtual position while route testing
     seq: int = 0  # client exchanges recorded so far (ClientExchange.seq of the last one)
+    #: the client's connection closed: a move it waits for is abandoned (the robot stops)
+    gone: asyncio.Event = field(default_factory=asyncio.Event)

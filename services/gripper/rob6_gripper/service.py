@@ -7,6 +7,7 @@ import threading
 import time
 
 from rob6.bus import Bus, Context
+from rob6.deadlines import SLACK_S
 from rob6.messages import Empty, GripperCommand, GripperReply, GripperState
 
 from .backend import GripperBackend, Result
@@ -25,10 +26,11 @@ class GripperService:
         self._stop = threading.Event()
         self._publisher = threading.Thread(target=self._publish_state, name="gripper-state", daemon=True)
 
-    def command(self, req: GripperCommand, _ctx: Context) -> GripperReply:
+    def command(self, req: GripperCommand, ctx: Context) -> GripperReply:
         name, value = req.command, req.value
         if name == "HasGripper":
             return GripperReply(ok=self.backend.has_gripper())
+        ctx.waiting(self.timeout + SLACK_S, "waiting for the gripper")  # the backend's own bound
         if name == "GripperGoHome":
             return self._reply(self.backend.go_home(self.timeout))
         if value is None:  # the gateway sends one with every move (it answers ParseError otherwise)

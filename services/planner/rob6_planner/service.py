@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections import deque
 
 import numpy as np
 
 from rob6.bus import Bus, BusError, Context
+from rob6.deadlines import PLAN_LIN_S, PLAN_PTP_S, QUICK_S
 from rob6.messages import (
     Ack,
     AlterMode,
@@ -31,6 +33,7 @@ from rob6.messages import (
     MoveReply,
     MoveRequest,
     SelectRequest,
+    SessionEnd,
     Trajectory,
 )
 from rob6.robots import RobotModel
@@ -74,6 +77,11 @@ class PlannerService:
         # Adept V+ settings (ad850): speed and accelerations in percent of the maximum
         self.adept = {"speed": 100.0, "accel": 100.0, "decel": 100.0, "fine": 100.0, "coarse": 100.0}
         self._lock = threading.Lock()  # one motion at a time; the planner reuses its Ruckig buffers
+        # a motion of a session whose client left (session_end) never starts, and the stop
+        # for it reaches the driver only after a motion being handed over has started
+        self._handover = threading.Condition()
+        self._ended: deque[str] = deque(maxlen=64)  # the last sessions that ended
+        self._handing_over = False
         self._version = 0  # of the configuration, for the gateway's mirror
         bus.on_liveliness(self._on_liveliness)
 
@@ -140,36 +148,50 @@ class PlannerService:
         command = req.command
         if command == "EnableAdeptAlter" and not self.robot.is_adept:
             return Ack(ok=False, reason="EnableAdeptAlter is for the Adept only")
-        if command in ("EnableAlter", "EnableAdeptAlter"):
+        if command in ("EnableAlter", "EnableAdeptAlter"):  # waits for a stop in progress
             reply = self.bus.request("driver", "alter_mode", AlterMode(
                 enable=True, synchronized=self.config.rt_speed_control == 0,
-                timeout_s=self.alter_timeout_s), cid=ctx.cid)
+                timeout_s=self.alter_timeout_s), cid=ctx.cid, waiting=ctx.waiting)
             self.alter = reply.ok
             return reply
         if command == "DisableAlter":
             if not self.alter:
                 return Ack(ok=True)  # already off: the original answers true as well
-            self.alter = False
-            return self.bus.request("driver", "alter_mode", AlterMode(enable=False), cid=ctx.cid, timeout=12.0)
+            self.alter = False  # answered once the robot is at rest
+            return self.bus.request("driver", "alter_mode", AlterMode(enable=False), cid=ctx.cid,
+                                    waiting=ctx.waiting)
         if command in ("EnableLin", "DisableLin"):
             self.lin = command == "EnableLin"
             return Ack(ok=True)
         return Ack(ok=False, reason=f"unknown mode command {command}")
 
-    def session_end(self, _req: Empty, ctx: Context) -> Ack:
-        """The client left: real-time motion must not go on without it."""
-        if self.alter:
+    def session_end(self, req: SessionEnd, ctx: Context) -> Ack:
+        """The client left: no motion goes on without it (Alter, or a move it left during,
+        or one of its moves still being planned). The driver stops whatever runs, with its
+        ramp; answered at rest."""
+        with self._handover:
+            self._ended.append(req.session)
             self.alter = False
-            return self.bus.request("driver", "alter_mode", AlterMode(enable=False), cid=ctx.cid, timeout=12.0)
-        return Ack(ok=True)
+            if self._handing_over:  # the stop must come after the driver took the motion
+                ctx.waiting(QUICK_S, "waiting for the driver to take a motion")
+                self._handover.wait_for(lambda: not self._handing_over, QUICK_S)
+        reply: Ack = self.bus.request("driver", "stop", Empty(), cid=ctx.cid, waiting=ctx.waiting)
+        return reply
+
+    def _handed_over(self) -> None:
+        with self._handover:
+            self._handing_over = False
+            self._handover.notify_all()
 
     # ------------------------------------------------------------------ motion
     def move(self, req: MoveRequest, ctx: Context) -> MoveReply:
         try:
+            lin = req.kind == "MoveLINHomRowWise"
+            ctx.waiting(PLAN_LIN_S if lin else PLAN_PTP_S, "planning the straight line" if lin else "planning")
             if req.kind in ALTER_MOVES:
                 return self._alter_move(req, ctx.cid)
             with self._lock:
-                return self._move(req, ctx.cid)
+                return self._move(req, ctx)
         except Refused as exc:
             log.info("%s refused: %s", req.kind, exc)
             return MoveReply(ok=False, reason=str(exc))
@@ -183,12 +205,13 @@ class PlannerService:
             return list(req.start)
         return list(self.bus.request("driver", "state", Empty()).q)
 
-    def _move(self, req: MoveRequest, cid: str) -> MoveReply:
+    def _move(self, req: MoveRequest, ctx: Context) -> MoveReply:
+        cid = ctx.cid
         start = self._current(req)
         if self.alter and not req.dry_run:
             raise Refused("Alter mode is on (DisableAlter first)")
         if req.kind == "MoveLINHomRowWise":
-            return self._lin(req, start, cid)
+            return self._lin(req, start, ctx)
         if self.lin and not req.dry_run:
             raise Refused("LIN mode is on: point-to-point moves are refused (DisableLin first)")
         if req.kind in JOINT_MOVES:
@@ -205,7 +228,7 @@ class PlannerService:
             raise Refused(plan.reason)
         if req.dry_run:
             return MoveReply(ok=True, joints=target)
-        return self._execute(plan.trajectory, cid)
+        return self._execute(plan.trajectory, req, ctx)
 
     def _select(self, pose, pattern, current, cid) -> list[float]:
         c = self.config
@@ -217,15 +240,29 @@ class PlannerService:
             raise Refused("no admissible solution for that pose and status")
         return reply.joints
 
-    def _execute(self, trajectory, cid) -> MoveReply:
-        duration = trajectory.duration
-        reply = self.bus.request("driver", "execute", ExecuteRequest(trajectory=Trajectory(
-            dt=trajectory.dt, q=trajectory.q.tolist(), qd=trajectory.qd.tolist(), qdd=trajectory.qdd.tolist())),
-            cid=cid, timeout=duration + 10.0)
+    def _execute(self, trajectory, req: MoveRequest, ctx: Context) -> MoveReply:
+        """Hand the motion to the driver and wait for its end, as long as the driver says
+        (its announcement also says it took the motion: a stop sent now stops it)."""
+        request = ExecuteRequest(trajectory=Trajectory(
+            dt=trajectory.dt, q=trajectory.q.tolist(), qd=trajectory.qd.tolist(), qdd=trajectory.qdd.tolist()))
+        with self._handover:
+            if req.session and req.session in self._ended:
+                raise Refused("the client left before the motion started")
+            self._handing_over = True
+
+        def started(seconds: float, what: str) -> None:
+            self._handed_over()
+            ctx.waiting(seconds, what)
+
+        try:
+            reply = self.bus.request("driver", "execute", request, cid=ctx.cid, waiting=started)
+        finally:
+            self._handed_over()
         joints = reply.state.q if reply.state is not None else None
         return MoveReply(ok=reply.ok, joints=joints, reason=reply.reason, error=reply.error, state=reply.state)
 
-    def _lin(self, req: MoveRequest, start: list[float], cid: str) -> MoveReply:
+    def _lin(self, req: MoveRequest, start: list[float], ctx: Context) -> MoveReply:
+        cid = ctx.cid
         if not self.lin:
             raise Refused("LIN mode is off (EnableLin first)")
         if req.dry_run:
@@ -236,7 +273,7 @@ class PlannerService:
 
         def ik_fn(poses: np.ndarray) -> np.ndarray:
             reply = self.bus.request("kinematics", "ik_batch", IkBatchRequest(
-                poses=np.asarray(poses, float).reshape(-1, 12).tolist()), cid=cid, timeout=5.0)
+                poses=np.asarray(poses, float).reshape(-1, 12).tolist()), cid=cid)
             index = reply.branches.index(branch)
             return np.array([[np.nan] * 6 if s[index] is None else s[index] for s in reply.solutions])
 
@@ -244,7 +281,7 @@ class PlannerService:
                         self._planning_config(), ik_fn)
         if not plan.ok:
             raise Refused(plan.reason)
-        return self._execute(plan.trajectory, cid)
+        return self._execute(plan.trajectory, req, ctx)
 
     def _alter_move(self, req: MoveRequest, cid: str) -> MoveReply:
         """Alter targets; the driver checks them (Alter mode, turn limits, max change), since

@@ -99,8 +99,10 @@ class RecorderService:
         elif suffix == "trace/gateway/event":
             event = self._event.decode(payload)
             t = int(event.t * 1e9)
-            submit(f"/session/{event.session}/event", t,
-                   {"session": event.session, "event": event.event, "peer": event.peer})
+            record = {"session": event.session, "event": event.event, "peer": event.peer}
+            if event.reason:  # a close other than Quit or the client's close between commands
+                record["reason"] = event.reason
+            submit(f"/session/{event.session}/event", t, record)
             if event.greeting:
                 submit(f"/session/{event.session}/client_out", t,
                        {"session": event.session, "cid": "", "text": event.greeting, "kind": "greeting"})

@@ -299,6 +299,8 @@ def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(t
             k += 1
             reply = ask("MoveRTJoints " + " ".join(f"{x:f}" for x in target))
             assert reply == "true\n" or reply.startswith("ERROR: driver"), reply
+            if reply != "true\n":
+                assert client.read_lines(1, timeout=30) == "false\n"  # ERROR: ... then false
             refused += reply != "true\n"
             time.sleep(0.004)
 

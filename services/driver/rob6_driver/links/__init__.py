@@ -68,6 +68,11 @@ class Link(ABC):
         """The outputs switched so far, V+ style (5 on, -6 off), by number."""
         return []
 
+    @property
+    def settle_bound_s(self) -> float:
+        """The longest ``settle`` waits (its own timeouts), seconds."""
+        return 0.0
+
     def settle(self, q_final, timeout: float | None = None) -> str:
         """After a motion ended at ``q_final`` (deg): wait until the robot is there.
         "" when it is, else why not (the motion then fails with that error). Links

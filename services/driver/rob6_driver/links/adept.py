@@ -349,6 +349,10 @@ class AdeptLink(Link):
         return self._outputs.as_list()
 
     # ------------------------------------------------------------------ arrival
+    @property
+    def settle_bound_s(self) -> float:
+        return self.settle_max_s + self.ack_timeout_s  # stopped short, or the last points never taken
+
     def settle(self, q_final, timeout: float | None = None) -> str:
         """Wait until the robot has arrived at ``q_final`` (deg); "" or why it did not."""
         target = np.asarray(q_final, float)
