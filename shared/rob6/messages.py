@@ -410,7 +410,7 @@ OPS: dict[tuple[str, str], Op] = {
     ("driver", "alter_target"): Op(AlterTarget, Ack),
     ("driver", "stop"): Op(Empty, Ack, waits=True),
     ("driver", "link"): Op(LinkQuery, LinkStatus),
-    ("driver", "signal"): Op(SignalRequest, Ack, timeout=10.0),
+    ("driver", "signal"): Op(SignalRequest, Ack, waits=True),
     ("kinematics", "fk"): Op(FkRequest, FkReply, timeout=REMOTE_POSE_S, hedged=True),
     ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply, timeout=REMOTE_POSE_S, hedged=True),
     ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply, timeout=REMOTE_POSE_S, hedged=True),

@@ -186,7 +186,7 @@ class DriverService:
         stopped = self._at_rest(self.core.stop("stop requested"), ctx)
         return Ack(ok=stopped, reason="" if stopped else "the robot did not come to rest in time")
 
-    def signal(self, req: SignalRequest, _ctx) -> Ack:
+    def signal(self, req: SignalRequest, ctx: Context) -> Ack:
         """Switch the Adept's digital outputs; the numbers are checked again here (rob6.vplus),
         so nothing reaches the controller that V+ SIGNAL would not take."""
         if not self.robot.is_adept:
@@ -194,6 +194,8 @@ class DriverService:
         problem = check_signals(req.signals)
         if problem:
             return Ack(ok=False, reason=problem)
+        ctx.waiting(self.link.signal_bound_s(len(req.signals)) + SIGNAL_PUBLISH_WAIT_S,
+                    f"waiting for the controller to switch {len(req.signals)} outputs")
         failed = self.link.signal(req.signals)
         if failed:
             return Ack(ok=False, reason=failed, error=failed)

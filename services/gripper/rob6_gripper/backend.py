@@ -82,6 +82,10 @@ class GripperBackend(ABC):
     """Common interface of :class:`~rob6_gripper.sim.SimGripper` and
     :class:`~rob6_gripper.schunk.SchunkGripper`."""
 
+    #: the longest one command to the gripper waits for its answer, seconds (0: it answers
+    #: at once); a motion waits its timeout and at most two such commands more
+    command_bound_s = 0.0
+
     @abstractmethod
     def has_gripper(self) -> bool:
         """True only if a working gripper answers (never raises, bounded time)."""

@@ -120,6 +120,7 @@ class SchunkGripper(GripperBackend):
         self.module_id = module_id
         self.response_timeout = response_timeout
         self.retries = max(0, retries)
+        self.command_bound_s = (self.retries + 1) * response_timeout
         self.poll_interval = poll_interval
         self.units = units_per_metre
         self.stroke = stroke

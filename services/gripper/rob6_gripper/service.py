@@ -28,11 +28,12 @@ class GripperService:
 
     def command(self, req: GripperCommand, ctx: Context) -> GripperReply:
         name, value = req.command, req.value
-        # the backend's own bound; HasGripper too: it asks the module (a silent serial
-        # one answers false only after the serial reply timeout, beyond QUICK_S)
-        ctx.waiting(self.timeout + SLACK_S, "waiting for the gripper")
+        bound = self.backend.command_bound_s
         if name == "HasGripper":
+            if bound:
+                ctx.waiting(bound + SLACK_S, "asking the gripper")
             return GripperReply(ok=self.backend.has_gripper())
+        ctx.waiting(self.timeout + 2 * bound + SLACK_S, "waiting for the gripper")  # the backend's own bound
         if name == "GripperGoHome":
             return self._reply(self.backend.go_home(self.timeout))
         if value is None:  # the gateway sends one with every move (it answers ParseError otherwise)

@@ -68,6 +68,10 @@ class Link(ABC):
         """The outputs switched so far, V+ style (5 on, -6 off), by number."""
         return []
 
+    def signal_bound_s(self, count: int) -> float:
+        """The longest ``signal`` of ``count`` outputs waits (its own timeouts), seconds."""
+        return 0.0
+
     @property
     def settle_bound_s(self) -> float:
         """The longest ``settle`` waits (its own timeouts), seconds."""

@@ -348,6 +348,9 @@ class AdeptLink(Link):
     def outputs(self) -> list[int]:
         return self._outputs.as_list()
 
+    def signal_bound_s(self, count: int) -> float:
+        return self.io.bound_s(count)
+
     # ------------------------------------------------------------------ arrival
     @property
     def settle_bound_s(self) -> float:

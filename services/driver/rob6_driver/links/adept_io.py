@@ -50,6 +50,11 @@ class AdeptIoPort:
         self._lock = threading.Lock()
         self._sock: socket.socket | None = None
 
+    def bound_s(self, count: int) -> float:
+        """The longest ``count`` writes take by this port's own timeouts: a connection,
+        and for each signal the gap and the answer, once more on a new connection."""
+        return CONNECT_TIMEOUT_S + count * 2 * (self.gap_s + self.answer_timeout_s)
+
     def write(self, signal: int) -> None:
         """``SIGNAL (signal)`` on the controller; IoPortError when it was not confirmed."""
         with self._lock:
