@@ -20,6 +20,7 @@ from rob6.config import BusSettings
 from rob6.messages import IkBatchRequest
 from rob6.testing import running
 
+from .busy import busy_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baseline
 from .links import links_table, live_realtime_table
 
@@ -225,6 +226,7 @@ def main() -> int:
     kinematics_tables()
     planner_table()
     links_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")), table)
+    busy_table(float(os.environ.get("ROB6_BENCH_BUSY_S", "60")), table)
     recording_table()
     live_realtime_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")) / 2, table)
     if os.environ.get("ROB6_BENCH_MULTIHOST") == "1":  # needs Docker and root, ~7 min
