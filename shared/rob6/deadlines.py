@@ -17,8 +17,11 @@ from __future__ import annotations
 import numpy as np
 
 #: a call that waits for nothing but the service's own work (the default of every bus
-#: operation), and what a waiting call has before the service said what it waits for
-QUICK_S = 0.2
+#: operation), and what a waiting call has before the service said what it waits for.
+#: The work takes well under a millisecond, but on a starved robot PC (4-8 busy processes on
+#: 2 cores, `make bench`'s busy table) a reply was seen 197 ms late: at 0.2 s such a reply
+#: became an ERROR a quiet machine would not give. A hung instance is still named within 1 s.
+QUICK_S = 1.0
 #: each hop outward waits this much longer than the service it called, so the service
 #: that waited is the one that reports, naming what it waited for
 HOP_S = 0.5

@@ -95,11 +95,11 @@ def test_every_host_serves(topology, client):
     line = backward_line(client)
     results = calls(client, line, 60)
     REPORT["BackwardCalc x60, no fault"] = assert_answered(results, "no fault")
-    # a busy machine may miss the 0.2 s kinematics timeout now and then: an ERROR, not a wrong answer
+    # a busy machine may miss the kinematics deadline now and then: an ERROR, not a wrong answer
     assert sum(c.ok for c in results) >= 0.9 * len(results)
     assert len(topology.containers("kinematics-c1")) == 2 and len(topology.containers("kinematics-c2")) == 1
     # the robot PC's own services through the gateway: planner, driver
-    ask_answered(client, "MovePTPJoints 10 -20 30 40 50 60")  # asked again if the 0.2 s bus timeout was missed
+    ask_answered(client, "MovePTPJoints 10 -20 30 40 50 60")  # asked again if the quick-call deadline was missed
     assert client.ask("GetPositionJoints") == "10.000000 -20.000000 30.000000 40.000000 50.000000 60.000000\n"
     # each compute host serves: stop the other one's replicas, the calls still succeed
     for only in REMOTE_KINEMATICS:
@@ -190,7 +190,7 @@ def test_robot_pc_router_killed(topology, client):
         assert client.ask("CM_PING") == "PONG\n"
         assert client.ask("MovePTPJoints 12 -20 30 40 50 60", timeout=30) == "true\n"
         assert client.ask("GetPositionJoints") == "12.000000 -20.000000 30.000000 40.000000 50.000000 60.000000\n"
-        ask_answered(client, "MovePTPJoints 10 -20 30 40 50 60")  # asked again if the 0.2 s bus timeout was missed
+        ask_answered(client, "MovePTPJoints 10 -20 30 40 50 60")  # asked again if the quick-call deadline was missed
         local = time.monotonic() - killed
         results = calls(client, line, 20, timeout=CALL_TIMEOUT)
         summary = assert_answered(results, "robot PC router killed")
@@ -248,8 +248,8 @@ def test_motion_unchanged_when_every_remote_host_is_partitioned(topology, client
     }
     REPORT["motion under partition of every remote host"] = report
     assert same_motion(reference, faulted, _ptp_samples(ptp_ref)), "the PTP motion differs"
-    # a busy machine may refuse the odd target (the driver's reply later than the 0.2 s bus
-    # timeout) with or without faults; a partition must not add to that (it refused every
+    # a busy machine may refuse the odd target (the driver's reply later than the quick-call
+    # deadline) with or without faults; a partition must not add to that (it refused every
     # target, 2 s in, while Zenoh held replies back for the partitioned routes: rob6.bus)
     assert refused[True] <= refused[False] + 10, f"{refused[True]} of 500 Alter targets refused under the partition"
     assert all(abs(a - b) < 1e-6 for a, b in zip(faulted[-1].q, reference[-1].q, strict=True)), \

@@ -310,7 +310,7 @@ def backward_line(client: Client) -> str:
 
 def ask_answered(client: Client, line: str, expected: str = "true\n", attempts: int = 3) -> int:
     """``line`` (a command answering true or false) answered ``expected``; an ``ERROR: <robot-PC
-    service> unavailable`` or ``ERROR: <service>: no reply to <command> within 0.2 s`` (the
+    service> unavailable`` or ``ERROR: <service>: no reply to <command> within N s`` (the
     quick-call deadline missed on a busy machine), each followed by ``false``, is asked
     again. Returns how often it was asked."""
     asked = 0
@@ -329,7 +329,7 @@ def ask_answered(client: Client, line: str, expected: str = "true\n", attempts: 
 def alter_session(client: Client) -> int:
     """2 s of Alter targets at 250 Hz (a sine on A1), then a final one, reached; returns how
     many targets were refused with an ERROR line (a busy machine: the driver's reply came
-    later than the 0.2 s bus timeout; the next target replaces it)."""
+    later than the quick-call deadline; the next target replaces it)."""
     ask_answered(client, "EnableAlter")
     here = [float(x) for x in client.ask("GetPositionJoints").split()]
     refused = 0
