@@ -14,7 +14,7 @@ docs/COMPATIBILITY.md lists every command whose reply waits, with these deadline
 
 from __future__ import annotations
 
-import numpy as np
+from collections.abc import Iterable
 
 #: a call that waits for nothing but the service's own work (the default of every bus
 #: operation), and what a waiting call has before the service said what it waits for.
@@ -57,13 +57,11 @@ def arm_s(seconds: float) -> float:
     return seconds * (1.0 + CLOCK_SLACK) + SLACK_S
 
 
-def stop_s(vmax: np.ndarray, amax: np.ndarray, jmax: np.ndarray) -> float:
-    """The longest controlled stop under these limits (deg/s, deg/s^2, deg/s^3), in the
-    controller's seconds: from full speed with full acceleration, the acceleration ramps
-    to the braking one (2 a/j), then the speed to 0 (v/a). Axes with a zero limit are
-    held, not braked."""
-    braking = (amax > 1e-9) & (jmax > 1e-9)
-    if not braking.any():
-        return 0.0
-    v, a, j = vmax[braking], amax[braking], jmax[braking]
-    return float(np.max(v / a + 2.0 * a / j))
+def stop_s(vmax: Iterable[float], amax: Iterable[float], jmax: Iterable[float]) -> float:
+    """The longest controlled stop under these limits (deg/s, deg/s^2, deg/s^3, per axis),
+    in the controller's seconds: from full speed with full acceleration, the acceleration
+    ramps to the braking one (2 a/j), then the speed to 0 (v/a). Axes with a zero limit
+    are held, not braked. Plain Python: rob6-shared has no numpy (the router, gateway,
+    gripper and recorder images do not carry it)."""
+    return max((float(v) / float(a) + 2.0 * float(a) / float(j)
+                for v, a, j in zip(vmax, amax, jmax, strict=True) if a > 1e-9 and j > 1e-9), default=0.0)

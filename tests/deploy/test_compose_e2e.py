@@ -201,25 +201,18 @@ def built(rob6_images):
 
 
 @pytest.fixture(scope="module")
-def entry_points(built) -> dict[str, bool]:
-    """Which services' images can import their entry point (the lead writes them)."""
-    found = {}
-    for service in SERVICES:
-        proc = run(["docker", "run", "--rm", "--network", "none", f"rob6/{service}:{TAG}", "python", "-c",
-                    f"import rob6_{service}.__main__"], check=False, timeout=120)
-        found[service] = proc.returncode == 0
-    return found
-
-
-def require(entry_points, *services):
-    missing = [s for s in services if not entry_points[s]]
-    if missing:
-        pytest.skip(f"no entry point yet in the image(s) of {missing} (rob6_<service>/__main__.py)")
+def entry_points(built) -> None:
+    """Every image imports its entry point, with everything it imports in turn: a module
+    the image lacks (rob6-shared importing numpy, which the router, gateway, gripper and
+    recorder images do not carry) fails here, before any stack is started."""
+    for service in ("router", *SERVICES):
+        module = "rob6.cli" if service == "router" else f"rob6_{service}.__main__"
+        run(["docker", "run", "--rm", "--network", "none", f"rob6/{service}:{TAG}", "python", "-c",
+             f"import {module}"], timeout=120)
 
 
 @pytest.fixture(scope="module")
 def plain(built, entry_points):
-    require(entry_points, *SERVICES)
     stack = Stack(f"rob6e2e{os.getpid()}")
     try:
         t = time.monotonic()
@@ -487,7 +480,6 @@ def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
     """`ROB6_LINK=rsi ROB6_ROBOT=kr16rt compose --profile rsi up`: the driver drives the
     stand-in KR C4 (its own container on the robot network) over RSI in real time; the
     controller's axes end where the client moved them, without a trip."""
-    require(entry_points, *SERVICES)
     with controller_stack("rsi", "kuka-rsi-sim", robot="kr16rt", link="rsi",
                           control_port_setting="ROB6_KUKA_SIM_CONTROL_PORT") as (stack, kuka):
         # the KR C4 sends from the moment it is up; until the driver answers, RSI times out
@@ -512,7 +504,6 @@ def test_adept_profile_drives_the_adept_container(built, entry_points):
     connects to the stand-in Adept controller (its own container on the robot network, found
     by the compose default ROB6_SM_HOST=adept-sm-sim) and streams a PTP motion to it over
     simple_message; the move answers true only once the controller's arm is at the target."""
-    require(entry_points, *SERVICES)
     with controller_stack("adept", "adept-sm-sim", robot="ad850", link="simple_message",
                           control_port_setting="ROB6_ADEPT_SIM_CONTROL_PORT") as (stack, adept):
         # the driver is the client of both simple_message ports and retries until they answer
@@ -554,7 +545,6 @@ def test_adept_profile_drives_the_adept_container(built, entry_points):
 
 # ---------------------------------------------------------------------- tests: secure profile
 def test_secure_profile_end_to_end(built, entry_points, certs):
-    require(entry_points, *SERVICES)
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2esec{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
                   {"ROB6_CERTS_DIR": str(certs_dir)})
