@@ -296,10 +296,10 @@ class Topology:
 
 def backward_line(client: Client) -> str:
     """A BackwardCalc line that succeeds (the pose of FK_LINE and its status); asks again while
-    kinematics answers ``ERROR: ...`` (one line: e.g. right after a partition healed)."""
+    kinematics answers ``ERROR: ...`` / ``false`` (e.g. right after a partition healed)."""
     deadline = time.monotonic() + 60
     while True:
-        reply = client.ask(FK_LINE, timeout=15)
+        reply = ask_reply(client, FK_LINE, timeout=15)
         if not reply.startswith("ERROR"):
             pose, status = reply, client.read_lines(1, timeout=15)
             return f"BackwardCalc {pose.strip()} {status.strip()}"
@@ -375,11 +375,21 @@ class Call:
         return self.reply.startswith("ERROR")
 
 
+def ask_reply(client: Client, line: str, timeout: float) -> str:
+    """The first line of ``line``'s reply; an ``ERROR: ...`` line's ``false`` after it (the
+    gateway answers a failed BackwardCalc or ForwardCalc with both) is read too, and checked."""
+    reply = client.ask(line, timeout=timeout)
+    if reply.startswith("ERROR"):
+        after = client.read_lines(1, timeout=timeout)
+        assert after == "false\n", (line, reply, after)
+    return reply
+
+
 def calls(client: Client, line: str, count: int, timeout: float = 10.0) -> list[Call]:
     out = []
     for _ in range(count):
         t = time.monotonic()
-        reply = client.ask(line, timeout=timeout)
+        reply = ask_reply(client, line, timeout)
         out.append(Call(t, time.monotonic() - t, reply))
     return out
 
@@ -396,7 +406,7 @@ class Load:
     def _run(self) -> None:
         while not self._stop.is_set():
             t = time.monotonic()
-            reply = self.client.ask(self.line, timeout=self.timeout)
+            reply = ask_reply(self.client, self.line, self.timeout)
             self.calls.append(Call(t, time.monotonic() - t, reply))
             if not reply:  # no answer within the timeout: a hang; stop here
                 return
