@@ -113,6 +113,22 @@ def test_records_outside_sessions_go_to_system_only(tmp_path):
     assert [r.log_time - t for r in read_records(system)] == [0, 1, 2, 3, 4, 5]
 
 
+def test_a_trace_arriving_before_its_sessions_open_event_lands_in_the_session(tmp_path):
+    """Two services' trace batches reach the recorder in either order: the kinematics trace of
+    a session's first command may come before the gateway's open event (seen in a full test
+    run on a busy machine). It belongs to the session by its time, not by its arrival."""
+    with Recorder(tmp_path, "kr16", "robot1") as rec:
+        t = time.time_ns()
+        rec.submit("/driver/joint_state", t, {"q": [0] * 6})  # before the session: not in it
+        rec.submit("/bus/kinematics/forward_calc/request", t + 2, {"cid": "a"})  # arrives first
+        rec.submit("/session/1/event", t + 1, {"session": 1, "event": "open"})
+        rec.submit("/session/1/client_in", t + 3, {"session": 1, "cid": "a", "text": "ForwardCalc\n"})
+        rec.submit("/session/1/event", t + 4, {"session": 1, "event": "close"})
+    (session,), (system,) = _files(tmp_path, "session"), _files(tmp_path, "system")
+    assert sorted(r.log_time - t for r in read_records(session)) == [1, 2, 3, 4]
+    assert sorted(r.log_time - t for r in read_records(system)) == [0, 1, 2, 3, 4]
+
+
 def test_rotation_by_size_and_time(tmp_path):
     with Recorder(tmp_path / "size", "kr16", "robot1", rotate_bytes=20_000, rotate_seconds=0,
                   chunk_interval=0.05, fsync=False) as rec:

@@ -4,7 +4,11 @@ One file per client session (``/session/<n>/...`` records, plus everything else 
 happens while it is open) and a rolling system file (everything), rotated when it is
 ``rotate_seconds`` old or ``rotate_bytes`` large. A session file lingers
 ``session_linger`` seconds after its close event, so late bus traces of its last command
-still land in it; late records of a finished session go to the system file only.
+still land in it; late records of a finished session go to the system file only. Early
+ones are kept too: each service sends its traces in batches of its own, and two services'
+batches reach the recorder in either order, so the bus trace of a session's first command
+can come before the gateway's open event. The last ``SESSION_BACKLOG_S`` of records are
+kept, and a session file that opens starts with those logged at or after its start.
 
 File names: ``<UTC start %Y%m%dT%H%M%SZ>_<robot>_<robot_id>_session<n>.mcap`` and
 ``..._system_<part>.mcap`` (part 001, 002, ... counts the rotations of this recorder
@@ -29,6 +33,10 @@ from . import __version__
 from .mcapfile import McapFile
 
 log = logging.getLogger("rob6.recorder")
+
+#: how long records that belong to no session are kept for a session file that opens
+#: later (see the module's text): far more than two services' trace batches apart (5 ms)
+SESSION_BACKLOG_S = 2.0
 
 
 def utc_stamp(ns: int) -> str:
@@ -66,6 +74,8 @@ class RecordingFiles:
         self._finished: collections.OrderedDict[str, None] = collections.OrderedDict()
         self._closing: dict[str, float] = {}  # session -> monotonic close time
         self._session_of_topic: dict[str, str | None] = {}
+        # (arrival, topic, log_time, publish_time, payload) of the last SESSION_BACKLOG_S
+        self._recent: collections.deque[tuple[float, str, int, int, bytes]] = collections.deque()
         self._paths_lock = threading.Lock()
         self._paths: list[str] = []
         self._part = 0  # system file part number (sorts chronologically within a second)
@@ -104,6 +114,8 @@ class RecordingFiles:
         else:
             for f in self._sessions.values():
                 f.write(topic, log_time, publish_time, payload)
+            if self.sessions:
+                self._remember(topic, log_time, publish_time, payload)
         if self.system:
             f = self._system
             if f is None:
@@ -202,7 +214,17 @@ class RecordingFiles:
     def _open_session(self, session: str, start_ns: int) -> McapFile:
         self._finished.pop(session, None)
         f = self._sessions[session] = self._open("session", start_ns, session)
+        for _, topic, log_time, publish_time, payload in self._recent:
+            if log_time >= start_ns:  # came before the session's first record, logged after it
+                f.write(topic, log_time, publish_time, payload)
         return f
+
+    def _remember(self, topic: str, log_time: int, publish_time: int, payload: bytes) -> None:
+        now = time.monotonic()
+        recent = self._recent
+        while recent and recent[0][0] < now - SESSION_BACKLOG_S:
+            recent.popleft()
+        recent.append((now, topic, log_time, publish_time, payload))
 
     def _open_system(self, start_ns: int) -> McapFile:
         return self._open("system", start_ns, None)
