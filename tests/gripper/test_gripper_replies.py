@@ -15,7 +15,7 @@ import signal
 import time
 
 from rob6_gripper.fake_device import FakeSmpDevice
-from tests.system import Client, running
+from tests.system import Client, System, running
 
 #: the protocol description's line count of each command (section 3.4), true/false included
 LINES = {"HasGripper": 1, "GripperMove": 2, "GripperGoHome": 3, "GripperMoveToPosition": 3}
@@ -81,11 +81,20 @@ def test_a_silent_serial_gripper_fails_with_the_same_line_counts():
                 "Start moving to position 0.0200 m", "Gripper at 0.0200 m", "true"]
 
 
+def _gateway_saw_go(system: System, service: str, timeout: float = 10.0) -> None:
+    """Until the gateway logs that ``service``'s instance went away (its liveliness token
+    left with its session): from then on its commands answer ``unavailable``."""
+    deadline = time.monotonic() + timeout
+    while not any(f"{service} instance" in line and "went away" in line for line in list(system.output)):
+        assert time.monotonic() < deadline, f"the gateway did not see {service} go within {timeout} s"
+        time.sleep(0.05)
+
+
 def test_no_gripper_service_fails_with_the_same_line_counts():
     with running("ad850", dummy=True) as system, Client(system.port) as client:
         assert reply(client, "HasGripper") == ["true"]
         os.kill(system.pids()["gripper"], signal.SIGKILL)
-        time.sleep(0.5)  # its liveliness token goes away with its session
+        _gateway_saw_go(system, "gripper")
         assert reply(client, "HasGripper") == ["ERROR: gripper unavailable"]
         for line in ("GripperGoHome", "GripperMoveToPosition 0.02", "GripperMove -1"):
             command = line.split()[0]

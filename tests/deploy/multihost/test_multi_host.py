@@ -30,7 +30,7 @@ from tests.deploy.multihost.topology import (
     Load,
     Topology,
     alter_session,
-    ask_answered,
+    ask_true,
     backward_line,
     calls,
     cannot_run,
@@ -99,7 +99,7 @@ def test_every_host_serves(topology, client):
     assert sum(c.ok for c in results) >= 0.9 * len(results)
     assert len(topology.containers("kinematics-c1")) == 2 and len(topology.containers("kinematics-c2")) == 1
     # the robot PC's own services through the gateway: planner, driver
-    ask_answered(client, "MovePTPJoints 10 -20 30 40 50 60")  # asked again if the quick-call deadline was missed
+    ask_true(client, "MovePTPJoints 10 -20 30 40 50 60")
     assert client.ask("GetPositionJoints") == "10.000000 -20.000000 30.000000 40.000000 50.000000 60.000000\n"
     # each compute host serves: stop the other one's replicas, the calls still succeed
     for only in REMOTE_KINEMATICS:
@@ -190,7 +190,7 @@ def test_robot_pc_router_killed(topology, client):
         assert client.ask("CM_PING") == "PONG\n"
         assert client.ask("MovePTPJoints 12 -20 30 40 50 60", timeout=30) == "true\n"
         assert client.ask("GetPositionJoints") == "12.000000 -20.000000 30.000000 40.000000 50.000000 60.000000\n"
-        ask_answered(client, "MovePTPJoints 10 -20 30 40 50 60")  # asked again if the quick-call deadline was missed
+        ask_true(client, "MovePTPJoints 10 -20 30 40 50 60")
         local = time.monotonic() - killed
         results = calls(client, line, 20, timeout=CALL_TIMEOUT)
         summary = assert_answered(results, "robot PC router killed")
@@ -205,7 +205,7 @@ def test_robot_pc_router_killed(topology, client):
 
 # ---------------------------------------------------------------------- the motion
 def _ptp(client) -> None:
-    ask_answered(client, "MovePTPJoints 30 -70 90 10 40 20")
+    ask_true(client, "MovePTPJoints 30 -70 90 10 40 20")
 
 
 def test_motion_unchanged_when_every_remote_host_is_partitioned(topology, client):
@@ -217,7 +217,7 @@ def test_motion_unchanged_when_every_remote_host_is_partitioned(topology, client
     refused: dict[bool, int] = {}
 
     def session(fault: bool) -> tuple[list, list]:
-        ask_answered(client, "MovePTPJoints 0 -80 100 0 30 0")
+        ask_true(client, "MovePTPJoints 0 -80 100 0 30 0")
         with StateRecorder(topology, f"states{int(fault)}") as recorder:
             if fault:
                 with topology.partitioned("compute1", "compute2", "storage"):
@@ -281,12 +281,13 @@ def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(t
         exchanges += 1
         return reply
 
-    def ask_true(line: str) -> None:
+    def ask_true_counted(line: str) -> None:
         nonlocal exchanges
-        exchanges += ask_answered(client, line)
+        ask_true(client, line)
+        exchanges += 1
 
-    ask_true("MovePTPJoints 0 -80 100 0 30 0")
-    ask_true("EnableAlter")
+    ask_true_counted("MovePTPJoints 0 -80 100 0 30 0")
+    ask_true_counted("EnableAlter")
     here = [float(x) for x in ask("GetPositionJoints").split()]
     k = 0
 
@@ -313,7 +314,7 @@ def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(t
     stream(1.0)
     run(["docker", "start", recorder])
     stream(5.0)
-    ask_true("DisableAlter")
+    ask_true_counted("DisableAlter")
     assert ask("Quit") == "bye!\n"
     time.sleep(3.0)  # the last batches reach the recorder
     run(["docker", "stop", "-t", "20", recorder])  # closes its files

@@ -21,7 +21,7 @@ from tests.deploy.images import TAG
 from tests.deploy.multihost.topology import (
     Topology,
     alter_session,
-    ask_answered,
+    ask_true,
     cannot_run,
     run,
 )
@@ -90,9 +90,9 @@ def test_rsi_motion_unchanged_when_every_remote_host_is_partitioned(topology, cl
     sessions: dict[str, dict[str, object]] = {}
 
     def session(name: str) -> None:
-        ask_answered(client, START)
+        ask_true(client, START)
         before = topology.kuka()
-        ask_answered(client, "MovePTPJoints " + " ".join(f"{x:g}" for x in TARGET))
+        ask_true(client, "MovePTPJoints " + " ".join(f"{x:g}" for x in TARGET))
         refused = alter_session(client)  # ends at TARGET with A1 + 2 deg
         after = topology.kuka()
         assert after["state"] == "running" and after["trips"] == before["trips"], (name, after)
