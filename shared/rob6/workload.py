@@ -92,7 +92,7 @@ class _Mix:
             q = list(start)
             q[0] += 2.0 * math.sin(2 * math.pi * k / count)
             self.ask("MoveRTJoints " + _fmt(q), expect="true")
-            delay = began + (k + 1) / ALTER_HZ - time.perf_counter()
+            delay = began + (k + 1) / ALTER_HZ - time.perf_counter()  # paced, as an Alter client streams
             if delay > 0:
                 time.sleep(delay)
         self.ask("DisableAlter", expect="true")

@@ -171,7 +171,7 @@ def test_followme_session_with_an_alter_stream(rig: Rig) -> None:
             q = list(rig.start)
             q[0] += 3.0 * np.sin(2 * np.pi * 0.5 * k / 250)
             assert flow.one("MoveRTJoints " + fmt(q)) == "true", k
-            delay = began + (k + 1) * 0.004 - time.monotonic()
+            delay = began + (k + 1) * 0.004 - time.monotonic()  # paced at 250 Hz, as an Alter client streams
             if delay > 0:
                 time.sleep(delay)
         assert flow.one("DisableAlter") == "true"

@@ -45,7 +45,7 @@ def test_disable_alter_mid_stream_answers_true_at_rest_and_the_next_ptp_works(kr
         assert client.ask("EnableAlter") == "true\n"
         for k in range(1, 251):
             assert client.ask("MoveRTJoints " + _joints(_sine(k))) == "true\n", k
-            time.sleep(0.004)
+            time.sleep(0.004)  # a send-and-wait client streaming at up to 250 Hz
         assert client.ask("DisableAlter") == "true\n"
         first = _position(client)
         time.sleep(0.3)
@@ -65,6 +65,6 @@ def test_client_library_alter_block_ends_with_the_arm_at_rest(kr16rt):
         with robot.alter():  # the same, leaving while A1 moves at its fastest
             for k in range(1, 251):
                 assert robot.move_rt_joints(_sine(k)) is True, k
-                time.sleep(0.004)
+                time.sleep(0.004)  # a send-and-wait client streaming at up to 250 Hz
         assert robot.move_ptp_joints(START)
         assert list(robot.get_position_joints()) == START
