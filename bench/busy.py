@@ -1,4 +1,4 @@
-"""A busy robot PC: the mixed client (rob6.workload) on the real-time kr16rt, once on a quiet
+"""A busy robot PC: the mixed client (bench/workload.py) on the real-time kr16rt, once on a quiet
 machine and once with CPU hogs spinning at normal priority, errors and round trips per
 command side by side."""
 
@@ -9,9 +9,9 @@ import tempfile
 from collections.abc import Callable
 
 from rob6.testing import running
-from rob6.workload import MixResult, cpu_hogs, mixed_session
 
 from .latency import percentiles
+from .workload import MixResult, cpu_hogs, mixed_session
 
 START = [0.0, -80.0, 100.0, 0.0, 30.0, 0.0]
 ORDER = ("GetPositionJoints", "GetStatus", "ForwardCalc", "BackwardCalc", "IsPossible", "MovePTPJoints",

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from rob6.workload import cpu_hogs, mixed_session
+from bench.workload import cpu_hogs, mixed_session
 from tests.flows.rigs import STARTS
 from tests.system import running
 

@@ -5,7 +5,7 @@ kinematics (ForwardCalc, BackwardCalc, IsPossible), PTP moves between two poses 
 third round, a one-second Alter burst (MoveRTJoints at 250 Hz, each sent when the last was
 answered) ended by DisableAlter. Every reply is judged: an ``ERROR:`` line, or a move,
 Alter target or mode change not answered ``true``, is an error. Used by the benchmarks
-(``bench/busy.py``) and the busy-machine test (tests/flows).
+(``bench/busy.py``) and the busy-machine test (tests/flows), outside the product: no service ships it.
 """
 
 from __future__ import annotations
