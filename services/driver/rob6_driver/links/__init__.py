@@ -100,16 +100,21 @@ class Link(ABC):
 
 
 class Outputs:
-    """The digital outputs a link has switched: thread-safe, V+ style (n on, -n off)."""
+    """The digital outputs a link has switched: thread-safe, V+ style (n on, -n off).
+
+    ``as_list`` is read with every published joint state (the driver's cycle), so the
+    list is made when an output switches, not when it is read."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._on: dict[int, bool] = {}
+        self._list: list[int] = []
 
     def switched(self, signal: int) -> None:
         with self._lock:
             self._on[abs(signal)] = signal > 0
+            self._list = [n if on else -n for n, on in sorted(self._on.items())]
 
     def as_list(self) -> list[int]:
-        with self._lock:
-            return [n if on else -n for n, on in sorted(self._on.items())]
+        """The outputs by number; a new list after each switch, never changed in place."""
+        return self._list
