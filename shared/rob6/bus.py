@@ -139,6 +139,9 @@ WAITING_QUERY_S = 24 * 3600.0
 #: a caller's own deadline fires this long after the service's, so a reply sent just in
 #: time is not lost to the caller's timer
 REPLY_GRACE_S = 0.05
+#: a call waiting for its reply looks at its deadline at least this often: the service's
+#: announcement (``Context.waiting``) can bring it nearer as well as push it out
+WAIT_SLICE_S = 0.1
 
 
 def _host(instance: str) -> str:
@@ -481,8 +484,8 @@ class Bus:
                 if outcome is None:
                     if hedge_at:
                         self._hedge(call, waiter)
-                    # the deadline moves when the service announces a wait: wait again
-                    while (outcome := waiter.result(call.remaining() + REPLY_GRACE_S)) is None \
+                    # the deadline moves when the service announces a wait: look again each slice
+                    while (outcome := waiter.result(min(call.remaining() + REPLY_GRACE_S, WAIT_SLICE_S))) is None \
                             and call.remaining() + REPLY_GRACE_S > 0:
                         pass
                 if outcome is None:
@@ -881,7 +884,9 @@ class _Request:
         """The service waits ``waiting.seconds`` more for ``waiting.what`` (Zenoh's thread):
         the deadline follows, with a hop's margin, and the caller's caller is told."""
         seconds = waiting.seconds + HOP_S
-        self.deadline = max(self.deadline, time.monotonic() + seconds)
+        # the service's word replaces what the caller allowed before it spoke (ANNOUNCE_S,
+        # or an earlier announcement): each hop outward then ends HOP_S after the one it called
+        self.deadline = time.monotonic() + seconds
         self.waiting_for = waiting.what
         if self.relay is not None:
             self.relay(seconds, waiting.what)
@@ -981,12 +986,12 @@ class _Waiter:
         def expire() -> None:  # a timer on the loop, not asyncio.wait_for: no task switch per request
             nonlocal timer
             left = remaining() + REPLY_GRACE_S
-            if left > 0:  # the deadline moved
-                timer = loop.call_later(left, expire)
+            if left > 0:  # not yet: the deadline moved, or this was a slice
+                timer = loop.call_later(min(left, WAIT_SLICE_S), expire)
             else:
                 self._complete_in_loop(future.set_exception, _InstanceLost("no reply in time"))
 
-        timer = loop.call_later(remaining() + REPLY_GRACE_S, expire)
+        timer = loop.call_later(min(remaining() + REPLY_GRACE_S, WAIT_SLICE_S), expire)
         try:
             return await future
         finally:

@@ -17,11 +17,19 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 #: a call that waits for nothing but the service's own work (the default of every bus
-#: operation), and what a waiting call has before the service said what it waits for.
+#: operation).
 #: The work takes well under a millisecond, but on a starved robot PC (4-8 busy processes on
 #: 2 cores, `make bench`'s busy table) a reply was seen 197 ms late: at 0.2 s such a reply
 #: became an ERROR a quiet machine would not give. A hung instance is still named within 1 s.
 QUICK_S = 1.0
+#: what a waiting call (``Op.waits``: a motion, a mode, a stop, the gripper, the outputs)
+#: has before its service announces what it waits for. The service checks the request
+#: first (the driver checks a whole trajectory against the limits, under the lock its
+#: cycle shares, before it announces the motion it took): on a starved machine (a compose
+#: stack of 8 containers starting their health checks on 2 cores) a move's announcement
+#: came later than QUICK_S. Its caller waits for seconds anyway; a hung service is named
+#: after this long.
+ANNOUNCE_S = 5.0
 #: each hop outward waits this much longer than the service it called, so the service
 #: that waited is the one that reports, naming what it waited for
 HOP_S = 0.5

@@ -20,7 +20,7 @@ from typing import Generic, Literal, NamedTuple, TypeVar, get_args
 
 import msgspec
 
-from .deadlines import CONFIG_CHANGE_S, IK_BATCH_S, QUICK_S, REMOTE_POSE_S
+from .deadlines import ANNOUNCE_S, CONFIG_CHANGE_S, IK_BATCH_S, QUICK_S, REMOTE_POSE_S
 
 SCHEMA_VERSION = 1
 
@@ -390,7 +390,8 @@ class Op(NamedTuple):
     request: type
     reply: type
     #: how long the caller waits (rob6.deadlines): ``QUICK_S``, or the bound of the
-    #: service's own work; a service that waits for the arm announces more (``waits``)
+    #: service's own work; for a waiting operation (``waits``, ``ANNOUNCE_S``) until the
+    #: service announces what it waits for, which moves the deadline
     timeout: float = QUICK_S
     #: a second copy goes to another replica when the first has not answered after
     #: ``rob6.bus.HEDGE_DELAY_S`` (idempotent services only, never an owner service)
@@ -404,13 +405,13 @@ class Op(NamedTuple):
 OPS: dict[tuple[str, str], Op] = {
     ("driver", "ping"): Op(Empty, PingReply),
     ("driver", "state"): Op(Empty, JointState),
-    ("driver", "execute"): Op(ExecuteRequest, ExecuteReply, waits=True),
+    ("driver", "execute"): Op(ExecuteRequest, ExecuteReply, timeout=ANNOUNCE_S, waits=True),
     ("driver", "limits"): Op(LimitsUpdate, Ack),
-    ("driver", "alter_mode"): Op(AlterMode, Ack, waits=True),
+    ("driver", "alter_mode"): Op(AlterMode, Ack, timeout=ANNOUNCE_S, waits=True),
     ("driver", "alter_target"): Op(AlterTarget, Ack),
-    ("driver", "stop"): Op(Empty, Ack, waits=True),
+    ("driver", "stop"): Op(Empty, Ack, timeout=ANNOUNCE_S, waits=True),
     ("driver", "link"): Op(LinkQuery, LinkStatus),
-    ("driver", "signal"): Op(SignalRequest, Ack, waits=True),
+    ("driver", "signal"): Op(SignalRequest, Ack, timeout=ANNOUNCE_S, waits=True),
     ("kinematics", "fk"): Op(FkRequest, FkReply, timeout=REMOTE_POSE_S, hedged=True),
     ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply, timeout=REMOTE_POSE_S, hedged=True),
     ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply, timeout=REMOTE_POSE_S, hedged=True),
@@ -418,10 +419,10 @@ OPS: dict[tuple[str, str], Op] = {
     ("kinematics", "select"): Op(SelectRequest, JointsReply, timeout=REMOTE_POSE_S, hedged=True),
     ("planner", "config"): Op(Empty, MotionConfig),
     ("planner", "config_change"): Op(ConfigChange, ConfigReply, timeout=CONFIG_CHANGE_S),
-    ("planner", "move"): Op(MoveRequest, MoveReply, waits=True),
-    ("planner", "mode"): Op(ModeRequest, Ack, waits=True),
-    ("planner", "session_end"): Op(SessionEnd, Ack, waits=True),
-    ("gripper", "command"): Op(GripperCommand, GripperReply, waits=True),
+    ("planner", "move"): Op(MoveRequest, MoveReply, timeout=ANNOUNCE_S, waits=True),
+    ("planner", "mode"): Op(ModeRequest, Ack, timeout=ANNOUNCE_S, waits=True),
+    ("planner", "session_end"): Op(SessionEnd, Ack, timeout=ANNOUNCE_S, waits=True),
+    ("gripper", "command"): Op(GripperCommand, GripperReply, timeout=ANNOUNCE_S, waits=True),
     ("gripper", "state"): Op(Empty, GripperState),
 }
 
