@@ -1,5 +1,5 @@
-"""Round-trip latency through the gateway, next to a bare asyncio TCP echo measured in the
-same run (the echo is the floor any asyncio TCP server on this machine can reach)."""
+"""Round-trip latency through the gateway, next to its floors measured in the same run: a
+bare TCP echo and a bare Zenoh query between two processes."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import time
 
 import zenoh
 
-from rob6.testing import Client, free_port
+from rob6.testing import Client
 
 
 def percentiles(samples: list[float]) -> tuple[float, float]:
@@ -39,30 +39,28 @@ def measure(client: Client, command: str, lines: int, count: int, warmup: int = 
 
 
 def echo_baseline(count: int) -> list[float]:
-    """A bare asyncio line echo server in a thread of its own event loop."""
-    port = free_port()
-    ready = threading.Event()
+    """A bare line echo over TCP: a blocking server thread per client, as the gateway serves
+    (the floor of any Python TCP request/reply on this machine)."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    port = listener.getsockname()[1]
 
-    async def handle(reader, writer):
-        sock = writer.get_extra_info("socket")
+    def serve() -> None:
+        sock, _ = listener.accept()
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        writer.write(b"welcome\n")
-        while line := await reader.readline():
-            writer.write(line)
+        sock.sendall(b"welcome\n")
+        while data := sock.recv(65536):
+            sock.sendall(data)
+        sock.close()
 
-    def serve():
-        loop = asyncio.new_event_loop()
-        server = loop.run_until_complete(asyncio.start_server(handle, "127.0.0.1", port))
-        ready.set()
-        loop.run_until_complete(server.serve_forever())
-
-    threading.Thread(target=serve, daemon=True).start()
-    ready.wait()
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
     client = Client(port, handshake=False)
     try:
         return measure(client, "CM_PING", 1, count)
     finally:
         client.close()
+        server.join(5)
+        listener.close()
 
 
 _BARE_QUERYABLE = """
@@ -79,10 +77,13 @@ sys.stdin.read()
 """
 
 
-def zenoh_baseline(router_port: int, count: int, warmup: int = 200) -> list[float]:
+def zenoh_baselines(router_port: int, count: int, warmup: int = 200) -> dict[str, list[float]]:
     """The bare Zenoh query round trip between two Python processes (peers beside the same
-    router as rob6's services, linked directly to each other as they are), awaited on an
-    asyncio loop the way the gateway awaits."""
+    router as rob6's services, linked directly to each other as they are), received two
+    ways, interleaved so both see the same moment of the machine: ``blocking``, the reply
+    taken on the asking thread (``for reply in session.get(...)``), the floor of a request
+    that crosses the bus; ``asyncio``, awaited on an event loop through
+    ``call_soon_threadsafe`` (what the gateway did before it served on threads)."""
     server = subprocess.Popen([sys.executable, "-c", _BARE_QUERYABLE, str(router_port)],
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     config = zenoh.Config()
@@ -91,29 +92,42 @@ def zenoh_baseline(router_port: int, count: int, warmup: int = 200) -> list[floa
     config.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')  # a direct link, as rob6's peers have
     config.insert_json5("scouting/multicast/enabled", "false")
     session = zenoh.open(config)
+    blocking: list[float] = []
+    bridged: list[float] = []
     try:
         assert server.stdout is not None and server.stdout.readline().strip() == "ready"
 
-        async def run() -> list[float]:
+        def blocking_once() -> float:
+            start = time.perf_counter()
+            replies = list(session.get("bench/bare", consolidation=zenoh.ConsolidationMode.NONE))
+            elapsed = time.perf_counter() - start
+            if len(replies) != 1 or replies[0].ok is None:
+                raise RuntimeError("the bare queryable did not answer once")
+            return elapsed
+
+        async def bridged_once() -> float:
             loop = asyncio.get_running_loop()
-            samples = []
+            future = loop.create_future()
+
+            def on_reply(reply: zenoh.Reply) -> None:
+                loop.call_soon_threadsafe(future.set_result, reply.ok is not None)
+
+            start = time.perf_counter()
+            session.get("bench/bare", zenoh.handlers.Callback(on_reply), consolidation=zenoh.ConsolidationMode.NONE)
+            if not await asyncio.wait_for(future, 5):
+                raise RuntimeError("the bare queryable answered with an error")
+            return time.perf_counter() - start
+
+        async def run() -> None:
             for i in range(warmup + count):
-                future = loop.create_future()
-
-                def on_reply(reply, future=future):
-                    loop.call_soon_threadsafe(future.set_result, reply.ok is not None)
-
-                start = time.perf_counter()
-                session.get("bench/bare", zenoh.handlers.Callback(on_reply),
-                            consolidation=zenoh.ConsolidationMode.NONE)  # as rob6.bus asks
-                if not await asyncio.wait_for(future, 5):
-                    raise RuntimeError("the bare queryable answered with an error")
+                one, other = blocking_once(), await bridged_once()
                 if i >= warmup:
-                    samples.append(time.perf_counter() - start)
-            return samples
+                    blocking.append(one)
+                    bridged.append(other)
 
         time.sleep(0.5)  # the peers find each other through the router
-        return asyncio.run(run())
+        asyncio.run(run())
+        return {"blocking": blocking, "asyncio": bridged}
     finally:
         session.close()
         server.kill()

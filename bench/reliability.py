@@ -13,7 +13,6 @@ the recording check and the fault injection (``tests/reliability/faults.py``).
 from __future__ import annotations
 
 import argparse
-import asyncio
 import random
 import sys
 import time
@@ -124,16 +123,14 @@ def run_parser_campaign(examples: int) -> dict:
     counts["args"] = n2[0]
 
     gateway, session = make_dead_gateway()
-    loop = asyncio.new_event_loop()
     n3 = [0]
 
     @budget
     @given(command_line_strategy())
     def execute(text):
         n3[0] += 1
-        check_execute(gateway, session, text, loop)
+        check_execute(gateway, session, text)
     execute()
-    loop.close()
     counts["execute"] = n3[0]
     return counts
 

@@ -188,6 +188,10 @@ class BusTimeout(BusError):
         self.service, self.op, self.seconds, self.waiting_for = service, op, seconds, waiting_for
 
 
+class CallAbandoned(Exception):
+    """The caller gave up on a request (``Bus.request``'s ``abandon``); its query is cancelled."""
+
+
 class _InstanceLost(Exception):
     """The instance vanished (``gone``) or did not answer; the request may be retried elsewhere."""
 
@@ -461,8 +465,10 @@ class Bus:
     # ------------------------------------------------------------------ requests
     def request(self, service: str, op: str, body: object, *, timeout: float | None = None,
                 cid: str | None = None, instance: str | None = None,
-                waiting: Callable[[float, str], None] | None = None) -> Any:
-        """Send ``body`` to ``service.op`` and return the typed reply body.
+                waiting: Callable[[float, str], None] | None = None,
+                abandon: Callable[[], bool] | None = None) -> Any:
+        """Send ``body`` to ``service.op`` and return the typed reply body, received on
+        the calling thread (no hand-off: the reply wakes it straight from Zenoh's thread).
 
         Raises ``BusError`` with code ``unavailable`` (no live instance), ``timeout``
         (``BusTimeout``: a live instance did not answer in time), or whatever the service
@@ -471,6 +477,8 @@ class Bus:
         another replica when there is one: the first answer wins. ``waiting``: called with
         what the service announces it waits for (``Context.waiting``), each time plus
         ``HOP_S``: a handler passes its own ``ctx.waiting`` to tell its caller in turn.
+        ``abandon``: asked every ``WAIT_SLICE_S`` while the reply is awaited; when it
+        answers True (the client left), the query is cancelled and ``CallAbandoned`` raised.
         """
         call = _Request(self, service, op, body, timeout, cid, instance, waiting)
         while True:
@@ -487,7 +495,8 @@ class Bus:
                     # the deadline moves when the service announces a wait: look again each slice
                     while (outcome := waiter.result(min(call.remaining() + REPLY_GRACE_S, WAIT_SLICE_S))) is None \
                             and call.remaining() + REPLY_GRACE_S > 0:
-                        pass
+                        if abandon is not None and abandon():
+                            raise CallAbandoned(f"{service}.{op} abandoned by its caller")
                 if outcome is None:
                     raise _InstanceLost("no reply in time")
                 return call.decode(*outcome)

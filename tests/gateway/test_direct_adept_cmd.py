@@ -9,7 +9,6 @@ back from the driver's state over Zenoh, as the live view and the recorder see t
 
 from __future__ import annotations
 
-import asyncio
 from typing import cast
 
 from rob6.bus import Bus
@@ -27,7 +26,7 @@ REFUSED_RAW = ("ERROR: DirectAdeptCmd: raw V+ commands cannot reach the controll
 
 def ask(robot: str, line: str, **options: bool) -> str | None:
     gateway = Gateway(cast(Bus, _DeadBus()), get_robot(robot), Options(**options))
-    return asyncio.run(gateway.execute(Session(number=1, peer="test"), line))
+    return gateway.execute(Session(number=1, peer="test"), line)
 
 
 def driver_outputs(system: System) -> list[int]:

@@ -10,7 +10,6 @@ The properties are those of ``tests/reliability/fuzz.py`` (``check_framer``, ``c
 with the input that caused it.
 """
 
-import asyncio
 import sys
 
 import atheris
@@ -21,7 +20,6 @@ with atheris.instrument_imports():  # before anything imports them, so they are 
 from tests.reliability.fuzz import COMMAND_NAMES, check_args, check_execute, check_framer, make_dead_gateway
 
 GATEWAY, SESSION = make_dead_gateway("kr16")
-LOOP = asyncio.new_event_loop()
 
 
 def one_input(data: bytes) -> None:
@@ -36,7 +34,7 @@ def one_input(data: bytes) -> None:
     if target == 1:
         check_args(text)
     else:  # a real command name (atheris would rarely guess one) and fuzzed arguments
-        check_execute(GATEWAY, SESSION, fdp.PickValueInList(COMMAND_NAMES) + " " + text, LOOP)
+        check_execute(GATEWAY, SESSION, fdp.PickValueInList(COMMAND_NAMES) + " " + text)
 
 
 if __name__ == "__main__":

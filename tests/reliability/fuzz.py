@@ -219,7 +219,7 @@ class _DeadBus:
     def instances(self, *a, **k):
         return []
 
-    async def arequest(self, service, op, body, **kwargs):
+    def request(self, service, op, body, **kwargs):
         raise self._error("unavailable", f"{service} unavailable")
 
 
@@ -231,11 +231,11 @@ def make_dead_gateway(robot: str = "kr16"):
     return gateway, Session(number=1, peer="fuzz")
 
 
-def check_execute(gateway, session, text: str, loop) -> None:
+def check_execute(gateway, session, text: str) -> None:
     if text == "":
         return  # the server answers empty lines itself (with nothing); they never reach execute
     try:
-        reply = loop.run_until_complete(gateway.execute(session, text))
+        reply = gateway.execute(session, text)
     except Close as exc:
         assert _split_command(text)[0] in ("Quit", "Shutdown"), text
         reply = exc.reply

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import signal
+import socket
 import sys
+import threading
+import time
 
 import click
 
@@ -45,54 +47,54 @@ def main(settings, log_level, port, bind, allow_shutdown, allow_direct_adept_cmd
     """Serve the rob6server text protocol and forward the work to the rob6 services."""
     logs.configure("gateway", log_level)
     networks = [n.strip() for item in allow_clients for n in item.split(",") if n.strip()]
-    asyncio.run(_serve(settings, port, bind, Options(allow_shutdown, allow_direct_adept_cmd),
-                       AddressFilter(networks) if networks else None, pause_ms / 1000.0, idle_timeout))
+    _serve(settings, port, bind, Options(allow_shutdown, allow_direct_adept_cmd),
+           AddressFilter(networks) if networks else None, pause_ms / 1000.0, idle_timeout)
 
 
-async def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) -> None:
+def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) -> None:
     bus = Bus(settings, "gateway")
-    loop = asyncio.get_running_loop()
-    stop = asyncio.Event()
+    stop = threading.Event()
     stood_down: list[str] = []  # an earlier gateway of this robot appeared (see rob6.ownership)
 
     def stand_down(message: str) -> None:
         stood_down.append(message)
-        loop.call_soon_threadsafe(stop.set)
+        stop.set()
 
     ownership = service.claim(bus, stand_down)
     logging.getLogger().addHandler(logs.BusLogHandler(bus))
     gateway = Gateway(bus, get_robot(settings.robot), options)
     server = Server(gateway, pause_s=pause_s, idle_timeout_s=idle_timeout, allow=allow)
     for signum in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(signum, stop.set)
+        signal.signal(signum, lambda *_: stop.set())
     # clients only once the services their commands reach are alive in this process'
     # own view: a client connecting the instant the port opens gets real answers
-    deadline = loop.time() + service.NEEDS_WAIT_S
+    deadline = time.monotonic() + service.NEEDS_WAIT_S
     while (missing := service.missing_needs(bus, "gateway")) and not stop.is_set():
-        if loop.time() > deadline:
+        if time.monotonic() > deadline:
             log.warning("gateway: %s not alive after %.0f s; accepting clients without",
                         ", ".join(missing), service.NEEDS_WAIT_S)
             break
-        await asyncio.sleep(0.02)
+        stop.wait(0.02)
     if stop.is_set():
         bus.close()
         return
     try:
-        tcp = await asyncio.start_server(server.handle, bind, port, reuse_address=True)
+        listener = socket.create_server((bind, port), family=socket.AF_INET6 if ":" in bind else socket.AF_INET)
     except OSError as exc:
         bus.close()
         service.fail("gateway", f"cannot listen on {bind}:{port}: {exc.strerror or exc}; is another "
                                 f"rob6 or rob6server running? Stop it or choose another ROB6_PORT",
                      EXIT_REFUSED)
+    threading.Thread(target=server.serve_forever, args=(listener,), name="accept", daemon=True).start()
     bus.announce()  # tells tools and the launcher the gateway is up
     log.warning("gateway listening on %s:%d (robot %s)", bind, port, settings.robot)
-    done = asyncio.create_task(stop.wait())
-    shutdown = asyncio.create_task(gateway.shutdown_requested.wait())
-    await asyncio.wait({done, shutdown}, return_when=asyncio.FIRST_COMPLETED)
+    while not stop.is_set() and not gateway.shutdown_requested.is_set():
+        stop.wait(0.1)
     if gateway.shutdown_requested.is_set():
         log.warning("shutting down rob6server.")
         bus.publish("control/shutdown", b"{}", reliable=True)
-    tcp.close()
+    listener.shutdown(socket.SHUT_RDWR)  # wakes the accepting thread (a close alone does not)
+    listener.close()
     if ownership is not None:
         ownership.release()
     bus.close()

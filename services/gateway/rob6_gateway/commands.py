@@ -12,15 +12,15 @@ Command names are case-sensitive, extra arguments are ignored, as in the origina
 
 from __future__ import annotations
 
-import asyncio
 import logging
+import threading
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any
 
 from rob6 import logs
-from rob6.bus import Bus, BusError, BusTimeout
+from rob6.bus import Bus, BusError, BusTimeout, CallAbandoned
 from rob6.messages import (
     OWNER_SERVICES,
     AlterTarget,
@@ -49,8 +49,6 @@ from .state import ConfigMirror, Session
 
 log = logging.getLogger("rob6.gateway")
 
-T = TypeVar("T")
-
 VERSION = "0.1.01"
 TRUE, FALSE = "true\n", "false\n"
 
@@ -65,20 +63,6 @@ class Close(Exception):
     def __init__(self, reply: str, shutdown: bool = False):
         self.reply = reply
         self.shutdown = shutdown
-
-
-async def unless_gone(session: Session, work: Awaitable[T], command: str) -> T:
-    """``work``'s result; ``ClientGone`` (``work`` cancelled) when the client goes first."""
-    task = asyncio.ensure_future(work)
-    watch = asyncio.ensure_future(session.gone.wait())
-    try:
-        await asyncio.wait({task, watch}, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        watch.cancel()
-    if task.done():
-        return task.result()
-    task.cancel()
-    raise ClientGone(f"the client left during {command}: the robot stops")
 
 
 def fmt(values) -> str:
@@ -101,7 +85,7 @@ class Options:
     ping_max_wait_ms: int = 1000
 
 
-Handler = Callable[["Gateway", Session, Args], Awaitable[str | None]]
+Handler = Callable[["Gateway", Session, Args], str | None]
 COMMANDS: dict[str, Handler] = {}
 #: commands whose reply is a value (or nothing), never ``false``: an error is its only line
 VALUE_REPLIES: set[str] = set()
@@ -145,9 +129,8 @@ class Gateway:
         self.limits = ConfigMirror(bus, robot)
         self.verbosity = 2
         self.alter = False  # EnableAlter succeeded (the planner owns the mode; this is its echo)
-        self.shutdown_requested = asyncio.Event()
-        self._ending: asyncio.Task[None] | None = None  # the last session's end: its robot stopping
-        self._ends: set[asyncio.Task[None]] = set()  # sessions' ends still under way
+        self.shutdown_requested = threading.Event()
+        self._ending: threading.Thread | None = None  # the last session's end: its robot stopping
         # a service (re)appearing gets the current verbosity, so all processes agree
         bus.on_liveliness(self._on_liveliness)
 
@@ -158,26 +141,27 @@ class Gateway:
         elif service != "gateway":
             self.bus.publish("control/verbosity", Verbosity(level=self.verbosity))
 
-    async def execute(self, session: Session, line: str) -> str | None:
+    def execute(self, session: Session, line: str) -> str | None:
         name, _, rest = _split_command(line)
         handler = COMMANDS.get(name)
         if handler is None:
             return f"ERROR: {line}\n"
-        if self._ending is not None and not self._ending.done():
+        if self._ending is not None:
             # the last client left with the robot moving: this one starts with it at rest
-            await asyncio.shield(self._ending)
+            self._ending.join()
         try:
-            return await handler(self, session, Args(rest))
+            return handler(self, session, Args(rest))
         except ParseError as exc:
             return error(str(exc))
         except BusError as exc:
             log.warning("%s failed: %s (%s)", name, exc.message, exc.code)
             return error(failure(name, exc), with_false=name not in VALUE_REPLIES)
 
-    async def call(self, session: Session, service: str, op: str, body, **kwargs):
-        return await self.bus.arequest(service, op, body, cid=session.cid, **kwargs)
+    def call(self, session: Session, service: str, op: str, body, **kwargs) -> Any:
+        """One request on the session's own thread, the reply received where it waits."""
+        return self.bus.request(service, op, body, cid=session.cid, **kwargs)
 
-    async def current(self, session: Session) -> list[float]:
+    def current(self, session: Session) -> list[float]:
         """Where the robot is (or the virtual robot, while route testing).
 
         Normally the driver's latest published state; right after a (re)start, before
@@ -185,7 +169,7 @@ class Gateway:
         """
         if session.routetest is not None:
             return session.routetest
-        state = self.joints.get() or await self.call(session, "driver", "state", Empty())
+        state = self.joints.get() or self.call(session, "driver", "state", Empty())
         return state.q
 
     def record(self, session: Session, received: float, line, reply: str | None) -> None:
@@ -212,17 +196,17 @@ class Gateway:
         client gone), the next session's commands wait for that."""
         moving = self.alter or abandoned
         self.alter = False
-        ending = asyncio.get_running_loop().create_task(self._session_end(session))
-        self._ends.add(ending)  # a reference until it is done (the loop keeps only a weak one)
-        ending.add_done_callback(self._ends.discard)
+        ending = threading.Thread(target=self._session_end, args=(session,),
+                                  name=f"session-{session.number}-end", daemon=True)
+        ending.start()
         if moving:
             self._ending = ending
 
-    async def _session_end(self, session: Session) -> None:
+    def _session_end(self, session: Session) -> None:
         """The planner stops whatever the client left running (Alter, a move), with the
         ramp, and answers at rest."""
         try:
-            reply = await self.call(session, "planner", "session_end", SessionEnd(session=self.session_id(session)))
+            reply = self.call(session, "planner", "session_end", SessionEnd(session=self.session_id(session)))
         except BusError as exc:
             log.warning("planner did not confirm the end of session %d: %s", session.number,
                         failure("the end of the session", exc))
@@ -241,12 +225,12 @@ def _split_command(line: str) -> tuple[str, str, str]:
 
 # ====================================================================== management
 @command("GetRobot", value=True)
-async def get_robot(gw, session, args):
+def get_robot(gw, session, args):
     return gw.robot.name + "\n"
 
 
 def _identity(predicate):
-    async def handler(gw, session, args):
+    def handler(gw, session, args):
         return boolean(predicate(gw.robot))
     return handler
 
@@ -259,27 +243,27 @@ command("IsKR16")(_identity(lambda r: r.is_kr16))
 
 
 @command("GetVersion", value=True)
-async def get_version(gw, session, args):
+def get_version(gw, session, args):
     return VERSION + "\n"
 
 
 @command("GetTimestamp", value=True)
-async def get_timestamp(gw, session, args):
+def get_timestamp(gw, session, args):
     return "%.3f\n" % time.time()
 
 
 @command("CM_PING", value=True)
-async def cm_ping(gw, session, args):
+def cm_ping(gw, session, args):
     return "PONG\n"
 
 
 @command("GetVerbosity", value=True)
-async def get_verbosity(gw, session, args):
+def get_verbosity(gw, session, args):
     return f"{gw.verbosity}\n"
 
 
 @command("SetVerbosity")
-async def set_verbosity(gw, session, args):
+def set_verbosity(gw, session, args):
     level = args.index()
     if not 0 <= level <= 4:
         log.error("invalid verbosity level %d", level)
@@ -291,12 +275,12 @@ async def set_verbosity(gw, session, args):
 
 
 @command("Quit")
-async def quit_(gw, session, args):
+def quit_(gw, session, args):
     raise Close("bye!\n")
 
 
 @command("Shutdown")
-async def shutdown(gw, session, args):
+def shutdown(gw, session, args):
     if not gw.options.allow_shutdown:
         return error("Shutdown is disabled on this server (start the gateway with --allow-shutdown)",
                      with_false=False)
@@ -304,7 +288,7 @@ async def shutdown(gw, session, args):
 
 
 @command("PingRobot", value=True)
-async def ping_robot(gw, session, args):
+def ping_robot(gw, session, args):
     """n round trips gateway -> driver, ``wait`` ms apart (default 10, 0).
 
     Reply (one line, like the original): mean round trip (s), robot time zero, server
@@ -322,9 +306,9 @@ async def ping_robot(gw, session, args):
     samples = []
     for i in range(count):
         if i and wait_ms:
-            await asyncio.sleep(wait_ms / 1000.0)
+            time.sleep(wait_ms / 1000.0)
         sent = time.time()
-        reply = await gw.call(session, "driver", "ping", Empty())
+        reply = gw.call(session, "driver", "ping", Empty())
         received = time.time()
         samples.append((received - sent, reply.robot_time, (sent + received) / 2))
     mean_rtt = sum(s[0] for s in samples) / count
@@ -348,34 +332,34 @@ def _drift_fit(points: list[tuple[float, float]]) -> tuple[float, float]:
 
 # ====================================================================== position
 @command("GetPositionJoints", value=True)
-async def get_position_joints(gw, session, args):
-    return fmt(await gw.current(session)) + "\n"
+def get_position_joints(gw, session, args):
+    return fmt(gw.current(session)) + "\n"
 
 
 @command("GetPositionHomRowWise", value=True)
-async def get_position_hom(gw, session, args):
-    reply = await gw.call(session, "kinematics", "fk", FkRequest(joints=[await gw.current(session)]))
+def get_position_hom(gw, session, args):
+    reply = gw.call(session, "kinematics", "fk", FkRequest(joints=[gw.current(session)]))
     return fmt(reply.poses[0]) + "\n"
 
 
 @command("GetStatus", value=True)
-async def get_status(gw, session, args):
-    return " ".join(gw.robot.status(await gw.current(session))) + "\n"
+def get_status(gw, session, args):
+    return " ".join(gw.robot.status(gw.current(session))) + "\n"
 
 
 # ====================================================================== limits and configuration
-async def _config(gw, session) -> MotionConfig:
+def _config(gw, session) -> MotionConfig:
     """The planner's configuration: mirrored, or asked when the mirror cannot vouch for it."""
     config = gw.limits.current()
     if config is None:
-        config = await gw.call(session, "planner", "config", Empty())
+        config = gw.call(session, "planner", "config", Empty())
         gw.limits.set(config)
     return config
 
 
 def _config_getter(field: str):
-    async def handler(gw, session, args):
-        return fmt(getattr(await _config(gw, session), field)) + "\n"
+    def handler(gw, session, args):
+        return fmt(getattr(_config(gw, session), field)) + "\n"
     return handler
 
 
@@ -387,30 +371,30 @@ command("GetJointsMaxTurnMin", value=True)(_config_getter("turn_min"))
 command("GetMinChangeWeights", value=True)(_config_getter("weights"))
 
 
-async def _change(gw, session, name: str, values=(), words=()) -> bool:
-    reply = await gw.call(session, "planner", "config_change",
+def _change(gw, session, name: str, values=(), words=()) -> bool:
+    reply = gw.call(session, "planner", "config_change",
                           ConfigChange(command=name, args=list(values), words=list(words)))
     gw.limits.set(reply.config)
     return reply.ok
 
 
 def _six(name):
-    async def handler(gw, session, args):
-        return boolean(await _change(gw, session, name, args.joints()))
+    def handler(gw, session, args):
+        return boolean(_change(gw, session, name, args.joints()))
     return handler
 
 
 def _single(name):
-    async def handler(gw, session, args):
+    def handler(gw, session, args):
         index = args.index()
         value = args.value()
-        return boolean(await _change(gw, session, name, (index, value)))
+        return boolean(_change(gw, session, name, (index, value)))
     return handler
 
 
 def _reset(name):
-    async def handler(gw, session, args):
-        return boolean(await _change(gw, session, name))
+    def handler(gw, session, args):
+        return boolean(_change(gw, session, name))
     return handler
 
 
@@ -434,43 +418,43 @@ command("ResetAllowedStatus")(_reset("ResetAllowedStatus"))
 
 
 @command("GetAllowedStatus", value=True)
-async def get_allowed_status(gw, session, args):
-    return " ".join((await _config(gw, session)).allowed) + "\n"
+def get_allowed_status(gw, session, args):
+    return " ".join((_config(gw, session)).allowed) + "\n"
 
 
 @command("SetAllowedStatus", value=True)
-async def set_allowed_status(gw, session, args):
+def set_allowed_status(gw, session, args):
     try:
         words = args.status()
     except ParseError:
         return error("incorrect status", with_false=False)
-    await _change(gw, session, "SetAllowedStatus", words=words)
+    _change(gw, session, "SetAllowedStatus", words=words)
     return None  # the original sends nothing on success; its clients do not read a reply
 
 
 @command("GetRTSpeedControl", value=True)
-async def get_rt_speed_control(gw, session, args):
-    return f"{(await _config(gw, session)).rt_speed_control}\n"
+def get_rt_speed_control(gw, session, args):
+    return f"{(_config(gw, session)).rt_speed_control}\n"
 
 
 @command("SetRTSpeedControl")
-async def set_rt_speed_control(gw, session, args):
-    return boolean(await _change(gw, session, "SetRTSpeedControl", (args.index(),)))
+def set_rt_speed_control(gw, session, args):
+    return boolean(_change(gw, session, "SetRTSpeedControl", (args.index(),)))
 
 
 @command("SetKukaRTSpeed")
-async def set_kuka_rt_speed(gw, session, args):
+def set_kuka_rt_speed(gw, session, args):
     if not gw.robot.rt:  # kr16, kr3, ad850, kaw_fs: arguments not even read
         return FALSE
-    return boolean(await _change(gw, session, "SetKukaRTSpeed", args.joints()))
+    return boolean(_change(gw, session, "SetKukaRTSpeed", args.joints()))
 
 
 def _adept_setting(name):
     # the original answers true to anything, on every robot type; only the Adept uses them
-    async def handler(gw, session, args):
+    def handler(gw, session, args):
         values = args.leading_doubles(2)
         if gw.robot.is_adept and values:
-            await _change(gw, session, name, values)
+            _change(gw, session, name, values)
         return TRUE
     return handler
 
@@ -483,47 +467,51 @@ command("SetAdeptCoarse")(_adept_setting("SetAdeptCoarse"))
 
 # ====================================================================== kinematics
 @command("ForwardCalc")
-async def forward_calc(gw, session, args):
+def forward_calc(gw, session, args):
     numbers = args.leading_doubles(6)
     if not numbers:
         return FALSE
     config = gw.limits.config
-    reply = await gw.call(session, "kinematics", "forward_calc", ForwardCalcRequest(
+    reply = gw.call(session, "kinematics", "forward_calc", ForwardCalcRequest(
         numbers=numbers, turn_min=config.turn_min, turn_max=config.turn_max))
     if reply.pose is None:
         return FALSE
     return fmt(reply.pose) + "\n" + reply.status + "\n"
 
 
-async def _backward(gw, session, args) -> list[float] | None:
+def _backward(gw, session, args) -> list[float] | None:
     pose = args.matrix()
     pattern = args.status()
     config = gw.limits.config
-    reply = await gw.call(session, "kinematics", "backward_calc", BackwardCalcRequest(
-        pose=pose, pattern=pattern, current=await gw.current(session), turn_min=config.turn_min,
+    reply = gw.call(session, "kinematics", "backward_calc", BackwardCalcRequest(
+        pose=pose, pattern=pattern, current=gw.current(session), turn_min=config.turn_min,
         turn_max=config.turn_max, max_change=config.max_change, weights=config.weights))
     return reply.joints
 
 
 @command("BackwardCalc", "GetJointsRowWise")
-async def backward_calc(gw, session, args):
-    joints = await _backward(gw, session, args)
+def backward_calc(gw, session, args):
+    joints = _backward(gw, session, args)
     return FALSE if joints is None else fmt(joints) + "\n"
 
 
 @command("IsPossible")
-async def is_possible(gw, session, args):
-    return boolean(await _backward(gw, session, args) is not None)
+def is_possible(gw, session, args):
+    return boolean(_backward(gw, session, args) is not None)
 
 
 # ====================================================================== motion
-async def _move(gw, session, kind: MotionKind, **fields) -> str:
+def _move(gw, session, kind: MotionKind, **fields) -> str:
     if session.routetest is not None:  # real moves are refused while route testing
         return FALSE
     state = gw.joints.get()  # the planner starts from it rather than follow the state itself
     # the client may leave mid-move: the move is abandoned, the session's end stops the robot
-    reply = await unless_gone(session, gw.call(session, "planner", "move", MoveRequest(
-        kind=kind, start=state.q if state is not None else None, session=gw.session_id(session), **fields)), kind)
+    try:
+        reply = gw.call(session, "planner", "move", MoveRequest(
+            kind=kind, start=state.q if state is not None else None, session=gw.session_id(session), **fields),
+            abandon=session.client_gone)
+    except CallAbandoned:
+        raise ClientGone(f"the client left during {kind}: the robot stops") from None
     if reply.state is not None:
         gw.joints.update(reply.state)
     if not reply.ok and reply.error:  # the robot failed (not connected, link lost), not the command
@@ -534,25 +522,25 @@ async def _move(gw, session, kind: MotionKind, **fields) -> str:
 
 
 @command("MovePTPJoints")
-async def move_ptp_joints(gw, session, args):
-    return await _move(gw, session, "MovePTPJoints", joints=args.joints())
+def move_ptp_joints(gw, session, args):
+    return _move(gw, session, "MovePTPJoints", joints=args.joints())
 
 
 @command("MovePTPJointsStatus")
-async def move_ptp_joints_status(gw, session, args):
+def move_ptp_joints_status(gw, session, args):
     joints = args.joints()
-    return await _move(gw, session, "MovePTPJointsStatus", joints=joints, pattern=args.status())
+    return _move(gw, session, "MovePTPJointsStatus", joints=joints, pattern=args.status())
 
 
 @command("MovePTPHomRowWise")
-async def move_ptp_hom(gw, session, args):
-    return await _move(gw, session, "MovePTPHomRowWise", pose=args.matrix())
+def move_ptp_hom(gw, session, args):
+    return _move(gw, session, "MovePTPHomRowWise", pose=args.matrix())
 
 
 def _pose_status_move(kind: MotionKind):
-    async def handler(gw, session, args):
+    def handler(gw, session, args):
         pose = args.matrix()
-        return await _move(gw, session, kind, pose=pose, pattern=args.status())
+        return _move(gw, session, kind, pose=pose, pattern=args.status())
     return handler
 
 
@@ -562,48 +550,48 @@ command("MoveMinChangeRowWiseStatus")(_pose_status_move("MoveMinChangeRowWiseSta
 
 # ---------------------------------------------------------------------- route test
 @command("EnableRoutetest")
-async def enable_routetest(gw, session, args):
+def enable_routetest(gw, session, args):
     if session.routetest is not None:
         return FALSE
-    session.routetest = list(await gw.current(session))
+    session.routetest = list(gw.current(session))
     return TRUE
 
 
 @command("DisableRoutetest")
-async def disable_routetest(gw, session, args):
+def disable_routetest(gw, session, args):
     session.routetest = None
     return TRUE
 
 
-async def _routetest(gw, session, request: MoveRequest) -> str:
+def _routetest(gw, session, request: MoveRequest) -> str:
     request.dry_run, request.start = True, session.routetest
-    reply = await gw.call(session, "planner", "move", request)
+    reply = gw.call(session, "planner", "move", request)
     if reply.ok and reply.joints is not None:
         session.routetest = list(reply.joints)
     return boolean(reply.ok)
 
 
 @command("RoutetestJoints")
-async def routetest_joints(gw, session, args):
+def routetest_joints(gw, session, args):
     if session.routetest is None:
         return FALSE
-    return await _routetest(gw, session, MoveRequest(kind="MovePTPJoints", joints=args.joints()))
+    return _routetest(gw, session, MoveRequest(kind="MovePTPJoints", joints=args.joints()))
 
 
 @command("RoutetestRowWiseStatus")
-async def routetest_row_wise_status(gw, session, args):
+def routetest_row_wise_status(gw, session, args):
     if session.routetest is None:
         return FALSE
     pose = args.matrix()
-    return await _routetest(gw, session, MoveRequest(
+    return _routetest(gw, session, MoveRequest(
         kind="RoutetestRowWiseStatus", pose=pose, pattern=args.status()))
 
 
 # ---------------------------------------------------------------------- real-time (Alter) and LIN modes
 def _mode(name):
-    async def handler(gw, session, args):
+    def handler(gw, session, args):
         try:
-            reply = await gw.call(session, "planner", "mode", ModeRequest(command=name))
+            reply = gw.call(session, "planner", "mode", ModeRequest(command=name))
         except BusError as exc:
             if name != "DisableAlter" or not reached(exc):
                 raise
@@ -628,10 +616,10 @@ command("DisableLin")(_mode("DisableLin"))
 
 
 def _alter_move(kind: MotionKind, parse):
-    async def handler(gw, session, args):
+    def handler(gw, session, args):
         if not gw.alter:  # the original answers false without reading the arguments
             return FALSE
-        return await _move(gw, session, kind, **parse(args))
+        return _move(gw, session, kind, **parse(args))
     return handler
 
 
@@ -643,14 +631,14 @@ def _pose_and_status(args):
 def _alter_joints(relative: bool):
     """Joint targets go straight to the driver, one hop on the real-time path; the driver
     checks them (Alter mode, turn limits, max change). Cartesian ones need the planner's IK."""
-    async def handler(gw, session, args):
+    def handler(gw, session, args):
         if not gw.alter:  # the original answers false without reading the arguments
             return FALSE
         joints = args.joints()
         if session.routetest is not None:  # real moves are refused while route testing
             return FALSE
-        config = await _config(gw, session)
-        reply = await gw.call(session, "driver", "alter_target", AlterTarget(
+        config = _config(gw, session)
+        reply = gw.call(session, "driver", "alter_target", AlterTarget(
             q=joints, synchronized=config.rt_speed_control == 0, relative=relative))
         if not reply.ok and reply.error:  # the robot failed (not connected, link lost)
             return error(f"driver: {reply.error}")
@@ -668,13 +656,13 @@ command("DoAlterCart")(_alter_move("DoAlterCart", lambda a: {"pose": a.doubles(6
 
 
 @command("MoveLINHomRowWise")
-async def move_lin(gw, session, args):
+def move_lin(gw, session, args):
     # the planner knows whether LIN mode is on; without it the answer is false
     try:
         pose = args.matrix()
     except ParseError:
         return FALSE  # the original answers false without reading arguments when LIN is off
-    return await _move(gw, session, "MoveLINHomRowWise", pose=pose)
+    return _move(gw, session, "MoveLINHomRowWise", pose=pose)
 
 
 # ====================================================================== gripper and Adept
@@ -711,7 +699,7 @@ def _gripper_failure(name: str, reason: str, info: str) -> str:
 
 
 def _gripper(name: str, needs_value: bool):
-    async def handler(gw, session, args):
+    def handler(gw, session, args):
         if not gw.robot.is_adept:  # the original: false, arguments not read
             return FALSE
         value = None
@@ -720,7 +708,7 @@ def _gripper(name: str, needs_value: bool):
             if value is None:
                 return _gripper_failure(name, "incorrect value", "Gripper not moved")
         try:
-            reply = await gw.call(session, "gripper", "command", GripperCommand(command=name, value=value))
+            reply = gw.call(session, "gripper", "command", GripperCommand(command=name, value=value))
         except BusError as exc:
             log.warning("%s failed: %s (%s)", name, exc.message, exc.code)
             return _gripper_failure(name, exc.message, _where(None))
@@ -740,7 +728,7 @@ command("GripperMoveToPosition")(_gripper("GripperMoveToPosition", True))
 
 
 @command("DirectAdeptCmd")
-async def direct_adept_cmd(gw, session, args):
+def direct_adept_cmd(gw, session, args):
     """The V+ SIGNAL instruction (``signal 5, -6``) reaches the Adept's digital outputs, by
     default: it switches outputs and nothing else, and clients (RobPraktikum's suction cup)
     need it unchanged. Any other V+ instruction has no channel to the controller."""
@@ -751,7 +739,7 @@ async def direct_adept_cmd(gw, session, args):
     except SignalError as exc:
         return error(f"DirectAdeptCmd: {exc}; nothing was switched")
     if signals is not None:
-        ack = await gw.call(session, "driver", "signal", SignalRequest(signals=signals))
+        ack = gw.call(session, "driver", "signal", SignalRequest(signals=signals))
         if not ack.ok:
             return error(f"driver: {ack.error}" if ack.error else f"DirectAdeptCmd: {ack.reason}")
         return TRUE  # the protocol description's reply to a DirectAdeptCmd that ran

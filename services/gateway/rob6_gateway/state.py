@@ -8,8 +8,8 @@ trip, not two.
 
 from __future__ import annotations
 
-import asyncio
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import msgspec
@@ -52,7 +52,7 @@ class ConfigMirror:
 
     def set(self, config: MotionConfig) -> None:
         source = self.bus.owner("planner")
-        with self._lock:  # publications (Zenoh's thread) and replies (the loop) may cross
+        with self._lock:  # publications (Zenoh's thread) and replies (the session's thread) may cross
             if source != self._source or config.version >= self.config.version:
                 self.config, self._source = config, source
 
@@ -70,5 +70,7 @@ class Session:
     cid: str = field(default_factory=new_cid)  # of the command being executed
     routetest: list[float] | None = None  # the virtual position while route testing
     seq: int = 0  # client exchanges recorded so far (ClientExchange.seq of the last one)
-    #: the client's connection closed: a move it waits for is abandoned (the robot stops)
-    gone: asyncio.Event = field(default_factory=asyncio.Event)
+    #: has the client's connection closed? Asked while a move waits (``Bus.request``'s
+    #: ``abandon``): the move is then abandoned and the robot stops. The server reads the
+    #: socket here (``Connection.poll``); without a connection, never.
+    client_gone: Callable[[], bool] = lambda: False
