@@ -50,14 +50,12 @@ bounded by the quick-call deadline: the handler announces how long and for what
 (``request(..., waiting=ctx.waiting)``), so each hop outward waits a little longer.
 
 Zenoh runs callbacks on its own threads: the callbacks here only hand data over
-(set a future, update a dict) and never block. Served requests are taken from a
+(release the waiting caller, update a dict) and never block. Served requests are taken from a
 FIFO channel by worker threads.
 """
 
 from __future__ import annotations
 
-import asyncio
-import concurrent.futures
 import functools
 import itertools
 import logging
@@ -505,30 +503,6 @@ class Bus:
             finally:
                 self._done(call, waiter)
 
-    async def arequest(self, service: str, op: str, body: object, *, timeout: float | None = None,
-                       cid: str | None = None, instance: str | None = None) -> Any:
-        """``request`` for asyncio code: the reply wakes the event loop straight from
-        Zenoh's callback thread (no executor thread in between). The hedge is a timer on
-        the loop that sends the second copy itself: no task, no wake-up of the caller.
-        Cancelled, it cancels the query too."""
-        call = _Request(self, service, op, body, timeout, cid, instance, None)
-        loop = asyncio.get_running_loop()
-        while True:
-            while (target := call.next_target()) is None:
-                await asyncio.sleep(0.005)
-            waiter = _Waiter(loop)
-            self._send(call, target, waiter)
-            hedge_at = call.hedge_at()
-            hedge = loop.call_later(hedge_at - time.monotonic(), self._hedge, call, waiter) if hedge_at else None
-            try:
-                return call.decode(*await waiter.aresult(call.remaining))
-            except _InstanceLost as exc:
-                call.lost(target, exc)
-            finally:
-                if hedge is not None:
-                    hedge.cancel()
-                self._done(call, waiter)
-
     def _hedge(self, call: "_Request", waiter: "_Waiter") -> None:
         """No answer yet: the second copy, to another live instance (the same one if it is
         the only one; the first copy may be stuck behind a lost packet, not the replica)."""
@@ -954,22 +928,22 @@ class _Request:
 
 class _Waiter:
     """Where the reply to one or two copies (attempts) of a request goes: completed from
-    any thread (Zenoh's); the first answer wins, a failure counts only once every copy
-    has failed.
+    any thread (Zenoh's), awaited by the calling thread; the first answer wins, a failure
+    counts only once every copy has failed. Its result is ``(reply payload, instance that
+    answered)``.
 
-    With an event loop the future is an asyncio one, completed through the loop's
-    thread-safe call; otherwise a concurrent.futures one a thread can block on. Its
-    result is ``(reply payload, instance that answered)``.
+    The outcome wakes the caller through one lock, released once (the cheapest hand-over
+    between two Python threads): no future, no condition, no event loop.
     """
 
-    def __init__(self, loop: asyncio.AbstractEventLoop | None = None):
-        self.loop = loop
-        self.future: asyncio.Future[tuple[bytes, str]] | concurrent.futures.Future[tuple[bytes, str]] = (
-            loop.create_future() if loop is not None else concurrent.futures.Future())
+    def __init__(self) -> None:
         self.targets: list[str] = []  # attempt number -> instance
-        self.settled = False  # the first outcome wakes the waiting loop; later ones cost nothing
+        self.settled = False  # the first outcome wakes the caller; later ones cost nothing
         self._open: set[int] = set()
         self._lock = threading.Lock()
+        self._outcome: tuple[bytes, str] | BaseException | None = None
+        self._ready = threading.Lock()  # held until the outcome is there
+        self._ready.acquire()
 
     def attempt(self, target: str) -> int:
         with self._lock:
@@ -978,41 +952,21 @@ class _Waiter:
             return len(self.targets) - 1
 
     def result(self, timeout: float) -> tuple[bytes, str] | None:
-        """The outcome, or None when none came within ``timeout``."""
-        assert isinstance(self.future, concurrent.futures.Future)  # made without a loop
-        try:
-            return self.future.result(timeout=max(timeout, 0.0))
-        except concurrent.futures.TimeoutError:
+        """The outcome (a failure is raised), or None when none came within ``timeout``."""
+        if not self._ready.acquire(timeout=max(timeout, 0.0)):
             return None
-
-    async def aresult(self, remaining: Callable[[], float]) -> tuple[bytes, str]:
-        """The outcome; ``_InstanceLost`` once ``remaining()`` (which an announcement of
-        the service may raise meanwhile) has run out."""
-        assert isinstance(self.future, asyncio.Future) and self.loop is not None  # made with the running loop
-        loop, future = self.loop, self.future
-        timer: asyncio.TimerHandle | None = None
-
-        def expire() -> None:  # a timer on the loop, not asyncio.wait_for: no task switch per request
-            nonlocal timer
-            left = remaining() + REPLY_GRACE_S
-            if left > 0:  # not yet: the deadline moved, or this was a slice
-                timer = loop.call_later(min(left, WAIT_SLICE_S), expire)
-            else:
-                self._complete_in_loop(future.set_exception, _InstanceLost("no reply in time"))
-
-        timer = loop.call_later(min(remaining() + REPLY_GRACE_S, WAIT_SLICE_S), expire)
-        try:
-            return await future
-        finally:
-            timer.cancel()
+        self._ready.release()  # it stays there for a later look
+        if isinstance(self._outcome, BaseException):
+            raise self._outcome
+        return self._outcome
 
     def resolve(self, attempt: int, payload: bytes) -> None:
         with self._lock:
             if self.settled:
                 return
             self.settled = True
-            value = (payload, self.targets[attempt])
-        self._complete(self.future.set_result, value)
+            self._outcome = (payload, self.targets[attempt])
+        self._ready.release()
 
     def fail(self, attempt: int, exc: BaseException) -> None:
         with self._lock:
@@ -1022,23 +976,8 @@ class _Waiter:
             if self._open:  # the other copy may still answer
                 return
             self.settled = True
-        self._complete(self.future.set_exception, exc)
-
-    def _complete(self, setter: Callable[[Any], None], value: object) -> None:
-        if self.loop is None:
-            try:
-                setter(value)
-            except concurrent.futures.InvalidStateError:
-                pass
-        else:
-            try:
-                self.loop.call_soon_threadsafe(self._complete_in_loop, setter, value)
-            except RuntimeError:  # the loop is closed: nobody waits any more
-                pass
-
-    def _complete_in_loop(self, setter: Callable[[Any], None], value: object) -> None:
-        if not self.future.done():
-            setter(value)
+            self._outcome = exc
+        self._ready.release()
 
 
 def decode(typ: type[T], payload: bytes) -> T:
