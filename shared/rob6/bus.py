@@ -137,9 +137,11 @@ WAITING_QUERY_S = 24 * 3600.0
 #: a caller's own deadline fires this long after the service's, so a reply sent just in
 #: time is not lost to the caller's timer
 REPLY_GRACE_S = 0.05
-#: a call waiting for its reply looks at its deadline at least this often: the service's
-#: announcement (``Context.waiting``) can bring it nearer as well as push it out
-WAIT_SLICE_S = 0.1
+#: how often the watcher (``_Watcher``) acts for callers blocked on their reply channel:
+#: sends a hedge that is due, ends a waiting call past its deadline (an announcement can
+#: bring it nearer as well as push it out) or abandoned by its caller. A hedge goes out
+#: within this after ``HEDGE_DELAY_S``.
+WATCH_TICK_S = 0.02
 
 
 def _host(instance: str) -> str:
@@ -277,7 +279,8 @@ class Bus:
         self._lock = threading.Lock()
         self._live: dict[str, list[str]] = {}
         self._inflight: dict[str, int] = {}
-        self._pending: dict[str, set[tuple[_Waiter, int]]] = {}  # instance -> (waiter, attempt)
+        self._pending: dict[str, set[_Exchange]] = {}  # instance -> exchanges waiting for it
+        self._watcher: _Watcher | None = None
         self._rotation = itertools.count()
         self._listeners: list[Callable[[str, str, bool], None]] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
@@ -321,8 +324,8 @@ class Bus:
             elif not alive and instance in instances:
                 instances.remove(instance)
             lost = self._pending.pop(instance, set()) if not alive else set()
-        for waiter, attempt in lost:
-            waiter.fail(attempt, _InstanceLost(f"{service} instance {instance} went away", gone=True))
+        for exchange in lost:
+            exchange.end(_InstanceLost(f"{service} instance {instance} went away", gone=True), instance)
         for listener in list(self._listeners):
             try:
                 listener(service, instance, alive)
@@ -482,86 +485,44 @@ class Bus:
         while True:
             while (target := call.next_target()) is None:
                 time.sleep(0.005)
-            waiter = _Waiter()
-            self._send(call, target, waiter)
+            exchange = _Exchange(self, call, target, abandon)
             try:
-                hedge_at = call.hedge_at()
-                outcome = waiter.result(hedge_at - time.monotonic()) if hedge_at else None  # before the deadline
-                if outcome is None:
-                    if hedge_at:
-                        self._hedge(call, waiter)
-                    # the deadline moves when the service announces a wait: look again each slice
-                    while (outcome := waiter.result(min(call.remaining() + REPLY_GRACE_S, WAIT_SLICE_S))) is None \
-                            and call.remaining() + REPLY_GRACE_S > 0:
-                        if abandon is not None and abandon():
-                            raise CallAbandoned(f"{service}.{op} abandoned by its caller")
-                if outcome is None:
-                    raise _InstanceLost("no reply in time")
-                return call.decode(*outcome)
+                return call.decode(*exchange.run())
             except _InstanceLost as exc:
                 call.lost(target, exc)
             finally:
-                self._done(call, waiter)
+                exchange.close()
 
-    def _hedge(self, call: "_Request", waiter: "_Waiter") -> None:
-        """No answer yet: the second copy, to another live instance (the same one if it is
-        the only one; the first copy may be stuck behind a lost packet, not the replica)."""
-        if waiter.settled or call.remaining() <= 0:
-            return
-        target = self._pick(call.service, call.tried) or self._pick(call.service, set())
-        if target is None:
-            return
-        log.debug("hedging %s.%s on %s", call.service, call.op, target)
-        self._send(call, target, waiter)
+    def _watch(self, exchange: "_Exchange") -> None:
+        if self._watcher is None:
+            with self._lock:
+                if self._watcher is None:
+                    self._watcher = _Watcher(self)
+        self._watcher.add(exchange)
 
-    def _send(self, call: "_Request", instance: str, waiter: "_Waiter") -> None:
-        """Send the query; its reply, or the loss of the instance, completes ``waiter``."""
-        service = call.service
-        call.sent(instance)
-        attempt = waiter.attempt(instance)
-
-        def on_reply(reply: zenoh.Reply) -> None:
-            ok, err = reply.ok, reply.err  # exactly one of them is set
-            if ok is not None and ok.attachment is not None and ok.attachment.to_bytes() == WAITING:
-                try:
-                    call.announced(_waiting.decode(ok.payload.to_bytes()))
-                except Exception:  # an announcement must not break the call: its reply still comes
-                    log.exception("bad announcement from %s.%s", service, call.op)
-            elif ok is not None:
-                waiter.resolve(attempt, ok.payload.to_bytes())
-            elif err is not None:
-                message = err.payload.to_string()
-                if message == "Timeout":  # Zenoh's own error reply: the query timed out
-                    # (a stopped/hung instance); report it like any lost instance, not as
-                    # a bare "ERROR: Timeout" that names no service
-                    waiter.fail(attempt, _InstanceLost(f"no reply from {service} instance {instance} in time"))
-                else:
-                    waiter.fail(attempt, BusError("internal", message))
-
-        def on_done() -> None:
-            waiter.fail(attempt, _InstanceLost(f"no reply from {service} instance {instance}"))
-
-        with self._lock:
-            self._pending.setdefault(instance, set()).add((waiter, attempt))
-            self._inflight[instance] = self._inflight.get(instance, 0) + 1
+    def _query(self, call: "_Request", instance: str, token: zenoh.CancellationToken,
+               handler: Any = None) -> Any:
+        """Send the query to ``instance``: its replies come through ``handler`` (a callback),
+        or, without one, on a channel the caller reads (returned)."""
         # a waiting operation's deadline moves with what the service announces; Zenoh's
         # timeout cannot, so the query lives long and is cancelled when the call ends
-        timeout = WAITING_QUERY_S if call.spec.waits else max(call.remaining(), 0.001)
+        timeout = WAITING_QUERY_S if call.spec.waits else max(call.remaining() + REPLY_GRACE_S, 0.001)
         # no consolidation: the reply is passed on when it arrives. Zenoh's default holds it
         # back until every route has sent its final, and a route through a router whose link
         # to a partitioned host is still open never does before the timeout: measured, every
         # gateway -> driver call on the robot PC timed out 2 s into a partition of the
         # remote hosts (deploy/MULTI_HOST.md). The key names one instance: one reply.
-        self.session.get(self.key(service, instance, call.op), zenoh.handlers.Callback(on_reply, on_done),
-                         payload=call.payload, timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE,
-                         cancellation_token=call.token)
+        return self.session.get(self.key(call.service, instance, call.op), handler, payload=call.payload,
+                                timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE,
+                                cancellation_token=token)
 
-    def _done(self, call: "_Request", waiter: "_Waiter") -> None:
-        if call.token is not None and not waiter.settled:
-            call.token.cancel()  # nobody waits for its reply any more
+    def _track(self, exchange: "_Exchange", instance: str, add: bool) -> None:
         with self._lock:
-            for attempt, instance in enumerate(waiter.targets):
-                self._pending.get(instance, set()).discard((waiter, attempt))
+            if add:
+                self._pending.setdefault(instance, set()).add(exchange)
+                self._inflight[instance] = self._inflight.get(instance, 0) + 1
+            else:
+                self._pending.get(instance, set()).discard(exchange)
                 self._inflight[instance] = self._inflight.get(instance, 1) - 1
 
     # ------------------------------------------------------------------ pub/sub
@@ -850,7 +811,6 @@ class _Request:
         self.deadline = start + self.timeout
         self.waiting_for = ""  # what the service announced it waits for
         self.relay = waiting
-        self.token = zenoh.CancellationToken() if self.spec.waits else None
         # a quick call finds its instance within its deadline; a waiting one's deadline
         # counts from when it was sent (until the service announces more)
         self.grace_end = start + LIVELINESS_GRACE_S if self.spec.waits else min(self.deadline, start + LIVELINESS_GRACE_S)
@@ -926,58 +886,206 @@ class _Request:
         return envelope.body
 
 
-class _Waiter:
-    """Where the reply to one or two copies (attempts) of a request goes: completed from
-    any thread (Zenoh's), awaited by the calling thread; the first answer wins, a failure
-    counts only once every copy has failed. Its result is ``(reply payload, instance that
-    answered)``.
+def _reply_outcome(reply: zenoh.Reply, call: _Request, instance: str) -> tuple[bytes, str] | None:
+    """A final reply's ``(payload, instance)``; None for an announcement (``Context.waiting``,
+    passed to the call); a failure raised."""
+    ok = reply.ok
+    if ok is not None:
+        if ok.attachment is not None and ok.attachment.to_bytes() == WAITING:
+            try:
+                call.announced(_waiting.decode(ok.payload.to_bytes()))
+            except Exception:  # an announcement must not break the call: its reply still comes
+                log.exception("bad announcement from %s.%s", call.service, call.op)
+            return None
+        return ok.payload.to_bytes(), instance
+    message = reply.err.payload.to_string() if reply.err is not None else "reply without content"
+    if message == "Timeout":  # Zenoh's own error reply: the query timed out (a stopped or
+        # hung instance); reported like any lost instance, not as a bare "ERROR: Timeout"
+        raise _InstanceLost(f"no reply from {call.service} instance {instance} in time")
+    raise BusError("internal", message)
 
-    The outcome wakes the caller through one lock, released once (the cheapest hand-over
-    between two Python threads): no future, no condition, no event loop.
+
+class _Exchange:
+    """One request sent to one instance, its reply received on the calling thread.
+
+    The reply comes through a Zenoh channel the caller blocks on: it wakes straight from
+    Zenoh's thread, without a Python callback in between (the callback and the hand-over
+    to the caller cost more than the Zenoh round trip itself: docs/PERFORMANCE.md).
+    Whatever else must end the wait cancels the query, which closes the channel, and says
+    why (``end``): the instance went away (``Bus._on_liveliness``), a waiting call ran past
+    its deadline or was abandoned, or the hedge's second copy answered first (``_Watcher``).
+    The second copy of a hedged call is the one reply taken by a callback.
     """
 
-    def __init__(self) -> None:
-        self.targets: list[str] = []  # attempt number -> instance
-        self.settled = False  # the first outcome wakes the caller; later ones cost nothing
-        self._open: set[int] = set()
+    def __init__(self, bus: Bus, call: _Request, target: str, abandon: Callable[[], bool] | None):
+        self.bus, self.call, self.target, self.abandon = bus, call, target, abandon
+        self.token = zenoh.CancellationToken()
         self._lock = threading.Lock()
-        self._outcome: tuple[bytes, str] | BaseException | None = None
-        self._ready = threading.Lock()  # held until the outcome is there
-        self._ready.acquire()
+        self._ended: tuple[tuple[bytes, str] | BaseException, str] | None = None  # outcome, instance
+        self._hedge: tuple[str, zenoh.CancellationToken] | None = None  # where the second copy went
+        self._hedge_done = threading.Lock()  # released when the second copy has its outcome
+        self._hedge_done.acquire()
+        self._hedge_outcome: tuple[bytes, str] | BaseException | None = None
+        self._answered = False  # the channel gave the reply: the query ends by itself
+        self.hedge_at: float | None = None
+        self.watched = False
 
-    def attempt(self, target: str) -> int:
+    def run(self) -> tuple[bytes, str]:
+        """The reply ``(payload, instance)``; ``_InstanceLost`` when none can come."""
+        call, target = self.call, self.target
+        call.sent(target)
+        self.hedge_at = call.hedge_at()
+        self.watched = bool(self.hedge_at) or call.spec.waits
+        self.bus._track(self, target, True)
+        if self.watched:
+            self.bus._watch(self)
+        try:
+            replies = self.bus._query(call, target, self.token)
+        except zenoh.ZError:  # cancelled before it was sent (the instance went away at once)
+            replies = ()
+        try:
+            for reply in replies:
+                outcome = _reply_outcome(reply, call, target)
+                if outcome is not None:
+                    self._answered = True
+                    return outcome
+        except _InstanceLost as exc:
+            return self._second_copy(exc)
+        # the channel closed without a reply: why it was cancelled, or the query's end
         with self._lock:
-            self.targets.append(target)
-            self._open.add(len(self.targets) - 1)
-            return len(self.targets) - 1
+            ended = self._ended
+        if ended is None:
+            return self._second_copy(_InstanceLost(f"no reply from {call.service} instance {target}"))
+        why = ended[0]
+        if isinstance(why, tuple):
+            return why
+        if isinstance(why, _InstanceLost):
+            return self._second_copy(why)
+        raise why
 
-    def result(self, timeout: float) -> tuple[bytes, str] | None:
-        """The outcome (a failure is raised), or None when none came within ``timeout``."""
-        if not self._ready.acquire(timeout=max(timeout, 0.0)):
-            return None
-        self._ready.release()  # it stays there for a later look
-        if isinstance(self._outcome, BaseException):
-            raise self._outcome
-        return self._outcome
+    def _second_copy(self, exc: _InstanceLost) -> tuple[bytes, str]:
+        """The first copy failed: the second's outcome, if one was sent; else ``exc``."""
+        if self._hedge is None:
+            raise exc
+        if not self._hedge_done.acquire(timeout=max(self.call.remaining() + REPLY_GRACE_S, 0.0)):
+            raise exc
+        if isinstance(self._hedge_outcome, tuple):
+            return self._hedge_outcome
+        raise exc
 
-    def resolve(self, attempt: int, payload: bytes) -> None:
+    def end(self, outcome: tuple[bytes, str] | BaseException, instance: str) -> None:
+        """End the wait from another thread, with ``outcome`` (a reply or the reason), if
+        ``instance`` is the one waited for: the query is cancelled, the caller wakes."""
+        if self._hedge is not None and instance == self._hedge[0] and isinstance(outcome, BaseException):
+            self.hedged(outcome)  # the second copy's instance went away
+        if instance != self.target:
+            return
         with self._lock:
-            if self.settled:
+            if self._ended is not None:
                 return
-            self.settled = True
-            self._outcome = (payload, self.targets[attempt])
-        self._ready.release()
+            self._ended = (outcome, instance)
+        self.token.cancel()
 
-    def fail(self, attempt: int, exc: BaseException) -> None:
+    def tick(self, now: float) -> None:
+        """The watcher's look (``WATCH_TICK_S``): a hedge due, a deadline past, an abandon."""
+        if self.hedge_at is not None and now >= self.hedge_at:
+            self.hedge_at = None
+            self._send_hedge()
+        call = self.call
+        if call.spec.waits:
+            if self.abandon is not None and self.abandon():
+                self.end(CallAbandoned(f"{call.service}.{call.op} abandoned by its caller"), self.target)
+            elif call.remaining() + REPLY_GRACE_S <= 0:
+                self.end(_InstanceLost("no reply in time"), self.target)
+
+    def _send_hedge(self) -> None:
+        """No answer yet: the second copy, to another live instance (the same one if it is
+        the only one; the first copy may be stuck behind a lost packet, not the replica)."""
+        call, bus = self.call, self.bus
         with self._lock:
-            if self.settled or attempt not in self._open:
+            if self._ended is not None or call.remaining() <= 0:
                 return
-            self._open.discard(attempt)
-            if self._open:  # the other copy may still answer
+        target = bus._pick(call.service, call.tried) or bus._pick(call.service, set())
+        if target is None:
+            return
+        log.debug("hedging %s.%s on %s", call.service, call.op, target)
+        token = zenoh.CancellationToken()
+        self._hedge = (target, token)
+        call.sent(target)
+        bus._track(self, target, True)
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            try:
+                outcome = _reply_outcome(reply, call, target)
+            except Exception as exc:  # the second copy failed
+                self.hedged(exc)
                 return
-            self.settled = True
-            self._outcome = exc
-        self._ready.release()
+            if outcome is not None:
+                self.hedged(outcome)
+
+        def on_done() -> None:
+            self.hedged(_InstanceLost(f"no reply from {call.service} instance {target}"))
+
+        try:
+            bus._query(call, target, token, zenoh.handlers.Callback(on_reply, on_done))
+        except zenoh.ZError:
+            self.hedged(_InstanceLost(f"could not ask {call.service} instance {target}"))
+
+    def hedged(self, outcome: tuple[bytes, str] | BaseException) -> None:
+        """The second copy's outcome (Zenoh's thread): an answer ends the first copy's wait."""
+        with self._lock:
+            if self._hedge_outcome is not None:
+                return
+            self._hedge_outcome = outcome
+        self._hedge_done.release()
+        if isinstance(outcome, tuple):
+            self.end(outcome, self.target)
+
+    def close(self) -> None:
+        """The call is over: nothing waits for either copy any more."""
+        with self._lock:
+            if self._ended is None:
+                self._ended = (CallAbandoned("closed"), self.target)
+        if not self._answered:
+            self.token.cancel()
+        self.bus._track(self, self.target, False)
+        if self._hedge is not None:
+            self._hedge[1].cancel()
+            self.bus._track(self, self._hedge[0], False)
+        if self.watched and self.bus._watcher is not None:
+            self.bus._watcher.discard(self)
+
+
+class _Watcher:
+    """One thread per bus that acts, every ``WATCH_TICK_S``, for the callers blocked on a
+    reply channel whose exchange needs watching (a hedged call, a waiting one): see
+    ``_Exchange.tick``. Started with the first such call."""
+
+    def __init__(self, bus: Bus):
+        self._bus = bus
+        self._exchanges: set[_Exchange] = set()
+        self._lock = threading.Lock()
+        threading.Thread(target=self._run, name=f"{bus.service}-bus-watch", daemon=True).start()
+
+    def add(self, exchange: _Exchange) -> None:
+        with self._lock:
+            self._exchanges.add(exchange)
+
+    def discard(self, exchange: _Exchange) -> None:
+        with self._lock:
+            self._exchanges.discard(exchange)
+
+    def _run(self) -> None:
+        while not self._bus._closed.is_set():
+            time.sleep(WATCH_TICK_S)
+            with self._lock:
+                exchanges = list(self._exchanges)
+            now = time.monotonic()
+            for exchange in exchanges:
+                try:
+                    exchange.tick(now)
+                except Exception:  # one call's trouble must not stop the others' watch
+                    log.exception("watching %s.%s failed", exchange.call.service, exchange.call.op)
 
 
 def decode(typ: type[T], payload: bytes) -> T:
