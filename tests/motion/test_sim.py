@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from rob6_driver.motion import Limits, Motion, MotionCore
+from rob6_driver.limits import Limits
+from rob6_driver.motion import Motion, MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import TrajectoryPlanner
 
