@@ -4,7 +4,7 @@ Semantics are those of the original rob6server (REFERENCE.md 6.3, 6.3a, 6.4, 7 a
 ``limits``/``limits_bounds``/``misc`` transcripts):
 
 * speeds (deg per 12 ms cycle) ``0 <= v <= 10 x default`` per joint, accelerations
-  (deg per cycle^2) ``0 <= a <= 0.02``; bounds inclusive. The 6-value forms update
+  (deg per cycle^2) ``0 <= a <= 0.02`` (``RobotModel.max_accel_bound``); bounds inclusive. The 6-value forms update
   **partially**: joints before the first invalid value are already set.
 * max change: 6-value form ``c >= 0`` for all, **all-or-nothing**; single form ``c > 0``
   (``-0`` rejected). Independent of the turn limits after start (6.3a).
@@ -34,8 +34,6 @@ from rob6.robots import RobotModel, get_robot
 from rob6.status import TOGGLE_ALL, parse_status, status_matches
 
 N_JOINTS = 6
-MAX_ACCEL_BOUND = 0.02
-DEFAULT_WEIGHTS = (4.0, 1.0, 1.0, 1.0, 1.0, 1.0)
 
 
 FIELDS = ("speed", "accel", "max_change", "turn_max", "turn_min", "weights",
@@ -122,7 +120,7 @@ class MotionConfig:
         return True
 
     def reset_weights(self) -> bool:
-        self.weights = list(DEFAULT_WEIGHTS)
+        self.weights = list(self.robot.default_weights)
         return True
 
     def reset_allowed(self) -> bool:
@@ -133,9 +131,8 @@ class MotionConfig:
     def _speed_ok(self, i: int, v: float) -> bool:
         return 0.0 <= v <= self.speed_bound[i]
 
-    @staticmethod
-    def _accel_ok(i: int, a: float) -> bool:
-        return 0.0 <= a <= MAX_ACCEL_BOUND
+    def _accel_ok(self, i: int, a: float) -> bool:
+        return 0.0 <= a <= self.robot.max_accel_bound
 
     # ------------------------------------------------------------------ speeds / accels
     def _set_partial(self, target: list[float], values, ok) -> bool:
