@@ -178,6 +178,8 @@ ROBOTS: dict[str, RobotModel] = {
 }
 
 ROBOT_TYPES = tuple(ROBOTS)
+#: the robot type rob6 drives when none is given (``--robot``, ``ROB6_ROBOT``)
+DEFAULT_ROBOT = "kr16"
 
 
 def get_robot(name: str) -> RobotModel:

@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from rob6.config import DEFAULT_LIVE_PORT
+
 from .inspect import export_csv, format_summary, summarize
 from .reader import NotMcap, ScanReport, scan
 
@@ -212,7 +214,7 @@ def replay_joints_cmd(file: str, speed: float, topic: str) -> None:
 
 @main.command()
 @click.argument("file")
-@click.option("--port", envvar="ROB6_LIVE_PORT", default=8765, show_default=True, type=int,
+@click.option("--port", envvar="ROB6_LIVE_PORT", default=DEFAULT_LIVE_PORT, show_default=True, type=int,
               help="Live-view port to serve on (0 = any free port) [env ROB6_LIVE_PORT].")
 @click.option("--bind", envvar="ROB6_BIND", default="127.0.0.1", show_default=True,
               help="Address to listen on [env ROB6_BIND].")

@@ -25,6 +25,8 @@ from typing import Any
 
 from foxglove.websocket import PlaybackCommand, PlaybackControlRequest, PlaybackState, PlaybackStatus
 
+from rob6.config import DEFAULT_LIVE_PORT
+
 from .derive import TF_TOPIC, JointStateDerivation
 from .live import COMMANDS_TOPIC, LATCHED, LiveView
 from .mcapfile import ROBOT_DESCRIPTION_TOPIC
@@ -72,7 +74,7 @@ def load(path: str | Path) -> tuple[list[Item], str | None]:
 class Player:
     """Plays ``items`` into a ``LiveView`` it starts; ``run()`` until stopped (or the end)."""
 
-    def __init__(self, items: list[Item], urdf: str | None, *, host: str = "127.0.0.1", port: int = 8765,
+    def __init__(self, items: list[Item], urdf: str | None, *, host: str = "127.0.0.1", port: int = DEFAULT_LIVE_PORT,
                  speed: float = 1.0, paused: bool = False, loop: bool = False, name: str = "rob6 playback",
                  clock: Callable[[], float] = time.monotonic):
         if not items:
