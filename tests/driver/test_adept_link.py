@@ -20,7 +20,7 @@ import pytest
 
 from rob6.messages import LinkEvent
 from rob6.robots import get_robot
-from rob6_driver.links.adept import RATED_SPEED_DEG_S, AdeptLink, AdeptSettings, from_wire, to_wire
+from rob6_driver.links.simple_message import RATED_SPEED_DEG_S, AdeptLink, AdeptSettings, from_wire, to_wire
 from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionConfig
 from rob6_planner.trajectory import TrajectoryPlanner
