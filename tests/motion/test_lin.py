@@ -6,7 +6,7 @@ import pytest
 from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionConfig
-from rob6_planner.lin import LinOptions
+from rob6_planner.lin_planner import LinOptions
 from rob6_planner.trajectory import TrajectoryPlanner, finite_difference_violations
 from tests.motion.motion_kin import fk, make_ik
 

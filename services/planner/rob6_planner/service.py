@@ -40,7 +40,7 @@ from rob6.robots import RobotModel
 from rob6.status import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN
 
 from .config import MotionConfig
-from .lin import plan_lin
+from .lin_planner import plan_lin
 from .trajectory import TrajectoryPlanner
 
 log = logging.getLogger("rob6.planner")

@@ -35,7 +35,7 @@ from rob6.status import status_matches
 from rob6.units import JERK_RAMP_S, accel_si, jerk_si, speed_si
 
 if TYPE_CHECKING:
-    from .lin import LinOptions
+    from .lin_planner import LinOptions
 
 N_JOINTS = 6
 #: max-change comparison tolerance (deg); the check is inclusive
@@ -363,7 +363,7 @@ class TrajectoryPlanner:
                  manip_fn: Callable[[np.ndarray], np.ndarray] | None = None,
                  options: LinOptions | None = None) -> PlanResult:
         """Straight Cartesian line pose0 -> pose1 (orientation slerp), see ``lin.plan_lin``."""
-        from .lin import LinOptions, plan_lin  # lin builds on this module
+        from .lin_planner import LinOptions, plan_lin  # lin_planner builds on this module
 
         return plan_lin(self, q0, pose0, pose1, config, ik_fn, manip_fn=manip_fn,
                         options=options or LinOptions())
