@@ -5,7 +5,7 @@ import pytest
 
 from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
-from rob6_planner.config import MotionConfig
+from rob6_planner.config import MotionSettings
 from rob6_planner.lin_planner import LinOptions
 from rob6_planner.trajectory import TrajectoryPlanner, finite_difference_violations
 from tests.motion.motion_kin import fk, make_ik
@@ -19,7 +19,7 @@ def rot_z(deg):
 def setup(robot="kr16", q0=(10, -80, 100, 20, 40, 30)):
     r = get_robot(robot)
     q0 = np.array(q0, float)
-    return r, MotionConfig(r), TrajectoryPlanner(r), q0, fk(r, q0)[0], make_ik(r, q0)
+    return r, MotionSettings(r), TrajectoryPlanner(r), q0, fk(r, q0)[0], make_ik(r, q0)
 
 
 def line_deviation(r, tr, T0, T1):

@@ -17,11 +17,11 @@ import numpy as np
 
 from rob6.robots import DEFAULT_ROBOT
 
-from .config import MotionConfig
+from .config import MotionSettings
 from .trajectory import TrajectoryPlanner
 
 
-def _random_joints(config: MotionConfig, rng: np.random.Generator, n: int) -> np.ndarray:
+def _random_joints(config: MotionSettings, rng: np.random.Generator, n: int) -> np.ndarray:
     lo = np.asarray(config.turn_min, float)
     hi = np.asarray(config.turn_max, float)
     margin = 0.05 * (hi - lo)
@@ -31,7 +31,7 @@ def _random_joints(config: MotionConfig, rng: np.random.Generator, n: int) -> np
 def bench_ptp(robot: str = DEFAULT_ROBOT, n: int = 2000, seed: int = 0, sample: bool = True,
               warmup: int = 50) -> dict:
     """PTP planning time percentiles (µs): {'p50_us', 'p99_us', 'max_us', 'mean_us', 'n', ...}."""
-    config = MotionConfig(robot)
+    config = MotionSettings(robot)
     planner = TrajectoryPlanner(robot)
     rng = np.random.default_rng(seed)
     starts = _random_joints(config, rng, n + warmup)

@@ -22,7 +22,8 @@ Input is already-parsed numbers (the gateway reads the text and produces the
 numbers are refused everywhere (the gateway never produces them).
 
 The whole state is a plain dict (``to_dict``/``from_dict``) with the field names of
-``rob6.messages.MotionConfig`` so it travels over the bus as JSON.
+``rob6.messages.MotionConfig`` so it travels over the bus as JSON: ``MotionSettings`` is
+the planner's live, validated state, ``MotionConfig`` the message that carries a copy.
 """
 
 from __future__ import annotations
@@ -72,8 +73,10 @@ def _six(values) -> list[float] | None:
     return out
 
 
-class MotionConfig:
-    """Speeds, accelerations, max change, turn limits, weights, allowed status, RT mode."""
+class MotionSettings:
+    """Speeds, accelerations, max change, turn limits, weights, allowed status, RT mode:
+    what the protocol's Set*/Reset* commands change, with their checks (the message
+    carrying a copy is ``rob6.messages.MotionConfig``)."""
 
     def __init__(self, robot: RobotModel | str):
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
@@ -292,7 +295,7 @@ class MotionConfig:
         }
 
     @classmethod
-    def from_dict(cls, robot: RobotModel | str, data: dict) -> "MotionConfig":
+    def from_dict(cls, robot: RobotModel | str, data: dict) -> "MotionSettings":
         config = cls(robot)
         config.update_from_dict(data)
         return config
@@ -312,12 +315,12 @@ class MotionConfig:
         if "rt_speed_control" in data:
             self.rt_speed_control = int(data["rt_speed_control"])
 
-    def copy(self) -> "MotionConfig":
-        return MotionConfig.from_dict(self.robot, self.to_dict())
+    def copy(self) -> "MotionSettings":
+        return MotionSettings.from_dict(self.robot, self.to_dict())
 
     def __eq__(self, other) -> bool:
-        return (isinstance(other, MotionConfig) and self.robot.name == other.robot.name
+        return (isinstance(other, MotionSettings) and self.robot.name == other.robot.name
                 and self.to_dict() == other.to_dict())
 
     def __repr__(self) -> str:
-        return f"MotionConfig({self.robot.name!r}, {self.to_dict()!r})"
+        return f"MotionSettings({self.robot.name!r}, {self.to_dict()!r})"

@@ -28,7 +28,7 @@ from rob6.messages import (
     IkBatchRequest,
     LimitsUpdate,
     ModeRequest,
-    MotionConfig as ConfigMessage,
+    MotionConfig,
     MotionKind,
     MoveReply,
     MoveRequest,
@@ -39,7 +39,7 @@ from rob6.messages import (
 from rob6.robots import RobotModel
 from rob6.status import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN
 
-from .config import MotionConfig
+from .config import MotionSettings
 from .lin_planner import plan_lin
 from .trajectory import TrajectoryPlanner
 
@@ -69,7 +69,7 @@ class PlannerService:
     def __init__(self, bus: Bus, robot: RobotModel, alter_timeout_s: float = 0.5):
         self.bus = bus
         self.robot = robot
-        self.config = MotionConfig(robot)
+        self.config = MotionSettings(robot)
         self.planner = TrajectoryPlanner(robot)
         self.alter = False
         self.lin = False
@@ -86,10 +86,10 @@ class PlannerService:
         bus.on_liveliness(self._on_liveliness)
 
     # ------------------------------------------------------------------ configuration
-    def _message(self) -> ConfigMessage:
-        return ConfigMessage(**self.config.to_dict(), version=self._version)
+    def _message(self) -> MotionConfig:
+        return MotionConfig(**self.config.to_dict(), version=self._version)
 
-    def get_config(self, _req: Empty, _ctx: Context) -> ConfigMessage:
+    def get_config(self, _req: Empty, _ctx: Context) -> MotionConfig:
         return self._message()
 
     def config_change(self, req: ConfigChange, ctx: Context) -> ConfigReply:
@@ -134,7 +134,7 @@ class PlannerService:
         if service == "gateway" and alive:
             self.bus.publish("planner/config", self._message(), reliable=True)
 
-    def _planning_config(self) -> MotionConfig:
+    def _planning_config(self) -> MotionSettings:
         """The configuration with the Adept's speed/acceleration percentages applied."""
         if not self.robot.is_adept:
             return self.config

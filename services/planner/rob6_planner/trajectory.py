@@ -225,7 +225,7 @@ def check_target(q0, q1, config, pattern=None) -> str:
 
     Strict turn limits at the target (``min < q < max``), max change per joint from the
     current position (inclusive), and -- when ``config`` has ``allowed`` and ``robot``
-    (a MotionConfig) -- the allowed status and the optional status ``pattern``
+    (a ``MotionSettings``) -- the allowed status and the optional status ``pattern``
     (MovePTPJointsStatus) for the target's status computed from its joints, as the
     original (REFERENCE.md 6.4, 6.6).
     """
@@ -287,7 +287,7 @@ class TrajectoryPlanner:
                  pattern: Sequence[str] | None = None) -> PlanResult:
         """Jerk-limited, time-synchronised joint move q0 -> q1 (rest to rest).
 
-        ``config``: a MotionConfig (or anything with speed, accel, turn_min, turn_max,
+        ``config``: a ``MotionSettings`` (or anything with speed, accel, turn_min, turn_max,
         max_change). ``check``: validate the target first (turn limits, max change).
         ``sample=False`` skips sampling (``info['duration']`` only). ``pattern``: an
         explicit status pattern the target must match (MovePTPJointsStatus).
