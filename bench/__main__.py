@@ -23,17 +23,9 @@ from rob6.testing import running
 from .busy import busy_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baselines
 from .links import links_table, live_realtime_table
+from .tables import table
 
 COUNT = int(os.environ.get("ROB6_BENCH_COUNT", "3000"))
-
-
-def table(title: str, header: tuple[str, ...], rows: list[tuple]) -> None:
-    print(f"\n{title}\n")
-    widths = [max(len(str(x)) for x in column) for column in zip(header, *rows, strict=True)]
-    print("| " + " | ".join(str(h).ljust(w) for h, w in zip(header, widths, strict=True)) + " |")
-    print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
-    for row in rows:
-        print("| " + " | ".join(str(x).ljust(w) for x, w in zip(row, widths, strict=True)) + " |")
 
 
 # (command, reply lines, kind): "gateway" answered by the gateway alone, "mirror" from

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import msgspec
 
-from rob6_recorder.replay import load_script, replay
+from rob6_recorder.session_replay import load_script, replay
 from rob6_recorder.writer import Recorder
 from tests.recording.rec_helpers import FakeServer  # the replay target: the test suite's fake rob6 server
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Callable
 
 from tests.deploy import images
 from tests.deploy.multihost.topology import (
@@ -36,7 +35,8 @@ from tests.deploy.multihost.topology import (
     run,
 )
 
-Table = Callable[[str, tuple[str, ...], list[tuple]], None]
+from .tables import Table, table
+
 COUNT = int(os.environ.get("ROB6_BENCH_MH_COUNT", "400"))
 DELAYS_MS = (0, 1, 5)
 
@@ -194,7 +194,6 @@ def multihost_table(table: Table) -> None:
 
 
 def main() -> int:
-    from bench.__main__ import table
     multihost_table(table)
     return 0
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings, strategies as st
 
+from rob6.robots import DEFAULT_ROBOT
 from rob6_gateway.commands import _split_command
 from rob6_gateway.framing import _clean
 from tests.reliability.fuzz import (
@@ -140,7 +141,7 @@ def main(argv=None) -> int:
     parser.add_argument("--parser-examples", type=int, default=35000,
                         help="hypothesis examples per in-process target (framer, args, execute)")
     parser.add_argument("--tcp-examples", type=int, default=5000)
-    parser.add_argument("--robot", default="kr16")
+    parser.add_argument("--robot", default=DEFAULT_ROBOT)
     parser.add_argument("--skip-faults", action="store_true")
     opts = parser.parse_args(argv)
     from rob6.testing import running

@@ -8,9 +8,9 @@ import sys
 import click
 
 from . import logs
-from .config import LINKS, BusSettings, bus_options
+from .config import DEFAULT_ROUTER, DEFAULT_ROUTER_PORT, LINKS, BusSettings, bus_options
 from .messages import SERVICES
-from .robots import ROBOT_TYPES
+from .robots import DEFAULT_ROBOT, ROBOT_TYPES
 
 
 @click.group()
@@ -19,10 +19,10 @@ def main() -> None:
 
 
 @main.command()
-@click.option("--robot", envvar="ROB6_ROBOT", default="kr16", show_default=True, type=click.Choice(ROBOT_TYPES))
+@click.option("--robot", envvar="ROB6_ROBOT", default=DEFAULT_ROBOT, show_default=True, type=click.Choice(ROBOT_TYPES))
 @click.option("--robot-id", envvar="ROB6_ROBOT_ID", default="robot1", show_default=True)
 @click.option("--port", envvar="ROB6_PORT", default=5005, show_default=True, type=int)
-@click.option("--router-port", envvar="ROB6_ROUTER_PORT", default=7447, show_default=True, type=int)
+@click.option("--router-port", envvar="ROB6_ROUTER_PORT", default=DEFAULT_ROUTER_PORT, show_default=True, type=int)
 @click.option("--log-dir", envvar="ROB6_LOG_DIR", default="./logs", show_default=True)
 @click.option("--dummy/--real-time", envvar="ROB6_DUMMY", default=False, show_default=True,
               help="Instantaneous motion (the original's -d) or real time.")
@@ -53,7 +53,7 @@ def router(settings: BusSettings, log_level: str) -> None:
     """Run a Zenoh router (every rob6 process connects to it); --listen defaults to tcp/127.0.0.1:7447."""
     from .router import run as run_router
     logs.configure("router", log_level)
-    run_router(settings, settings.listen or ("tcp/127.0.0.1:7447",))
+    run_router(settings, settings.listen or (DEFAULT_ROUTER,))
 
 
 @main.command()

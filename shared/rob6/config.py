@@ -18,9 +18,11 @@ from typing import Any, TypeVar
 
 import click
 
-from .robots import ROBOT_TYPES
+from .robots import DEFAULT_ROBOT, ROBOT_TYPES
 
-DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+#: the Zenoh router's port (``rob6 run --router-port``, ``ROB6_ROUTER_PORT``)
+DEFAULT_ROUTER_PORT = 7447
+DEFAULT_ROUTER = f"tcp/127.0.0.1:{DEFAULT_ROUTER_PORT}"
 #: the live view's port (Foxglove WebSocket, served by the recorder; ROB6_LIVE_PORT, 0 = off)
 DEFAULT_LIVE_PORT = 8765
 #: how the driver reaches the robot: the simulation, a KUKA KR C4 over RSI, or an Adept
@@ -30,7 +32,7 @@ LINKS = ("sim", "rsi", "simple_message", "adept")
 
 @dataclass(frozen=True)
 class BusSettings:
-    robot: str = "kr16"
+    robot: str = DEFAULT_ROBOT
     robot_id: str = "robot1"
     connect: tuple[str, ...] = (DEFAULT_ROUTER,)
     listen: tuple[str, ...] = ()
@@ -43,7 +45,7 @@ class BusSettings:
         """Settings from ROB6_* variables (used by tests and tools without a CLI)."""
         env = os.environ
         values: dict[str, Any] = dict(
-            robot=env.get("ROB6_ROBOT", "kr16"),
+            robot=env.get("ROB6_ROBOT", DEFAULT_ROBOT),
             robot_id=env.get("ROB6_ROBOT_ID", "robot1"),
             connect=_split(env.get("ROB6_ZENOH_CONNECT", DEFAULT_ROUTER)),
             listen=_split(env.get("ROB6_ZENOH_LISTEN", "")),
@@ -70,7 +72,7 @@ R = TypeVar("R")
 def bus_options(func: Callable[..., R]) -> Callable[..., R]:
     """Click options every service shares; passes ``settings: BusSettings``."""
 
-    @click.option("--robot", envvar="ROB6_ROBOT", default="kr16", show_default=True,
+    @click.option("--robot", envvar="ROB6_ROBOT", default=DEFAULT_ROBOT, show_default=True,
                   type=click.Choice(ROBOT_TYPES), help="Robot type [env ROB6_ROBOT].")
     @click.option("--robot-id", envvar="ROB6_ROBOT_ID", default="robot1", show_default=True,
                   help="Name of this robot on the bus; several robots can share one Zenoh network "

@@ -55,7 +55,7 @@ PLAN_PTP_S = QUICK_S + 2 * REMOTE_POSE_S + SLACK_S
 #: (the driver enforces the limits too)
 CONFIG_CHANGE_S = QUICK_S + HOP_S
 #: ... before a LIN move starts: the start pose, then the line solved once and again for
-#: each time scaling (rob6_planner.lin.LinOptions.max_retries + 1 times at most)
+#: each time scaling (rob6_planner.lin_planner.LinOptions.max_retries + 1 times at most)
 LIN_SOLVES = 10
 PLAN_LIN_S = QUICK_S + REMOTE_POSE_S + LIN_SOLVES * IK_BATCH_S + SLACK_S
 

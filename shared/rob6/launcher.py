@@ -31,6 +31,7 @@ import click
 from .bus import Bus
 from .config import DEFAULT_LIVE_PORT, BusSettings
 from .ownership import EXIT_REFUSED
+from .service import StartupError
 
 #: stop order, and how long each group may take before it is killed
 STOP_ORDER = ((("gateway",), 0.5), (("planner", "driver", "gripper", "kinematics"), 0.8),
@@ -45,10 +46,6 @@ class Child:
     restarts: int = 0
     next_start: float = 0.0
     exits: list[int] = field(default_factory=list)
-
-
-class StartFailed(Exception):
-    """One line for the user: why the system could not start and what to do."""
 
 
 class Launcher:
@@ -94,7 +91,7 @@ class Launcher:
             listen = self.env.get("ROB6_RSI_LISTEN", "0.0.0.0:49152")
             host, _, port = listen.rpartition(":")
             if not host or not port.isdigit():
-                raise StartFailed(f"ROB6_RSI_LISTEN={listen!r}: expected HOST:PORT, e.g. 0.0.0.0:49152")
+                raise StartupError(f"ROB6_RSI_LISTEN={listen!r}: expected HOST:PORT, e.g. 0.0.0.0:49152")
             _check_free(socket.SOCK_DGRAM, host.strip("[]"), int(port),
                         f"the RSI port udp/{listen} is in use: is another rob6 driving the robot? "
                         f"Stop it, or set ROB6_RSI_LISTEN")
@@ -104,14 +101,14 @@ class Launcher:
         view is not worth refusing to drive the robot for)."""
         text = self.env.get("ROB6_LIVE_PORT", str(DEFAULT_LIVE_PORT)).strip() or "0"
         if not text.isdigit():
-            raise StartFailed(f"ROB6_LIVE_PORT={text!r}: expected a port number (0 = no live view)")
+            raise StartupError(f"ROB6_LIVE_PORT={text!r}: expected a port number (0 = no live view)")
         port = int(text)
         if port == 0:
             return
         bind = self.env.get("ROB6_BIND", "0.0.0.0")
         try:
             _check_free(socket.SOCK_STREAM, bind, port, "")
-        except StartFailed:
+        except StartupError:
             self.echo(f"rob6: live view off: port {bind}:{port} is in use (another rob6?); "
                       f"choose one with ROB6_LIVE_PORT", err=True)
             self.env["ROB6_LIVE_PORT"] = "0"
@@ -122,11 +119,11 @@ class Launcher:
         self.live_url = f"{scheme}://{host}:{port}"
 
     def start(self, ready_timeout: float = 60.0) -> None:
-        """Start the router and every service; returns once all are alive, else raises StartFailed."""
+        """Start the router and every service; returns once all are alive, else raises StartupError."""
         self.preflight()
         self._spawn(self.router)
         if not _wait_port(self.router_port, 10.0, self.router):
-            raise StartFailed(f"the Zenoh router did not start on port {self.router_port} (see above)")
+            raise StartupError(f"the Zenoh router did not start on port {self.router_port} (see above)")
         self.bus = Bus(self.settings, "launcher")
         self.bus.subscribe("control/shutdown", lambda *_: self.stopping.set())
         for child in self.children:
@@ -139,11 +136,11 @@ class Launcher:
             for child in (self.router, *self.children):
                 code = child.process.poll() if child.process else None
                 if code is not None:
-                    raise StartFailed(f"{child.name} failed to start (exit code {code}, see above)")
+                    raise StartupError(f"{child.name} failed to start (exit code {code}, see above)")
             if self.stopping.is_set():
-                raise StartFailed("stopped before the system was ready")
+                raise StartupError("stopped before the system was ready")
             if time.monotonic() > deadline:
-                raise StartFailed(f"not ready after {ready_timeout:.0f} s, still waiting for {', '.join(waiting)}")
+                raise StartupError(f"not ready after {ready_timeout:.0f} s, still waiting for {', '.join(waiting)}")
             waiting = [name for name in waiting if not self.bus.instances(name)]
             time.sleep(0.02)
 
@@ -216,8 +213,8 @@ def _check_free(kind: int, host: str, port: int, message: str) -> None:
             sock.bind((host, port))
         except OSError as exc:
             if exc.errno in (errno.EADDRINUSE, errno.EACCES):
-                raise StartFailed(message) from None
-            raise StartFailed(f"cannot use {host}:{port}: {exc.strerror}") from None
+                raise StartupError(message) from None
+            raise StartupError(f"cannot use {host}:{port}: {exc.strerror}") from None
 
 
 def _wait_port(port: int, timeout: float, child: Child | None = None) -> bool:
@@ -245,7 +242,7 @@ def run(**options: Any) -> int:
         click.echo(f"rob6 ready: robot {launcher.robot} on 127.0.0.1:{launcher.port} "
                    f"(Zenoh router {launcher.endpoint}); Ctrl-C stops everything", err=True)
         return launcher.supervise()
-    except StartFailed as exc:
+    except StartupError as exc:
         click.echo(f"rob6: {exc}", err=True)
         return 1
     finally:

@@ -35,7 +35,7 @@ import zenoh
 from .bus import Bus
 from .messages import OWNER_SERVICES
 
-__all__ = ["OWNER_SERVICES", "EXIT_REFUSED", "Claim", "Refused"]
+__all__ = ["OWNER_SERVICES", "EXIT_REFUSED", "Claim", "ClaimRefused"]
 
 log = logging.getLogger("rob6.ownership")
 
@@ -50,7 +50,7 @@ ROUTER_WAIT_S = 10.0
 EXIT_REFUSED = 78
 
 
-class Refused(Exception):
+class ClaimRefused(Exception):
     """This process may not own the role (another owner exists, or none can be ruled out)."""
 
 
@@ -71,7 +71,7 @@ class Claim:
         _wait_for_router(bus, router_wait_s)
         holder = _live_owner(bus, self.service)
         if holder:
-            raise Refused(already_running(bus, holder))
+            raise ClaimRefused(already_running(bus, holder))
         liveliness = bus.session.liveliness()
         self._subscriber = liveliness.declare_subscriber(
             bus.key("claim", self.service, "*", "*"), zenoh.handlers.Callback(self._on_claim), history=True)
@@ -109,8 +109,8 @@ class Claim:
             # a claim token lives as long as its owner: one much older than this start is an
             # owner that runs (its alive token may not have reached this new session yet)
             if holder or self.epoch - earlier[0][0] > RUNNING_AFTER_S * 1000:
-                raise Refused(already_running(bus, holder or earlier[0][1]))
-            raise Refused(f"rob6: a {self.service} for {bus.settings.robot_id} is starting at the same time "
+                raise ClaimRefused(already_running(bus, holder or earlier[0][1]))
+            raise ClaimRefused(f"rob6: a {self.service} for {bus.settings.robot_id} is starting at the same time "
                           f"on {earlier[0][1]}; that one wins; stop it or use another ROB6_ROBOT_ID")
         with self._lock:
             self._won = True
@@ -175,7 +175,7 @@ def _wait_for_router(bus: Bus, timeout: float) -> None:
     deadline = time.monotonic() + timeout
     while not bus.session.info.routers_zid():
         if time.monotonic() >= deadline:
-            raise Refused(f"rob6: no Zenoh router reachable at {', '.join(bus.settings.connect)}; "
+            raise ClaimRefused(f"rob6: no Zenoh router reachable at {', '.join(bus.settings.connect)}; "
                           f"a {bus.service} claims robot {bus.settings.robot_id} only where it can see "
                           f"whether another one runs (start the router, or check ROB6_ZENOH_CONNECT)")
         time.sleep(0.02)

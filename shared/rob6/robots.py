@@ -60,7 +60,13 @@ class RobotModel:
 
     @property
     def max_accel_bound(self) -> float:
+        """The largest acceleration a client may set (deg per cycle^2, inclusive)."""
         return 0.02
+
+    @property
+    def default_weights(self) -> tuple[float, ...]:
+        """Min-change weights at start-up (GetMinChangeWeights, ResetMinChangeWeights)."""
+        return (4.0, 1.0, 1.0, 1.0, 1.0, 1.0)
 
     @property
     def speed_bound(self) -> tuple[float, ...]:
@@ -172,6 +178,8 @@ ROBOTS: dict[str, RobotModel] = {
 }
 
 ROBOT_TYPES = tuple(ROBOTS)
+#: the robot type rob6 drives when none is given (``--robot``, ``ROB6_ROBOT``)
+DEFAULT_ROBOT = "kr16"
 
 
 def get_robot(name: str) -> RobotModel:

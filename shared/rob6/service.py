@@ -22,7 +22,7 @@ from . import logs
 from .bus import Bus
 from .config import BusSettings
 from .messages import SERVICES, Verbosity
-from .ownership import EXIT_REFUSED, OWNER_SERVICES, Claim, Refused
+from .ownership import EXIT_REFUSED, OWNER_SERVICES, Claim, ClaimRefused
 
 log = logging.getLogger("rob6.service")
 
@@ -37,7 +37,9 @@ NEEDS_WAIT_S = 30.0
 
 
 class StartupError(Exception):
-    """A start-up failure a restart cannot fix; the message says what to do."""
+    """Why rob6 or one of its services cannot start, in one line naming the cause and what
+    to do (no traceback). ``rob6 run`` prints it and exits 1; a service whose ``setup``
+    raises it exits ``EXIT_REFUSED``: a restart cannot fix it."""
 
 
 def needed(name: str) -> tuple[str, ...]:
@@ -75,7 +77,7 @@ def claim(bus: Bus, on_conflict: Callable[[str], None]) -> Claim | None:
         return None
     try:
         return Claim(bus, on_conflict)
-    except Refused as exc:
+    except ClaimRefused as exc:
         bus.close()
         fail(bus.service, str(exc), EXIT_REFUSED)
     return None  # not reached

@@ -17,6 +17,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from .robots import DEFAULT_ROBOT
+
 #: Ports handed out for tests: below Linux's ephemeral range (32768-60999), where the
 #: kernel picks the local port of every outgoing connection; a port the kernel gave us
 #: from that range can be taken by someone's connection before our server binds it
@@ -39,7 +41,7 @@ def free_port(kind: int = socket.SOCK_STREAM) -> int:
 class System:
     """A running ``rob6 run`` (router, services, gateway) on free ports."""
 
-    def __init__(self, robot: str = "kr16", *, dummy: bool = True, services: tuple[str, ...] = (),
+    def __init__(self, robot: str = DEFAULT_ROBOT, *, dummy: bool = True, services: tuple[str, ...] = (),
                  restart: bool = False, log_dir: str | None = None, extra_env: dict[str, str] | None = None):
         self.robot = robot
         self.port = free_port()
@@ -102,7 +104,7 @@ class System:
 
 
 @contextmanager
-def running(robot: str = "kr16", **kwargs: Any) -> Iterator[System]:
+def running(robot: str = DEFAULT_ROBOT, **kwargs: Any) -> Iterator[System]:
     system = System(robot, **kwargs)
     try:
         system.wait_ready()

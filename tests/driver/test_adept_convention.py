@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from rob6.robots import get_robot
-from rob6_driver.links.adept import (
+from rob6_driver.links.simple_message import (
     from_controller_deg,
     from_wire,
     to_controller_deg,

@@ -20,9 +20,9 @@ import pytest
 
 from rob6.messages import LinkEvent
 from rob6.robots import get_robot
-from rob6_driver.links.adept import RATED_SPEED_DEG_S, AdeptLink, AdeptSettings, from_wire, to_wire
+from rob6_driver.links.simple_message import RATED_SPEED_DEG_S, AdeptLink, AdeptSettings, from_wire, to_wire
 from rob6_driver.motion import MotionCore
-from rob6_planner.config import MotionConfig
+from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
 ROBOT = get_robot("ad850")
@@ -152,7 +152,7 @@ def wait(predicate, timeout=15.0, what="condition"):
 
 def ptp(core, target, config=None):
     plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), list(target),
-                                                  config or MotionConfig(core.robot))
+                                                  config or MotionSettings(core.robot))
     assert plan.ok, plan.reason
     t = plan.trajectory
     assert t is not None
@@ -324,7 +324,7 @@ def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig)
 
 
 def test_a_point_beyond_the_robots_range_is_never_sent():
-    config = MotionConfig(ROBOT)
+    config = MotionSettings(ROBOT)
     fake = FakeController()
     core = MotionCore(ROBOT)
     link = AdeptLink(core, ROBOT, AdeptSettings(**fake.settings), lambda s: None, retry_s=0.1)

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 from rob6_driver.motion import MotionCore, Offline
-from rob6_planner.config import MotionConfig
+from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
 
 
 def ptp(core, target):
-    plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), target, MotionConfig(core.robot))
+    plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), target, MotionSettings(core.robot))
     assert plan.ok, plan.reason
     t = plan.trajectory
     assert t is not None

@@ -16,7 +16,7 @@ from rob6.messages import LinkEvent
 from rob6.robots import get_robot
 from rob6_driver.links.rsi import RsiLink
 from rob6_driver.motion import CoreState, MotionCore
-from rob6_planner.config import MotionConfig
+from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
 HOME = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
@@ -88,7 +88,7 @@ def wait(predicate, timeout=5.0):
 
 
 def ptp(core, target):
-    plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), list(target), MotionConfig(core.robot))
+    plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), list(target), MotionSettings(core.robot))
     t = plan.trajectory
     assert t is not None, plan.reason
     return core.execute(t.q, t.dt, t.qd, t.qdd)

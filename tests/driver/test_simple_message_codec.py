@@ -8,7 +8,7 @@ import struct
 
 import pytest
 
-from rob6_driver.links import simple_message as sm
+from rob6_driver.links import simple_message_codec as sm
 
 ORDERS = {"big": ">", "little": "<"}
 

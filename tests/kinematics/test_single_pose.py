@@ -15,7 +15,7 @@ import pytest
 
 from rob6.robots import ROBOT_TYPES, get_robot
 from rob6_kinematics import opw
-from rob6_kinematics.calc import DEFAULT_WEIGHTS, TIE_EPS, TIE_ORDER, Kinematics, apply_limits
+from rob6_kinematics.calc import TIE_EPS, TIE_ORDER, Kinematics, apply_limits
 
 TOL = 1e-9
 SPECIAL = [0.0, 90.0, -90.0, 180.0, -180.0, 45.0, 10.0]
@@ -136,7 +136,7 @@ def test_commands_equal_vectorised(robot):
         cur = qs[rng.integers(len(qs))] if i % 2 else np.zeros(6)
         if i % 3 == 0:
             lo, hi = k.turn_min, k.turn_max
-            mc, w = k.max_change, DEFAULT_WEIGHTS
+            mc, w = k.max_change, k.weights
             kw = {}
         else:
             lo = np.maximum(k.turn_min, -rng.uniform(150, 360, 6))
@@ -201,7 +201,7 @@ def test_select_single_pose_equals_vectorised(robot):
     for i, t in enumerate(k.fk(qs).reshape(-1, 12).tolist()):
         cur = list(qs[rng.integers(len(qs))])
         words = ["toggleHand", "toggleElbow", "toggleArm"] if i % 3 else BRANCH_WORDS[i % 8].split()
-        args = (words, cur, list(k.turn_min), list(k.turn_max), list(k.max_change), list(DEFAULT_WEIGHTS))
+        args = (words, cur, list(k.turn_min), list(k.turn_max), list(k.max_change), list(k.weights))
         for shift in (True, False):
             a = selection.select(k, t, *args, shift_360=shift)
             b = selection.select(v, t, *args, shift_360=shift)

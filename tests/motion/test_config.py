@@ -1,4 +1,4 @@
-"""MotionConfig semantics (REFERENCE.md 6.3, 6.3a, 6.4) beyond the transcripts."""
+"""MotionSettings semantics (REFERENCE.md 6.3, 6.3a, 6.4) beyond the transcripts."""
 
 import json
 
@@ -7,12 +7,12 @@ import pytest
 
 from rob6 import messages
 from rob6.robots import ROBOT_TYPES
-from rob6_planner.config import MotionConfig
+from rob6_planner.config import MotionSettings
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
 def test_defaults(robot):
-    c = MotionConfig(robot)
+    c = MotionSettings(robot)
     r = c.robot
     assert c.speed == list(r.default_speed)
     assert c.accel == [0.005] * 6
@@ -23,7 +23,7 @@ def test_defaults(robot):
 
 
 def test_partial_update_speed_and_accel():
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     assert not c.set_speed([0.1, 0.1, 0.1, 0.1, 0.1, -0.1])
     assert c.speed == [0.1] * 5 + [0.7380]
     assert not c.set_accel([0.005, 0.001, 0.01, 0.01, 0.01, 0.05])
@@ -34,7 +34,7 @@ def test_partial_update_speed_and_accel():
 
 
 def test_max_change_all_or_nothing_and_single():
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     assert c.set_max_change([0] * 6)
     assert not c.set_max_change([10, 10, 10, 10, 10, -10])
     assert c.max_change == [0.0] * 6
@@ -45,7 +45,7 @@ def test_max_change_all_or_nothing_and_single():
 
 
 def test_turn_limits_unchecked_and_independent_of_max_change():
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     assert c.set_turn_max([-200] * 6) and c.set_turn_min([1e9] * 6)
     assert c.max_change == list(c.robot.default_max_change)
     assert c.set_max_change([5] * 6) and c.reset_turn()
@@ -56,7 +56,7 @@ def test_turn_limits_unchecked_and_independent_of_max_change():
 
 
 def test_weights_status_rt():
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     assert not c.set_weights([1, 1, 1, 0, 1, 1]) and c.weights == [4, 1, 1, 1, 1, 1]
     assert not c.set_weights([-0.0] * 6)
     assert c.set_weights([1e-9] * 6)
@@ -73,17 +73,17 @@ def test_weights_status_rt():
 
 def test_allowed_status():
     cur = ("noflip", "up", "lefty")
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     c.set_allowed(["noflip", "up", "lefty"])
     assert not c.status_allowed(("noflip", "down", "lefty"), cur)
 
 
 def test_dict_roundtrip_and_bus_schema():
-    c = MotionConfig("ad850")
+    c = MotionSettings("ad850")
     c.set_speed([0.2] * 6)
     c.set_allowed(["flip"])
     c.set_rt_speed_control(0)
     d = json.loads(json.dumps(c.to_dict()))
-    assert MotionConfig.from_dict("ad850", d) == c
+    assert MotionSettings.from_dict("ad850", d) == c
     msg = msgspec.convert(d, messages.MotionConfig)
     assert msgspec.to_builtins(msg) == d

@@ -1,4 +1,4 @@
-"""MotionConfig against the original's limits/limits_bounds/misc transcripts (offline).
+"""MotionSettings against the original's limits/limits_bounds/misc transcripts (offline).
 
 A tiny argument splitter stands in for the gateway's parser: numbers are read like C++
 ``istream >> int`` / ``>> double`` (``2.5`` as an index is 2 and ``.5`` is the next
@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from rob6.status import parse_status
-from rob6_planner.config import MotionConfig
+from rob6_planner.config import MotionSettings
 from tests.system import CONFORMANCE
 
 ROBOTS = ("kr16", "kr16rt", "kr3rt", "ad850", "kaw_fs")
@@ -115,7 +115,7 @@ def records(path: Path):
 
 
 def replay(robot: str, script: str):
-    config = MotionConfig(robot)
+    config = MotionSettings(robot)
     stats = {"get_match": 0, "get_mismatch": 0, "set_match": 0, "set_mismatch": 0,
              "parse_error": 0, "skipped": 0}
     mismatches = []

@@ -5,8 +5,8 @@ import pytest
 
 from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
-from rob6_planner.config import MotionConfig
-from rob6_planner.lin import LinOptions
+from rob6_planner.config import MotionSettings
+from rob6_planner.lin_planner import LinOptions, plan_lin
 from rob6_planner.trajectory import TrajectoryPlanner, finite_difference_violations
 from tests.motion.motion_kin import fk, make_ik
 
@@ -19,7 +19,7 @@ def rot_z(deg):
 def setup(robot="kr16", q0=(10, -80, 100, 20, 40, 30)):
     r = get_robot(robot)
     q0 = np.array(q0, float)
-    return r, MotionConfig(r), TrajectoryPlanner(r), q0, fk(r, q0)[0], make_ik(r, q0)
+    return r, MotionSettings(r), TrajectoryPlanner(r), q0, fk(r, q0)[0], make_ik(r, q0)
 
 
 def line_deviation(r, tr, T0, T1):
@@ -35,9 +35,10 @@ def test_lin_is_straight_and_within_limits():
     T1 = T0.copy()
     T1[:, 3] += [200, 150, -100]
     T1[:, :3] = rot_z(20) @ T0[:, :3]
-    res = p.plan_lin(q0, T0, T1, c, ik)
+    res = plan_lin(p, q0, T0, T1, c, ik)
     assert res.ok, res.reason
     tr = res.trajectory
+    assert tr is not None
     dev, along = line_deviation(r, tr, T0, T1)
     assert dev < 1e-6  # mm
     assert np.all(np.diff(along) >= -1e-9)  # monotone progress, no back-tracking
@@ -62,10 +63,11 @@ def test_lin_speed_is_limited_by_the_slowest_joint():
     r, c, p, q0, T0, ik = setup()
     T1 = T0.copy()
     T1[:, 3] += [0, 300, 0]
-    fast = p.plan_lin(q0, T0, T1, c, ik)
+    fast = plan_lin(p, q0, T0, T1, c, ik)
     c.set_speed([x / 4 for x in c.speed])
-    slow = p.plan_lin(q0, T0, T1, c, ik)
+    slow = plan_lin(p, q0, T0, T1, c, ik)
     assert fast.ok and slow.ok
+    assert fast.trajectory is not None and slow.trajectory is not None
     assert slow.trajectory.duration > 2.5 * fast.trajectory.duration
     lim = p.limits(c)
     peak = np.abs(np.diff(slow.trajectory.q, axis=0)).max(axis=0) / slow.trajectory.dt
@@ -77,7 +79,7 @@ def test_lin_through_the_wrist_singularity_is_rejected():
     r, c, p, qa, Ta, ik = setup(q0=(0, -90, 90, 0, 10, 0))
     Tb = fk(r, [0, -90, 110, 0, -10, 0])[0]
     Tb[:, :3] = Ta[:, :3]
-    res = p.plan_lin(qa, Ta, Tb, c, ik)
+    res = plan_lin(p, qa, Ta, Tb, c, ik)
     assert not res.ok and res.trajectory is None
     assert "wrist singularity" in res.reason
 
@@ -86,33 +88,33 @@ def test_lin_rejections():
     r, c, p, q0, T0, ik = setup()
     far = T0.copy()
     far[:, 3] += [3000, 0, 0]
-    res = p.plan_lin(q0, T0, far, c, ik)
+    res = plan_lin(p, q0, T0, far, c, ik)
     assert not res.ok and "unreachable" in res.reason
     # a turn limit on the way (J1 goes from 10 towards ~30 deg)
     T1 = T0.copy()
     T1[:, 3] += [0, -400, 0]
-    assert p.plan_lin(q0, T0, T1, c, ik).ok
+    assert plan_lin(p, q0, T0, T1, c, ik).ok
     c.set_single_turn_min(1, 0.0)
     c.set_single_turn_max(1, 12.0)
-    res = p.plan_lin(q0, T0, T1, c, ik)
+    res = plan_lin(p, q0, T0, T1, c, ik)
     assert not res.ok and "turn limits" in res.reason, res.reason
     c.reset_turn()
     c.set_max_change([5] * 6)
-    res = p.plan_lin(q0, T0, T1, c, ik)
+    res = plan_lin(p, q0, T0, T1, c, ik)
     assert not res.ok and "max change" in res.reason
     c.reset_max_change()
     # a manipulability callable with a threshold everything fails
-    res = p.plan_lin(q0, T0, T1, c, ik, manip_fn=lambda Q: np.zeros(len(Q)),
-                     options=LinOptions(manip_min=0.1))
+    res = plan_lin(p, q0, T0, T1, c, ik, manip_fn=lambda Q: np.zeros(len(Q)),
+                   options=LinOptions(manip_min=0.1))
     assert not res.ok and "manipulability" in res.reason
     # no motion
-    res = p.plan_lin(q0, T0, T0, c, ik)
-    assert res.ok and res.trajectory.n == 1
+    res = plan_lin(p, q0, T0, T0, c, ik)
+    assert res.ok and res.trajectory is not None and res.trajectory.n == 1
 
 
 def test_lin_start_must_match_the_current_joints():
     r, c, p, q0, T0, ik = setup()
     T1 = T0.copy()
     T1[:, 3] += [50, 0, 0]
-    res = p.plan_lin(q0 + [0, 0, 0, 0, 0, 1.0], T0, T1, c, ik)
+    res = plan_lin(p, q0 + [0, 0, 0, 0, 0, 1.0], T0, T1, c, ik)
     assert not res.ok and "start pose" in res.reason

@@ -47,12 +47,12 @@ def test_runner_counts_missed_cycles_and_survives_errors():
 
 
 def test_trajectory_completion_is_awaitable_in_real_time():
-    from rob6_planner.config import MotionConfig
+    from rob6_planner.config import MotionSettings
     from rob6_planner.trajectory import TrajectoryPlanner
 
     sim = MotionCore("kr16rt")
     tr = TrajectoryPlanner("kr16rt").plan_ptp(sim.state().q, [2, 0, 0, 0, 0, 0],
-                                              MotionConfig("kr16rt")).trajectory
+                                              MotionSettings("kr16rt")).trajectory
     assert tr is not None
     done = threading.Event()
     with CycleRunner(sim.step, sim.dt):

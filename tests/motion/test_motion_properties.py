@@ -1,6 +1,6 @@
 """Property tests: random command sequences never make the simulated robot break a limit.
 
-Commands: PTP moves (planned with the current MotionConfig, with or without exact
+Commands: PTP moves (planned with the current MotionSettings, with or without exact
 derivatives), Alter on/off, Alter targets (single and streamed every cycle, valid and
 invalid, just inside a turn limit), idle runs (watchdog), stops, corrupted trajectories (up-front check skipped:
 the per-cycle monitor must catch them), speed/acceleration changes and turn-limit
@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
-from rob6_planner.config import MotionConfig
+from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
 EXAMPLES = int(os.environ.get("ROB6_PROPERTY_EXAMPLES", "150"))
@@ -62,7 +62,7 @@ command = st.one_of(
 class Harness:
     def __init__(self, robot: str):
         self.robot = get_robot(robot)
-        self.config = MotionConfig(self.robot)
+        self.config = MotionSettings(self.robot)
         self.planner = TrajectoryPlanner(self.robot)
         self.sim = MotionCore(self.robot, alter_timeout_s=0.15)
         s = self.sim.state()

@@ -8,7 +8,7 @@ import pytest
 from rob6.robots import ROBOT_TYPES
 from rob6.units import JERK_RAMP_S, UNIT_CYCLE_S
 from rob6_driver.motion import MotionCore
-from rob6_planner.config import MotionConfig
+from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import (
     TrajectoryPlanner,
     check_target,
@@ -35,7 +35,7 @@ def analytic_time(d: float, v: float, a: float, j: float) -> float:
 
 
 def run_ptp_in_sim(robot, q1, config=None):
-    config = config or MotionConfig(robot)
+    config = config or MotionSettings(robot)
     planner = TrajectoryPlanner(robot)
     sim = MotionCore(robot)
     res = planner.plan_ptp(sim.state().q, q1, config)
@@ -52,7 +52,7 @@ def run_ptp_in_sim(robot, q1, config=None):
 
 
 def test_30deg_a1_kr16_takes_the_analytic_time():
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     v = c.speed[0] / UNIT_CYCLE_S  # 15.6 deg/s
     a = c.accel[0] / UNIT_CYCLE_S**2  # 34.72 deg/s^2
     j = a / JERK_RAMP_S
@@ -72,7 +72,7 @@ def test_30deg_a1_kr16_takes_the_analytic_time():
 @pytest.mark.parametrize("d", [0.01, 0.3, 1.0, 2.0, 5.0, 30.0, 120.0])
 @pytest.mark.parametrize("robot", ["kr16", "kr3rt", "ad850"])
 def test_single_axis_duration_matches_analytic(robot, d):
-    c = MotionConfig(robot)
+    c = MotionSettings(robot)
     p = TrajectoryPlanner(robot)
     for joint in (0, 5):
         q1 = np.zeros(6)
@@ -89,7 +89,7 @@ def test_single_axis_duration_matches_analytic(robot, d):
 def test_sampling_matches_ruckig_and_respects_limits():
     rng = np.random.default_rng(3)
     for robot in ROBOT_TYPES:
-        c = MotionConfig(robot)
+        c = MotionSettings(robot)
         p = TrajectoryPlanner(robot)
         lim = p.limits(c)
         lo, hi = np.array(c.turn_min) * 0.9, np.array(c.turn_max) * 0.9
@@ -113,7 +113,7 @@ def test_sampling_matches_ruckig_and_respects_limits():
 
 
 def test_target_validation():
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     zero = np.zeros(6)
     # strict turn limits: J2 max is 20 -> exactly 20 is refused
@@ -143,7 +143,7 @@ def test_target_validation():
 
 def test_from_outside_changed_turn_limits_back_inside():
     """Limits narrowed while the robot is outside: a move back inside is allowed."""
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     c.set_single_turn_max(1, 10)
     res = p.plan_ptp([30, 0, 0, 0, 0, 0], [5, 0, 0, 0, 0, 0], c)
@@ -151,7 +151,7 @@ def test_from_outside_changed_turn_limits_back_inside():
 
 
 def test_lower_limits_take_longer():
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     t_default = p.ptp_duration(np.zeros(6), [30, 0, 0, 0, 0, 0], c)
     c.set_speed([0.0936] * 6)  # half speed
@@ -160,7 +160,7 @@ def test_lower_limits_take_longer():
 
 
 def test_allowed_status_and_pattern():
-    c = MotionConfig("kr16")
+    c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     zero = np.zeros(6)  # noflip up lefty
     down = [0, -10, -20, 0, 10, 0]  # kr16: up <=> q3 > -2.99 deg -> down

@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from rob6_driver.motion import Limits, Motion, MotionCore
-from rob6_planner.config import MotionConfig
+from rob6_driver.limits import Limits
+from rob6_driver.motion import Motion, MotionCore
+from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
 TOL_REL = 1e-6
@@ -46,7 +47,7 @@ def run_states(sim, n):
 
 
 def plan(robot, q0, q1, config=None):
-    config = config or MotionConfig(robot)
+    config = config or MotionSettings(robot)
     res = TrajectoryPlanner(robot).plan_ptp(q0, q1, config)
     assert res.ok, res.reason
     return res.trajectory

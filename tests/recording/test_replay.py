@@ -12,13 +12,13 @@ import pytest
 from click.testing import CliRunner
 
 from rob6_recorder.cli import main as cli
+from rob6_recorder.playback import replay_joints
 from rob6_recorder.reader import read_records
-from rob6_recorder.replay import (
+from rob6_recorder.session_replay import (
     compare_reply,
     load_script,
     load_transcript,
     replay,
-    replay_joints,
 )
 from rob6_recorder.writer import Recorder
 from tests.recording.rec_helpers import REPLIES, SESSION_LINES, FakeServer, dict_handler, record_session

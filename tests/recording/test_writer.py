@@ -10,9 +10,9 @@ import time
 import pytest
 from mcap.reader import make_reader
 
-from rob6_recorder.geometry import TfDeriver, pose_from_fk
 from rob6_recorder.reader import RecordingReader, is_complete, read_records
 from rob6_recorder.schemas import schema_for, to_foxglove_log
+from rob6_recorder.transforms import TfDeriver, pose_from_fk
 from rob6_recorder.writer import Recorder
 from tests.recording.rec_helpers import record_session
 

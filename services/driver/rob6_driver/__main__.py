@@ -12,7 +12,8 @@ from rob6.config import LINKS, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
 
-from .links.adept import (
+from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, parse_address
+from .links.simple_message import (
     DEFAULT_BYTE_ORDER,
     DEFAULT_HOST,
     DEFAULT_IO_PORT,
@@ -21,7 +22,6 @@ from .links.adept import (
     DEFAULT_STATE_PORT,
     AdeptSettings,
 )
-from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, parse_address
 from .service import DriverService
 
 

@@ -1,6 +1,7 @@
 """The motion core of the driver, independent of the robot it drives: state at the
 controller cycle, trajectory execution, Alter (real-time target) mode with Ruckig
-online generation, watchdog, and an independent limit monitor (defence in depth).
+online generation, watchdog and stops; every setpoint passes the independent limit
+monitor of ``limits.py`` (defence in depth) before it is applied.
 
 A *link* (``links/``) owns the clock: it calls ``step()`` once per controller cycle
 and hands the new setpoint to the plant (the simulation takes it as reached; RSI sends
@@ -18,22 +19,15 @@ it in real time; tests call it in fast-forward.
 
 Limit monitor
 -------------
-Every commanded sample (from a trajectory or from the internal generator) is checked
-*before* it is applied, as a controller's monitor sees it cycle by cycle:
-
-* turn limits strict, ``min < q < max`` (a joint already outside -- limits changed
-  while it was there -- may only move back inwards, 1e-9 deg rounding tolerance);
-* speed ``|q_k - q_{k-1}| / dt <= v_max``;
-* acceleration ``|(q_k - 2 q_{k-1} + q_{k-2})| / dt^2 <= a_max``
-  (relative tolerance 1e-6, absolute 1e-9 deg/s and 1e-6 deg/s^2 for rounding).
-
-A sampled C2 motion that respects the limits everywhere always passes (the finite
-differences are averages of the true velocity/acceleration). A sample that fails is
-not applied: the violation is reported (``violations``, ``on_event``) and the robot
-makes a controlled, jerk-limited stop from its last good state. Samples the core
-generates itself (Alter, stops) are planned from the exact state and checked too; if
-one ever failed it would be clamped to the largest admissible step instead (and
-reported), so the state itself never breaks the speed/acceleration limits.
+Every commanded sample (from a trajectory or from the internal generator) goes through
+``_command``, which asks the ``LimitMonitor`` (``limits.py``: the checks, their
+tolerances and the transitions when limits change) *before* it is applied, as a
+controller's monitor sees it cycle by cycle. A sample that fails is not applied: the
+violation is reported (``violations``, ``on_event``) and the robot makes a controlled,
+jerk-limited stop from its last good state. Samples the core generates itself (Alter,
+stops) are planned from the exact state and checked too; if one ever failed it would be
+clamped to the largest admissible step the monitor gives instead (and reported), so the
+state itself never breaks the speed/acceleration limits.
 
 Generated motion (Ruckig, online): a new Alter target or a stop is planned from the
 exact current state (position, velocity, acceleration; from a trajectory without
@@ -66,54 +60,19 @@ import ruckig
 
 from rob6.deadlines import stop_s
 from rob6.robots import RobotModel, get_robot
-from rob6.units import JERK_RAMP_S, accel_si, jerk_si, speed_si
+from rob6.units import accel_si, jerk_si, speed_si
+
+from .limits import MIN_LIMIT, Breach, LimitMonitor, Limits, within
 
 log = logging.getLogger(__name__)
 
 N_JOINTS = 6
-RTOL = 1e-6
-ATOL_V = 1e-9
-ATOL_A = 1e-6
 #: how close the current state must be to a trajectory's first sample (deg)
 START_TOL_DEG = 1e-6
 REST_EPS = 1e-9
-#: a joint already outside its turn limits (limits changed) may not move further out
-#: than this (deg; rounding at the end of a stop)
-OUTSIDE_TOL = 1e-9
-#: speed (deg/s) or acceleration (deg/s^2) limits below this freeze the joint
-MIN_LIMIT = 1e-9
 
 
 # ====================================================================== data
-@dataclass
-class Limits:
-    """Limits in deg, deg/s, deg/s^2, deg/s^3."""
-
-    turn_min: np.ndarray
-    turn_max: np.ndarray
-    vmax: np.ndarray
-    amax: np.ndarray
-    jmax: np.ndarray
-    max_change: np.ndarray  # deg: an Alter target's largest distance from where the robot is
-
-    @classmethod
-    def from_protocol(cls, turn_min, turn_max, max_speed, max_accel, max_change,
-                      jerk_ramp_s: float = JERK_RAMP_S) -> "Limits":
-        a = accel_si(max_accel)
-        return cls(np.asarray(turn_min, float).copy(), np.asarray(turn_max, float).copy(),
-                   np.array(speed_si(max_speed)), np.array(a), np.array(jerk_si(a, jerk_ramp_s)),
-                   np.asarray(max_change, float).copy())
-
-    @classmethod
-    def defaults(cls, robot: RobotModel) -> "Limits":
-        return cls.from_protocol(robot.turn_min, robot.turn_max, robot.default_speed,
-                                 robot.default_accel, robot.default_max_change)
-
-    def copy(self) -> "Limits":
-        return Limits(self.turn_min.copy(), self.turn_max.copy(), self.vmax.copy(),
-                      self.amax.copy(), self.jmax.copy(), self.max_change.copy())
-
-
 @dataclass
 class CoreState:
     """One controller cycle. ``t`` = cycle * dt (the controller's clock, seconds)."""
@@ -206,9 +165,8 @@ class MotionCore:
         self.violation_count = 0
         self._lock = threading.RLock()
         self._lim = (limits or Limits.defaults(self.robot)).copy()
-        # monitor limits (may be wider than _lim during a transition)
-        self._mon = self._lim.copy()
-        self._settle = 0
+        # every setpoint passes it; its limits may be wider than _lim during a transition
+        self._monitor = LimitMonitor(self._lim, self.dt)
         self._cycle = 0
         self._q = np.zeros(N_JOINTS) if q0 is None else np.asarray(q0, float).copy()
         self._qd = np.zeros(N_JOINTS)
@@ -277,13 +235,13 @@ class MotionCore:
     def enforced_limits(self) -> Limits:
         """The limits the monitor checks right now (wider than ``limits()`` only in a transition)."""
         with self._lock:
-            return self._mon.copy()
+            return self._monitor.enforced.copy()
 
     def stop_bound_s(self) -> float:
         """The longest a controlled stop can take now (controller seconds): a stop may use
         what the monitor allows, and the robot moves within it."""
         with self._lock:
-            lim = self._mon
+            lim = self._monitor.enforced
             return stop_s(lim.vmax, lim.amax, lim.jmax)
 
     def stopping(self) -> Motion | None:
@@ -352,7 +310,7 @@ class MotionCore:
         self._v_fd[:] = 0.0
         self._target = self._q.copy()
         self._mode = "alter" if self._alter else "idle"
-        self._mon, self._settle = self._lim.copy(), 0  # at rest: the monitor takes the current limits
+        self._monitor.reset(self._lim)  # at rest: the monitor takes the current limits
         state = self._state()
         for motion in (self._motion, self._stop_motion):
             if motion is not None:
@@ -389,13 +347,9 @@ class MotionCore:
         self._lim = new
         self._lim_version += 1
         if not self._moving():
-            self._mon = new.copy()
-            self._settle = 0
+            self._monitor.reset(new)
             return
-        self._mon.vmax = np.maximum(self._mon.vmax, new.vmax)
-        self._mon.amax = np.maximum(self._mon.amax, new.amax)
-        self._mon.jmax = np.maximum(self._mon.jmax, new.jmax)
-        self._settle = -1  # wait until within the new limits
+        self._monitor.loosen(new)  # wider until the robot is within the new limits
         self._on_turn_change_in_motion(new)
         if self._gen is not None and self._gen_kind == "alter":
             self._target_pending = True  # replan with the new limits
@@ -405,21 +359,13 @@ class MotionCore:
     def _on_turn_change_in_motion(self, new: Limits) -> None:
         lo, hi = new.turn_min, new.turn_max
         future = self._future_extrema()
-        if future is None:
-            self._mon.turn_min, self._mon.turn_max = lo.copy(), hi.copy()
-            return
-        fmin, fmax = future
-        if _within(fmin, fmax, lo, hi, self._q):
-            self._mon.turn_min, self._mon.turn_max = lo.copy(), hi.copy()
+        if future is None or within(future[0], future[1], lo, hi, self._q):
+            self._monitor.take_turn(lo, hi)
             return
         # the current motion would cross the new limits: stop, widened just enough
         self._begin_stop("turn limits changed while moving", force=True)
-        future = self._future_extrema() or (self._q, self._q)
-        fmin, fmax = future
-        eps = 1e-6
-        self._mon.turn_min = np.where(_within_lo(fmin, lo, self._q), lo, np.minimum(lo, fmin - eps))
-        self._mon.turn_max = np.where(_within_hi(fmax, hi, self._q), hi, np.maximum(hi, fmax + eps))
-        joint = int(np.argmax(~(_within_lo(fmin, lo, self._q) & _within_hi(fmax, hi, self._q)))) + 1
+        fmin, fmax = self._future_extrema() or (self._q, self._q)
+        joint = self._monitor.widen_turn(lo, hi, fmin, fmax, self._q)
         self._violation("limits_changed", joint, float(self._q[joint - 1]),
                         float(hi[joint - 1]), "limits",
                         "turn limits changed under a motion that crosses them: stopping; "
@@ -438,7 +384,7 @@ class MotionCore:
             return np.minimum(self._q, lo), np.maximum(self._q, hi)
         if self._ebrake:
             v = self._v_fd
-            amax = np.maximum(self._mon.amax, MIN_LIMIT)
+            amax = np.maximum(self._monitor.enforced.amax, MIN_LIMIT)
             reach = v * v / (2 * amax) + np.abs(v) * self.dt
             end = self._q + np.sign(v) * reach
             return np.minimum(self._q, end), np.maximum(self._q, end)
@@ -503,22 +449,7 @@ class MotionCore:
             return "trajectory does not start at the current position"
         if not check:
             return ""
-        mon = self._mon
-        bad = _turn_bad(arr[1:] if len(arr) > 1 else arr, mon.turn_min, mon.turn_max, self._q)
-        if bad is not None:
-            k, j = bad
-            return f"joint {j + 1} sample {k + 1} at {arr[k + 1 if len(arr) > 1 else 0, j]:.6f} breaks its turn limits"
-        if self.dummy or len(arr) < 2:
-            return ""
-        held = np.vstack([arr, arr[-1:]])  # the robot holds the last sample afterwards
-        v = np.diff(held, axis=0) / self.dt
-        a = np.diff(np.vstack([self._v_fd[None], v]), axis=0) / self.dt
-        for kind, val, lim, atol in (("speed", v, mon.vmax, ATOL_V), ("acceleration", a, mon.amax, ATOL_A)):
-            bad = np.abs(val) > lim * (1 + RTOL) + atol
-            if bad.any():
-                k, j = np.argwhere(bad)[0]
-                return f"joint {j + 1} {kind} {abs(val[k, j]):.6g} > {lim[j]:.6g} at sample {k + 1}"
-        return ""
+        return self._monitor.check_trajectory(arr, self._q, self._v_fd, dynamics=not self.dummy)
 
     def _finish_trajectory(self, ok: bool, reason: str) -> None:
         motion, self._motion = self._motion, None
@@ -663,7 +594,8 @@ class MotionCore:
         vmax, amax = lim.vmax.copy(), lim.amax.copy()
         # while the monitor still allows the old limits (transition), keep the old (higher)
         # jerk: a state from the old limits may need it to get within the new ones
-        jmax = np.maximum(lim.jmax, self._mon.jmax)
+        mon = self._monitor.enforced
+        jmax = np.maximum(lim.jmax, mon.jmax)
         frozen = ~((vmax > MIN_LIMIT) & (amax > MIN_LIMIT))
         if frozen.any():
             # an axis with a zero limit may not move: held exactly if at rest, else braked
@@ -671,13 +603,12 @@ class MotionCore:
             held = frozen & (np.abs(v) <= 1e-9) & (np.abs(a) <= 1e-6)
             v = np.where(held, 0.0, v)
             a = np.where(held, 0.0, a)
-            vmax = np.where(held, 1.0, np.where(frozen, np.maximum(self._mon.vmax, 1e-6), vmax))
-            amax = np.where(held, 1.0, np.where(frozen, np.maximum(self._mon.amax, 1e-6), amax))
-            jmax = np.where(held, 1.0, np.where(frozen, np.maximum(self._mon.jmax, 1e-6), jmax))
+            vmax = np.where(held, 1.0, np.where(frozen, np.maximum(mon.vmax, 1e-6), vmax))
+            amax = np.where(held, 1.0, np.where(frozen, np.maximum(mon.amax, 1e-6), amax))
+            jmax = np.where(held, 1.0, np.where(frozen, np.maximum(mon.jmax, 1e-6), jmax))
             if target is not None:
                 target = np.where(frozen, q, target)
         # an estimated state may be inconsistent; the monitor's limits are the reachable ones
-        mon = self._mon
         v, a = _consistent_state(v, a, np.maximum(mon.vmax, vmax), np.maximum(mon.amax, amax),
                                  np.maximum(mon.jmax, jmax))
         inp.current_position = q.tolist()
@@ -709,21 +640,22 @@ class MotionCore:
     def _safe(self, traj: ruckig.Trajectory, *lims: Limits) -> bool:
         """Does the whole future of ``traj`` stay inside the turn limits of ``lims``?"""
         # cheap bound first: no joint can get further than (max speed x duration)
-        reach = 1.01 * np.maximum(self._mon.vmax, np.abs(self._qd)) * traj.duration + 1e-9
+        reach = 1.01 * np.maximum(self._monitor.enforced.vmax, np.abs(self._qd)) * traj.duration + 1e-9
         lo, hi = self._q - reach, self._q + reach
-        if all(_within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims):
+        if all(within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims):
             return True
         lo, hi = trajectory_extrema(traj, 0.0)
-        return all(_within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims)
+        return all(within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims)
 
     def _plan_stop(self) -> ruckig.Trajectory | None:
         # a stop may use everything the monitor allows (the old limits during a
         # transition): the shortest stop is the safest
+        mon = self._monitor.enforced
         for sync in (ruckig.Synchronization.Phase, ruckig.Synchronization.No):
-            inp = self._gen_input(self._mon, None)
+            inp = self._gen_input(mon, None)
             inp.synchronization = sync
             traj = self._calculate(inp)
-            if traj is not None and self._safe(traj, self._mon):
+            if traj is not None and self._safe(traj, mon):
                 return traj
         return None
 
@@ -731,7 +663,7 @@ class MotionCore:
         inp = self._gen_input(self._lim, self._target)
         inp.synchronization = ruckig.Synchronization.Time if self._sync else ruckig.Synchronization.No
         traj = self._calculate(inp)
-        if traj is not None and self._safe(traj, self._lim, self._mon):
+        if traj is not None and self._safe(traj, self._lim, self._monitor.enforced):
             self._gen_version = self._lim_version
             return traj
         return None
@@ -761,32 +693,23 @@ class MotionCore:
     def _hold(self) -> None:
         self._apply(self._q.copy(), np.zeros(N_JOINTS), np.zeros(N_JOINTS))
 
-    def _check(self, qn: np.ndarray):
-        """None if the sample is admissible, else (kind, joint0, value, limit)."""
-        mon = self._mon
-        bad = _turn_bad(qn[None], mon.turn_min, mon.turn_max, self._q)
-        if bad is not None:
-            j = bad[1]
-            lim = mon.turn_max[j] if qn[j] >= mon.turn_max[j] else mon.turn_min[j]
-            return "turn", j, qn[j], lim
-        v = (qn - self._q) / self.dt
-        over = np.abs(v) - (mon.vmax * (1 + RTOL) + ATOL_V)
-        if (over > 0).any():
-            j = int(np.argmax(over))
-            return "speed", j, v[j], mon.vmax[j]
-        a = (v - self._v_fd) / self.dt
-        over = np.abs(a) - (mon.amax * (1 + RTOL) + ATOL_A)
-        if (over > 0).any():
-            j = int(np.argmax(over))
-            return "acceleration", j, a[j], mon.amax[j]
-        return None
+    def _command(self, qn: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None) -> Breach | None:
+        """The one way a trajectory or generated sample becomes the setpoint: applied only if
+        the limit monitor admits it; otherwise nothing changes and the breach is returned.
+        (Only holding still and the monitor's own last resorts, ``clamp`` and ``brake``,
+        are applied without it.)"""
+        breach = self._monitor.check(qn, self._q, self._v_fd)
+        if breach is None:
+            self._apply(qn, qd, qdd)
+        return breach
 
     def _step_trajectory(self) -> None:
         k = self._k
         samples = self._samples
         assert samples is not None  # following a trajectory
-        qn = samples[k]
-        bad = self._check(qn)
+        qd = None if self._samples_qd is None else self._samples_qd[k]
+        qdd = None if self._samples_qdd is None else self._samples_qdd[k]
+        bad = self._command(samples[k], qd, qdd)
         if bad is not None:
             kind, j, value, limit = bad
             self._violation(kind, j + 1, value, limit, "trajectory",
@@ -794,9 +717,6 @@ class MotionCore:
             self._begin_stop(f"limit violation ({kind}, joint {j + 1})", force=True)
             self._step_generator()
             return
-        qd = None if self._samples_qd is None else self._samples_qd[k]
-        qdd = None if self._samples_qdd is None else self._samples_qdd[k]
-        self._apply(qn, qd, qdd)
         self._k = k + 1
         if self._k >= len(samples):
             self._finish_trajectory(True, "")
@@ -836,10 +756,9 @@ class MotionCore:
         self._gen_t += self.dt
         pos, vel, acc = self._gen.at_time(self._gen_t)
         qn = np.asarray(pos, float)
-        if self._check(qn) is None:
-            self._apply(qn, np.asarray(vel, float), np.asarray(acc, float))
-        else:
-            self._apply_clamped(qn, self._gen_kind or "alter")
+        bad = self._command(qn, np.asarray(vel, float), np.asarray(acc, float))
+        if bad is not None:
+            self._apply_clamped(qn, bad, self._gen_kind or "alter")
         if self._gen is not None and self._gen_t >= self._gen.duration - 1e-12:
             self._gen = None
             if self._mode == "stopping":
@@ -848,39 +767,22 @@ class MotionCore:
                     self._target = self._q.copy()
             self._finish_stop_if_any()
 
-    def _apply_clamped(self, qn: np.ndarray, source: str) -> None:
+    def _apply_clamped(self, qn: np.ndarray, breach: Breach, source: str) -> None:
         """Apply the admissible sample closest to qn (the monitor's last resort), then stop."""
-        kind, j, value, limit = self._check(qn)
+        kind, j, value, limit = breach
         self._violation(kind, j + 1, value, limit, source,
                         f"generated sample clamped: joint {j + 1} {kind} {value:.6g} beyond {limit:.6g}")
-        v_lo, v_hi = self._admissible_velocity()
-        v = np.clip((qn - self._q) / self.dt, v_lo, v_hi)
-        q_new = self._q + v * self.dt
-        if _turn_bad(q_new[None], self._mon.turn_min, self._mon.turn_max, self._q) is not None:
-            v = np.clip(np.zeros(N_JOINTS), v_lo, v_hi)  # brake as hard as allowed
-            q_new = self._q + v * self.dt
-        self._apply(q_new, None, None)
+        self._apply(self._monitor.clamp(qn, self._q, self._v_fd), None, None)
         if self._mode != "stopping":
             self._begin_stop(f"limit violation ({kind}, joint {j + 1})", force=True)
         self._resync = True
 
-    def _admissible_velocity(self):
-        """Per-joint velocity interval the monitor admits for the next cycle."""
-        mon = self._mon
-        vmax = mon.vmax * (1 - 1e-9)
-        dv = mon.amax * (1 - 1e-9) * self.dt
-        v_lo = np.maximum(-vmax, self._v_fd - dv)
-        v_hi = np.minimum(vmax, self._v_fd + dv)
-        return v_lo, np.maximum(v_hi, v_lo)
-
     def _step_ebrake(self) -> None:
         """Emergency brake: every joint decelerates at the monitor's max acceleration."""
-        v_lo, v_hi = self._admissible_velocity()
-        v = np.clip(np.zeros(N_JOINTS), v_lo, v_hi)
-        q_new = self._q + v * self.dt
-        if _turn_bad(q_new[None], self._mon.turn_min, self._mon.turn_max, self._q) is not None:
-            bad = _turn_bad(q_new[None], self._mon.turn_min, self._mon.turn_max, self._q)
-            self._violation("unavoidable", bad[1] + 1, q_new[bad[1]], 0.0, "stop",
+        q_new, v = self._monitor.brake(self._q, self._v_fd)
+        j = self._monitor.outside_turn(q_new, self._q)
+        if j is not None:
+            self._violation("unavoidable", j + 1, q_new[j], 0.0, "stop",
                             "emergency brake cannot stay inside the turn limits")
         a = (v - self._v_fd) / self.dt
         self._apply(q_new, v, a)
@@ -903,39 +805,12 @@ class MotionCore:
             self._deferred += motion._finish(False, reason, self._state())
 
     def _update_monitor(self) -> None:
-        """Close transitional monitor limits once the robot is within the new ones.
-
-        At rest: everything closes. In Alter motion: speed/acceleration close 3 cycles
-        after the state got within the new limits on a trajectory planned with them.
-        Trajectories and stops keep the wider limits until rest.
-        """
-        if self._settle == 0 and np.array_equal(self._mon.turn_min, self._lim.turn_min) \
-                and np.array_equal(self._mon.turn_max, self._lim.turn_max):
-            return
-        lim = self._lim
-        if not self._moving():
-            self._mon = lim.copy()
-            self._settle = 0
-            return
-        if self._settle == 0:
-            return  # only the turn bounds are widened: they close at rest
-        within = bool(self._mode == "alter" and self._gen is not None and self._gen_kind == "alter"
-                      and self._gen_version == self._lim_version and not self._target_pending
-                      and np.all(np.abs(self._v_fd) <= lim.vmax * (1 + RTOL) + ATOL_V)
-                      and np.all(np.abs(self._qd) <= lim.vmax * (1 + RTOL) + ATOL_V)
-                      and np.all(np.abs(self._qdd) <= lim.amax * (1 + RTOL) + ATOL_A))
-        if within:
-            # a joint frozen by a zero limit must be exactly at rest before the monitor
-            # takes the zero limit
-            frozen = ~((lim.vmax > MIN_LIMIT) & (lim.amax > MIN_LIMIT))
-            still = (self._v_fd == 0) & (self._qd == 0) & (self._qdd == 0)
-            within = bool(np.all(~frozen | still))
-        self._settle = self._settle + 1 if (within and self._settle > 0) else (1 if within else -1)
-        if self._settle >= 3:
-            self._mon.vmax = lim.vmax.copy()
-            self._mon.amax = lim.amax.copy()
-            self._mon.jmax = lim.jmax.copy()
-            self._settle = 0
+        """Let the monitor close transitional limits (``LimitMonitor.update``): in Alter
+        motion the state counts once it follows a plan made with the current limits;
+        trajectories and stops keep the wider limits until rest."""
+        on_current_plan = (self._mode == "alter" and self._gen is not None and self._gen_kind == "alter"
+                           and self._gen_version == self._lim_version and not self._target_pending)
+        self._monitor.update(self._lim, self._moving(), on_current_plan, self._v_fd, self._qd, self._qdd)
 
     # ------------------------------------------------------------------ fast-forward helpers
     def run(self, cycles: int) -> list[CoreState]:
@@ -960,17 +835,6 @@ def _six(values) -> np.ndarray:
     return arr
 
 
-def _turn_bad(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, start: np.ndarray):
-    """First (row, joint) of q breaking the strict turn limits (start rule), or None."""
-    lo_ok = np.where(start <= lo, q >= start - OUTSIDE_TOL, q > lo)
-    hi_ok = np.where(start >= hi, q <= start + OUTSIDE_TOL, q < hi)
-    ok = lo_ok & hi_ok
-    if ok.all():
-        return None
-    k, j = np.argwhere(~ok)[0]
-    return int(k), int(j)
-
-
 def _consistent_state(v, a, vmax, amax, jmax):
     """Velocity/acceleration made reachable within the limits (for estimated states).
 
@@ -984,18 +848,6 @@ def _consistent_state(v, a, vmax, amax, jmax):
     a_lim = np.sqrt(2.0 * jmax * room)
     a = np.sign(a) * np.minimum(np.abs(a), a_lim)
     return v, a
-
-
-def _within_lo(qmin, lo, start):
-    return np.where(start <= lo, qmin >= start - OUTSIDE_TOL, qmin > lo)
-
-
-def _within_hi(qmax, hi, start):
-    return np.where(start >= hi, qmax <= start + OUTSIDE_TOL, qmax < hi)
-
-
-def _within(qmin, qmax, lo, hi, start) -> bool:
-    return bool(np.all(_within_lo(np.asarray(qmin), lo, start) & _within_hi(np.asarray(qmax), hi, start)))
 
 
 def trajectory_extrema(traj: ruckig.Trajectory, t_from: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -43,9 +43,9 @@ from rob6.robots import RobotModel
 from rob6.vplus import check_signals
 
 from .links import Link
-from .links.adept import AdeptLink, AdeptSettings
 from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, RsiLink
 from .links.sim import SimLink
+from .links.simple_message import AdeptLink, AdeptSettings
 from .motion import CoreState, Motion, MotionCore, Offline
 
 log = logging.getLogger("rob6.driver")

@@ -24,7 +24,7 @@ def default_config(robot: RobotModel) -> MotionConfig:
     return MotionConfig(
         speed=list(robot.default_speed), accel=list(robot.default_accel),
         max_change=list(robot.default_max_change), turn_max=list(robot.turn_max),
-        turn_min=list(robot.turn_min), weights=[4.0, 1.0, 1.0, 1.0, 1.0, 1.0],
+        turn_min=list(robot.turn_min), weights=list(robot.default_weights),
         allowed=["toggleHand", "toggleElbow", "toggleArm"], rt_speed_control=1,
     )
 

@@ -23,6 +23,8 @@ import time
 
 import numpy as np
 
+from rob6.robots import DEFAULT_ROBOT
+
 
 def _single_thread() -> None:
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -67,7 +69,7 @@ def _best(repeat: int, fn) -> float:
     return best
 
 
-def bench_ik(robot: str = "kr16", n_batch: int = 20000, n_single: int = 2000, n_clik: int = 50,
+def bench_ik(robot: str = DEFAULT_ROBOT, n_batch: int = 20000, n_single: int = 2000, n_clik: int = 50,
              repeat: int = 3, seed: int = 0) -> dict:
     """Poses/s of batch IK, single-call IK and Pinocchio CLIK on the same poses."""
     _single_thread()
@@ -122,7 +124,7 @@ def bench_ik(robot: str = "kr16", n_batch: int = 20000, n_single: int = 2000, n_
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    res = bench_ik(argv[0] if argv else "kr16")
+    res = bench_ik(argv[0] if argv else DEFAULT_ROBOT)
     for k, v in res.items():
         print(f"{k:24s} {v:,.1f}" if isinstance(v, float) else f"{k:24s} {v}")
     return 0

@@ -27,8 +27,6 @@ from . import opw
 from .opw import BRANCH_INDEX, BRANCHES, DEG, Geometry
 from .selection import STATUS_ORDER
 
-#: Min-change weights the original starts with (GetMinChangeWeights).
-DEFAULT_WEIGHTS = np.array([4.0, 1.0, 1.0, 1.0, 1.0, 1.0])
 #: Tie-break order of the branches (indices into BRANCHES): flip before noflip, up
 #: before down, lefty before righty -- selection.STATUS_ORDER.
 TIE_ORDER = [BRANCH_INDEX[" ".join(status)] for status in STATUS_ORDER]
@@ -50,10 +48,12 @@ class Kinematics:
         self.turn_min = np.array(robot.turn_min, dtype=float)
         self.turn_max = np.array(robot.turn_max, dtype=float)
         self.max_change = np.array(robot.default_max_change, dtype=float)
+        self.weights = np.array(robot.default_weights, dtype=float)  # min-change weights
         # plain-float copies for the single-pose (numpy-free) paths
         self._lo = self.turn_min.tolist()
         self._hi = self.turn_max.tolist()
         self._mc = self.max_change.tolist()
+        self._w = self.weights.tolist()
         self._mid = ((np.asarray(robot.hw_min, float) + np.asarray(robot.hw_max, float)) / 2).tolist()
 
     # ------------------------------------------------------------------ FK / IK
@@ -192,7 +192,7 @@ class Kinematics:
         cur = _floats6(current_q)
         cands = self._check_one(self.ik_one(_matrix12(matrix)), cur, turn_min, turn_max, max_change)
         allowed = set(self.resolve_pattern(pattern, cur))
-        w = _DEFAULT_WEIGHTS if weights is None else _floats6(weights)
+        w = self._w if weights is None else _floats6(weights)
         best, best_cost = None, math.inf
         for b in TIE_ORDER:
             q = cands[b]
@@ -254,9 +254,6 @@ class Kinematics:
     def manipulability(self, q) -> float:
         """Yoshikawa manipulability sqrt(det(J J^T)) of the flange Jacobian (m, rad)."""
         return self.pin.manipulability(q)
-
-
-_DEFAULT_WEIGHTS = DEFAULT_WEIGHTS.tolist()
 
 
 def _floats6(x) -> list[float]:

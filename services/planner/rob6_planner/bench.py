@@ -15,21 +15,23 @@ import time
 
 import numpy as np
 
-from .config import MotionConfig
+from rob6.robots import DEFAULT_ROBOT
+
+from .config import MotionSettings
 from .trajectory import TrajectoryPlanner
 
 
-def _random_joints(config: MotionConfig, rng: np.random.Generator, n: int) -> np.ndarray:
+def _random_joints(config: MotionSettings, rng: np.random.Generator, n: int) -> np.ndarray:
     lo = np.asarray(config.turn_min, float)
     hi = np.asarray(config.turn_max, float)
     margin = 0.05 * (hi - lo)
     return rng.uniform(lo + margin, hi - margin, size=(n, 6))
 
 
-def bench_ptp(robot: str = "kr16", n: int = 2000, seed: int = 0, sample: bool = True,
+def bench_ptp(robot: str = DEFAULT_ROBOT, n: int = 2000, seed: int = 0, sample: bool = True,
               warmup: int = 50) -> dict:
     """PTP planning time percentiles (µs): {'p50_us', 'p99_us', 'max_us', 'mean_us', 'n', ...}."""
-    config = MotionConfig(robot)
+    config = MotionSettings(robot)
     planner = TrajectoryPlanner(robot)
     rng = np.random.default_rng(seed)
     starts = _random_joints(config, rng, n + warmup)
@@ -59,17 +61,17 @@ def bench_ptp(robot: str = "kr16", n: int = 2000, seed: int = 0, sample: bool = 
     }
 
 
-def ptp_p50_us(robot: str = "kr16", n: int = 2000) -> float:
+def ptp_p50_us(robot: str = DEFAULT_ROBOT, n: int = 2000) -> float:
     return bench_ptp(robot, n)["p50_us"]
 
 
-def ptp_p99_us(robot: str = "kr16", n: int = 2000) -> float:
+def ptp_p99_us(robot: str = DEFAULT_ROBOT, n: int = 2000) -> float:
     return bench_ptp(robot, n)["p99_us"]
 
 
 def main(argv: list[str] | None = None) -> None:
     argv = sys.argv[1:] if argv is None else argv
-    robot = argv[0] if argv else "kr16"
+    robot = argv[0] if argv else DEFAULT_ROBOT
     n = int(argv[1]) if len(argv) > 1 else 2000
     for sample in (False, True):
         print(json.dumps(bench_ptp(robot, n, sample=sample)))

@@ -4,7 +4,7 @@ Semantics are those of the original rob6server (REFERENCE.md 6.3, 6.3a, 6.4, 7 a
 ``limits``/``limits_bounds``/``misc`` transcripts):
 
 * speeds (deg per 12 ms cycle) ``0 <= v <= 10 x default`` per joint, accelerations
-  (deg per cycle^2) ``0 <= a <= 0.02``; bounds inclusive. The 6-value forms update
+  (deg per cycle^2) ``0 <= a <= 0.02`` (``RobotModel.max_accel_bound``); bounds inclusive. The 6-value forms update
   **partially**: joints before the first invalid value are already set.
 * max change: 6-value form ``c >= 0`` for all, **all-or-nothing**; single form ``c > 0``
   (``-0`` rejected). Independent of the turn limits after start (6.3a).
@@ -22,7 +22,8 @@ Input is already-parsed numbers (the gateway reads the text and produces the
 numbers are refused everywhere (the gateway never produces them).
 
 The whole state is a plain dict (``to_dict``/``from_dict``) with the field names of
-``rob6.messages.MotionConfig`` so it travels over the bus as JSON.
+``rob6.messages.MotionConfig`` so it travels over the bus as JSON: ``MotionSettings`` is
+the planner's live, validated state, ``MotionConfig`` the message that carries a copy.
 """
 
 from __future__ import annotations
@@ -34,8 +35,6 @@ from rob6.robots import RobotModel, get_robot
 from rob6.status import TOGGLE_ALL, parse_status, status_matches
 
 N_JOINTS = 6
-MAX_ACCEL_BOUND = 0.02
-DEFAULT_WEIGHTS = (4.0, 1.0, 1.0, 1.0, 1.0, 1.0)
 
 
 FIELDS = ("speed", "accel", "max_change", "turn_max", "turn_min", "weights",
@@ -74,8 +73,10 @@ def _six(values) -> list[float] | None:
     return out
 
 
-class MotionConfig:
-    """Speeds, accelerations, max change, turn limits, weights, allowed status, RT mode."""
+class MotionSettings:
+    """Speeds, accelerations, max change, turn limits, weights, allowed status, RT mode:
+    what the protocol's Set*/Reset* commands change, with their checks (the message
+    carrying a copy is ``rob6.messages.MotionConfig``)."""
 
     def __init__(self, robot: RobotModel | str):
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
@@ -122,7 +123,7 @@ class MotionConfig:
         return True
 
     def reset_weights(self) -> bool:
-        self.weights = list(DEFAULT_WEIGHTS)
+        self.weights = list(self.robot.default_weights)
         return True
 
     def reset_allowed(self) -> bool:
@@ -133,9 +134,8 @@ class MotionConfig:
     def _speed_ok(self, i: int, v: float) -> bool:
         return 0.0 <= v <= self.speed_bound[i]
 
-    @staticmethod
-    def _accel_ok(i: int, a: float) -> bool:
-        return 0.0 <= a <= MAX_ACCEL_BOUND
+    def _accel_ok(self, i: int, a: float) -> bool:
+        return 0.0 <= a <= self.robot.max_accel_bound
 
     # ------------------------------------------------------------------ speeds / accels
     def _set_partial(self, target: list[float], values, ok) -> bool:
@@ -295,7 +295,7 @@ class MotionConfig:
         }
 
     @classmethod
-    def from_dict(cls, robot: RobotModel | str, data: dict) -> "MotionConfig":
+    def from_dict(cls, robot: RobotModel | str, data: dict) -> "MotionSettings":
         config = cls(robot)
         config.update_from_dict(data)
         return config
@@ -315,12 +315,12 @@ class MotionConfig:
         if "rt_speed_control" in data:
             self.rt_speed_control = int(data["rt_speed_control"])
 
-    def copy(self) -> "MotionConfig":
-        return MotionConfig.from_dict(self.robot, self.to_dict())
+    def copy(self) -> "MotionSettings":
+        return MotionSettings.from_dict(self.robot, self.to_dict())
 
     def __eq__(self, other) -> bool:
-        return (isinstance(other, MotionConfig) and self.robot.name == other.robot.name
+        return (isinstance(other, MotionSettings) and self.robot.name == other.robot.name
                 and self.to_dict() == other.to_dict())
 
     def __repr__(self) -> str:
-        return f"MotionConfig({self.robot.name!r}, {self.to_dict()!r})"
+        return f"MotionSettings({self.robot.name!r}, {self.to_dict()!r})"

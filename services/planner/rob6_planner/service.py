@@ -28,7 +28,7 @@ from rob6.messages import (
     IkBatchRequest,
     LimitsUpdate,
     ModeRequest,
-    MotionConfig as ConfigMessage,
+    MotionConfig,
     MotionKind,
     MoveReply,
     MoveRequest,
@@ -39,8 +39,8 @@ from rob6.messages import (
 from rob6.robots import RobotModel
 from rob6.status import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN
 
-from .config import MotionConfig
-from .lin import plan_lin
+from .config import MotionSettings
+from .lin_planner import plan_lin
 from .trajectory import TrajectoryPlanner
 
 log = logging.getLogger("rob6.planner")
@@ -54,14 +54,14 @@ ADEPT_SETTINGS = {"SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoa
 LIMIT_FIELDS = ("speed", "accel", "turn_min", "turn_max", "max_change")
 
 
-class Refused(Exception):
+class MotionRefused(Exception):
     """A motion refused before it started (the client gets ``false``)."""
 
 
 def _given(value: list[float] | None, what: str, kind: str) -> list[float]:
     """A field the motion needs (the gateway always sends it with that kind)."""
     if value is None:
-        raise Refused(f"{kind} without {what}")
+        raise MotionRefused(f"{kind} without {what}")
     return value
 
 
@@ -69,7 +69,7 @@ class PlannerService:
     def __init__(self, bus: Bus, robot: RobotModel, alter_timeout_s: float = 0.5):
         self.bus = bus
         self.robot = robot
-        self.config = MotionConfig(robot)
+        self.config = MotionSettings(robot)
         self.planner = TrajectoryPlanner(robot)
         self.alter = False
         self.lin = False
@@ -86,10 +86,10 @@ class PlannerService:
         bus.on_liveliness(self._on_liveliness)
 
     # ------------------------------------------------------------------ configuration
-    def _message(self) -> ConfigMessage:
-        return ConfigMessage(**self.config.to_dict(), version=self._version)
+    def _message(self) -> MotionConfig:
+        return MotionConfig(**self.config.to_dict(), version=self._version)
 
-    def get_config(self, _req: Empty, _ctx: Context) -> ConfigMessage:
+    def get_config(self, _req: Empty, _ctx: Context) -> MotionConfig:
         return self._message()
 
     def config_change(self, req: ConfigChange, ctx: Context) -> ConfigReply:
@@ -134,7 +134,7 @@ class PlannerService:
         if service == "gateway" and alive:
             self.bus.publish("planner/config", self._message(), reliable=True)
 
-    def _planning_config(self) -> MotionConfig:
+    def _planning_config(self) -> MotionSettings:
         """The configuration with the Adept's speed/acceleration percentages applied."""
         if not self.robot.is_adept:
             return self.config
@@ -192,7 +192,7 @@ class PlannerService:
                 return self._alter_move(req, ctx.cid)
             with self._lock:
                 return self._move(req, ctx)
-        except Refused as exc:
+        except MotionRefused as exc:
             log.info("%s refused: %s", req.kind, exc)
             return MoveReply(ok=False, reason=str(exc))
 
@@ -209,23 +209,23 @@ class PlannerService:
         cid = ctx.cid
         start = self._current(req)
         if self.alter and not req.dry_run:
-            raise Refused("Alter mode is on (DisableAlter first)")
+            raise MotionRefused("Alter mode is on (DisableAlter first)")
         if req.kind == "MoveLINHomRowWise":
             return self._lin(req, start, ctx)
         if self.lin and not req.dry_run:
-            raise Refused("LIN mode is on: point-to-point moves are refused (DisableLin first)")
+            raise MotionRefused("LIN mode is on: point-to-point moves are refused (DisableLin first)")
         if req.kind in JOINT_MOVES:
             target = list(_given(req.joints, "joints", req.kind))
         elif req.kind in POSE_MOVES:
             pattern = PTP_HOM_PATTERN if req.kind == "MovePTPHomRowWise" else req.pattern
             target = self._select(req.pose, pattern, start, cid)
         else:
-            raise Refused(f"unknown motion {req.kind}")
+            raise MotionRefused(f"unknown motion {req.kind}")
         pattern = req.pattern if req.kind == "MovePTPJointsStatus" else None
         plan = self.planner.plan_ptp(start, target, self._planning_config(), pattern=pattern,
                                      sample=not req.dry_run)
         if not plan.ok:
-            raise Refused(plan.reason)
+            raise MotionRefused(plan.reason)
         if req.dry_run:
             return MoveReply(ok=True, joints=target)
         return self._execute(plan.trajectory, req, ctx)
@@ -237,7 +237,7 @@ class PlannerService:
             turn_max=list(c.turn_max), max_change=list(c.max_change), weights=list(c.weights),
             allowed=list(c.allowed)), cid=cid)
         if reply.joints is None:
-            raise Refused("no admissible solution for that pose and status")
+            raise MotionRefused("no admissible solution for that pose and status")
         return reply.joints
 
     def _execute(self, trajectory, req: MoveRequest, ctx: Context) -> MoveReply:
@@ -247,7 +247,7 @@ class PlannerService:
             dt=trajectory.dt, q=trajectory.q.tolist(), qd=trajectory.qd.tolist(), qdd=trajectory.qdd.tolist()))
         with self._handover:
             if req.session and req.session in self._ended:
-                raise Refused("the client left before the motion started")
+                raise MotionRefused("the client left before the motion started")
             self._handing_over = True
 
         def started(seconds: float, what: str) -> None:
@@ -264,9 +264,9 @@ class PlannerService:
     def _lin(self, req: MoveRequest, start: list[float], ctx: Context) -> MoveReply:
         cid = ctx.cid
         if not self.lin:
-            raise Refused("LIN mode is off (EnableLin first)")
+            raise MotionRefused("LIN mode is off (EnableLin first)")
         if req.dry_run:
-            raise Refused("route test of LIN moves is not supported")
+            raise MotionRefused("route test of LIN moves is not supported")
         fk = self.bus.request("kinematics", "fk", FkRequest(joints=[start]), cid=cid)
         branch = " ".join(self.robot.status(start))
         pose0 = np.asarray(fk.poses[0], float).reshape(3, 4)
@@ -280,14 +280,14 @@ class PlannerService:
         plan = plan_lin(self.planner, start, pose0, np.asarray(req.pose, float).reshape(3, 4),
                         self._planning_config(), ik_fn)
         if not plan.ok:
-            raise Refused(plan.reason)
+            raise MotionRefused(plan.reason)
         return self._execute(plan.trajectory, req, ctx)
 
     def _alter_move(self, req: MoveRequest, cid: str) -> MoveReply:
         """Alter targets; the driver checks them (Alter mode, turn limits, max change), since
         the gateway streams joint targets (MoveRTJoints, DoAlterJoint) to it directly."""
         if not self.alter:
-            raise Refused("Alter mode is off (EnableAlter first)")
+            raise MotionRefused("Alter mode is off (EnableAlter first)")
         relative = req.kind == "DoAlterJoint"
         if req.kind in ("MoveRTJoints", "DoAlterJoint"):
             target = list(_given(req.joints, "joints", req.kind))

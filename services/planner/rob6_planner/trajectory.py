@@ -1,6 +1,7 @@
 """Trajectory generation with Ruckig: joint limits, sampling Ruckig's profiles at the
 driver cycle, target checks and PTP (joint space) planning. LIN (the Cartesian straight
-line) builds on it: ``lin`` (checks and time law) and ``line`` (the line's geometry).
+line) builds on it and this module knows nothing of it: ``lin_planner`` (checks and time
+law, ``plan_lin(planner, ...)``) and ``cartesian_line`` (the line's geometry).
 
 Units
 -----
@@ -23,9 +24,8 @@ sampled, limit-respecting C2 motion has ``|dq/dt| <= v`` and ``|d2q/dt2| <= a``)
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 import ruckig
@@ -33,9 +33,6 @@ import ruckig
 from rob6.robots import RobotModel, get_robot
 from rob6.status import status_matches
 from rob6.units import JERK_RAMP_S, accel_si, jerk_si, speed_si
-
-if TYPE_CHECKING:
-    from .lin import LinOptions
 
 N_JOINTS = 6
 #: max-change comparison tolerance (deg); the check is inclusive
@@ -225,7 +222,7 @@ def check_target(q0, q1, config, pattern=None) -> str:
 
     Strict turn limits at the target (``min < q < max``), max change per joint from the
     current position (inclusive), and -- when ``config`` has ``allowed`` and ``robot``
-    (a MotionConfig) -- the allowed status and the optional status ``pattern``
+    (a ``MotionSettings``) -- the allowed status and the optional status ``pattern``
     (MovePTPJointsStatus) for the target's status computed from its joints, as the
     original (REFERENCE.md 6.4, 6.6).
     """
@@ -258,7 +255,8 @@ def check_target(q0, q1, config, pattern=None) -> str:
 
 # ====================================================================== planner
 class TrajectoryPlanner:
-    """PTP and LIN planning for one robot type at its driver cycle.
+    """PTP planning for one robot type at its driver cycle (LIN: ``lin_planner.plan_lin``,
+    which plans its time law with ``_plan_1d``).
 
     Not thread-safe (it reuses its Ruckig instances); use one per thread.
     """
@@ -287,7 +285,7 @@ class TrajectoryPlanner:
                  pattern: Sequence[str] | None = None) -> PlanResult:
         """Jerk-limited, time-synchronised joint move q0 -> q1 (rest to rest).
 
-        ``config``: a MotionConfig (or anything with speed, accel, turn_min, turn_max,
+        ``config``: a ``MotionSettings`` (or anything with speed, accel, turn_min, turn_max,
         max_change). ``check``: validate the target first (turn limits, max change).
         ``sample=False`` skips sampling (``info['duration']`` only). ``pattern``: an
         explicit status pattern the target must match (MovePTPJointsStatus).
@@ -358,16 +356,7 @@ class TrajectoryPlanner:
             raise ValueError(res.reason)
         return res.info["duration"]
 
-    # ------------------------------------------------------------------ LIN
-    def plan_lin(self, q0, pose0, pose1, config, ik_fn: Callable[[np.ndarray], np.ndarray], *,
-                 manip_fn: Callable[[np.ndarray], np.ndarray] | None = None,
-                 options: LinOptions | None = None) -> PlanResult:
-        """Straight Cartesian line pose0 -> pose1 (orientation slerp), see ``lin.plan_lin``."""
-        from .lin import LinOptions, plan_lin  # lin builds on this module
-
-        return plan_lin(self, q0, pose0, pose1, config, ik_fn, manip_fn=manip_fn,
-                        options=options or LinOptions())
-
+    # ------------------------------------------------------------------ path parameter (LIN)
     def _plan_1d(self, vmax: float, amax: float, jmax: float) -> ruckig.Trajectory | None:
         inp = self._inp1
         inp.current_position = [0.0]

@@ -4,11 +4,13 @@ Library API (the service in ``service.py`` feeds ``Recorder``):
 
 * ``rob6_recorder.writer``: ``Recorder`` (non-blocking ``submit``, per-session files,
   rolling system file); ``files`` routes records to files and rotates them, ``mcapfile``
-  is one file (``McapFile``), ``derive`` the /tf and /flange derived from joint states.
+  is one file (``McapFile``), ``derived_channels`` the /tf and /flange derived from joint
+  states (computed by ``transforms``).
 * ``rob6_recorder.reader``: ``read_records`` / ``scan`` (also unfinished files).
 * ``rob6_recorder.recover``: ``recover(path, out_path)``.
 * ``rob6_recorder.inspect``: ``summarize``, ``export_csv``.
-* ``rob6_recorder.replay``: ``load_script``, ``replay``, ``replay_joints``.
+* ``rob6_recorder.session_replay``: ``load_script``, ``replay`` (a client session against a server).
+* ``rob6_recorder.playback``: ``play`` (into the live view), ``replay_joints``.
 * ``rob6_recorder.adapters``: ``bus_trace_records`` (bus trace payload -> records).
 * ``rob6_recorder.cli``: the ``rob6-log`` click commands.
 """

@@ -27,11 +27,13 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from rob6.config import DEFAULT_LIVE_PORT
+
 from .inspect import export_csv, format_summary, summarize
 from .reader import NotMcap, ScanReport, scan
 
 if TYPE_CHECKING:
-    from .replay import ReplayResult
+    from .session_replay import ReplayResult
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -157,7 +159,7 @@ def replay(file: str, target: str, speed: float, afap: bool, robot: str | None,
     FILE is a recording (.mcap) or a conformance transcript (.jsonl). Exit code 1
     when any reply differs, 2 when the server cannot be reached.
     """
-    from .replay import format_report, load_script, replay as do_replay
+    from .session_replay import format_report, load_script, replay as do_replay
 
     host, port = _host_port(target)
     if speed <= 0 and not afap:
@@ -198,7 +200,7 @@ def replay(file: str, target: str, speed: float, afap: bool, robot: str | None,
 @click.option("--topic", default="/driver/joint_state", show_default=True)
 def replay_joints_cmd(file: str, speed: float, topic: str) -> None:
     """Print the recorded joint states as JSON lines at the recorded pace."""
-    from .replay import replay_joints
+    from .playback import replay_joints
 
     out = sys.stdout
 
@@ -212,7 +214,7 @@ def replay_joints_cmd(file: str, speed: float, topic: str) -> None:
 
 @main.command()
 @click.argument("file")
-@click.option("--port", envvar="ROB6_LIVE_PORT", default=8765, show_default=True, type=int,
+@click.option("--port", envvar="ROB6_LIVE_PORT", default=DEFAULT_LIVE_PORT, show_default=True, type=int,
               help="Live-view port to serve on (0 = any free port) [env ROB6_LIVE_PORT].")
 @click.option("--bind", envvar="ROB6_BIND", default="127.0.0.1", show_default=True,
               help="Address to listen on [env ROB6_BIND].")
@@ -225,7 +227,7 @@ def play(file: str, port: int, bind: str, speed: float, paused: bool, loop: bool
     """Play a recording into the live view (Foxglove WebSocket), seekable from Foxglove."""
     import signal
 
-    from .play import play as make_player
+    from .playback import play as make_player
 
     if speed <= 0:
         raise click.UsageError("--speed must be > 0")

@@ -19,7 +19,7 @@ client subscribes to it: a panel opened later shows the robot at once.
 The URDF is also an asset (``package://rob6/robot.urdf``, ``fetchAsset``), for a 3D
 panel's URDF layer with a URL.
 
-``rob6-log play FILE`` (``play.py``) serves a recording through the same class.
+``rob6-log play FILE`` (``playback.py``) serves a recording through the same class.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ with ``rob6_recorder.reader`` and rebuilt into an indexed file by
 
 This module is the queue and its writer thread; which file a record goes to, file names
 and rotation are ``files.RecordingFiles``, one file ``mcapfile.McapFile``, the derived
-Foxglove channels (``/tf``, ``/flange``) ``derive.JointStateDerivation``.
+Foxglove channels (``/tf``, ``/flange``) ``derived_channels.JointStateDerivation``.
 """
 
 from __future__ import annotations
@@ -42,11 +42,11 @@ from typing import Any
 
 import msgspec
 
-from .derive import JointStateDerivation
+from .derived_channels import JointStateDerivation
 from .files import RecordingFiles
-from .geometry import Fk
 from .mcapfile import as_dict, encode
 from .schemas import to_foxglove_log
+from .transforms import Fk
 
 log = logging.getLogger("rob6.recorder")
 

@@ -2,10 +2,12 @@
 
 A link owns the controller clock: it calls ``MotionCore.step()`` once per cycle and
 delivers the setpoint. ``sim`` takes every setpoint as reached (the default); ``rsi``
-drives a KUKA KR C4 over RSI, where every packet from the controller is one cycle;
-``simple_message`` (``adept.py``) streams the setpoints as ROS-Industrial
-simple_message points to an Adept V+ controller. Another controller (Kawasaki)
-becomes one more ``Link`` beside these, without touching the motion core.
+drives a KUKA KR C4 over RSI, where every packet from the controller is one cycle
+(``rsi.py``, its codec ``rsi_codec.py``); ``simple_message`` streams the setpoints as
+ROS-Industrial simple_message points to an Adept V+ controller (``simple_message.py``,
+its codec ``simple_message_codec.py``, the V+ program's I/O port ``adept_io.py``).
+Another controller (Kawasaki) becomes one more ``Link`` beside these, without touching
+the motion core.
 
 What the service needs from a link is small: ``start``/``stop``, the plant's state for
 each published joint state (``state``, ``late``, ``missed``, ``q_actual``, ``outputs``) and

@@ -1,4 +1,4 @@
-"""Replay a recorded client session against a server and compare the replies.
+"""Replay a recorded client session against a server and compare the replies (``rob6-log replay``).
 
 A *script* is what a client did on one connection: the greeting it got and, per
 line it sent, the exact bytes, when (relative to the first line) and the reply it
@@ -434,29 +434,3 @@ def format_report(result: ReplayResult, limit: int = 50) -> str:
     if result.aborted:
         lines.append(f"ABORTED: {result.aborted}")
     return "\n".join(lines)
-
-
-# --------------------------------------------------------------------------- joints
-def replay_joints(path: str | os.PathLike[str], publish: Callable[[dict[str, Any]], Any], *,
-                  speed: float | None = 1.0, topic: str = "/driver/joint_state",
-                  stop: Callable[[], bool] | None = None,
-                  sleep: Callable[[float], Any] = time.sleep,
-                  clock: Callable[[], float] = time.monotonic) -> int:
-    """Call ``publish(state)`` for every recorded joint state, paced like the recording
-    (``speed`` 2.0 = twice as fast, ``None``/0 = as fast as possible). Returns the count.
-    ``stop()`` returning True ends it early."""
-    count = 0
-    t0 = None
-    start = clock()
-    for rec in RecordingReader(path).records([topic]):
-        if stop is not None and stop():
-            break
-        if t0 is None:
-            t0 = rec.log_time
-        if speed:
-            delay = start + (rec.log_time - t0) / 1e9 / speed - clock()
-            if delay > 0:
-                sleep(delay)
-        publish(rec.data)
-        count += 1
-    return count

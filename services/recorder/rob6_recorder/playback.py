@@ -1,6 +1,6 @@
-"""``rob6-log play FILE``: a recording played back into the live view, seekable from Foxglove.
+"""A recording played back at its recorded pace: into the live view, or its joint states.
 
-The file's records go out on the same channels as live (``live.LiveView``), at their
+``rob6-log play FILE`` (``Player``): into the live view, seekable from Foxglove. The file's records go out on the same channels as live (``live.LiveView``), at their
 recorded pace divided by the speed, so a Foxglove layout made for the live robot plays the
 recording: the 3D panel moves the arm (``/tf`` as recorded, or derived from the joint states
 when the file has none), the Log panel shows ``/commands`` and ``/log``. The server offers
@@ -10,12 +10,16 @@ joint state, gripper, link) is sent at once, so the picture is right before the 
 
 Works on unfinished files (``reader.scan``): a recording cut by a crash plays up to its
 last complete chunk.
+
+``rob6-log replay-joints FILE`` (``replay_joints``): the recorded joint states, one by one
+at the recorded pace, to a callback.
 """
 
 from __future__ import annotations
 
 import bisect
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -25,7 +29,9 @@ from typing import Any
 
 from foxglove.websocket import PlaybackCommand, PlaybackControlRequest, PlaybackState, PlaybackStatus
 
-from .derive import TF_TOPIC, JointStateDerivation
+from rob6.config import DEFAULT_LIVE_PORT
+
+from .derived_channels import TF_TOPIC, JointStateDerivation
 from .live import COMMANDS_TOPIC, LATCHED, LiveView
 from .mcapfile import ROBOT_DESCRIPTION_TOPIC
 from .reader import RecordingReader
@@ -72,7 +78,7 @@ def load(path: str | Path) -> tuple[list[Item], str | None]:
 class Player:
     """Plays ``items`` into a ``LiveView`` it starts; ``run()`` until stopped (or the end)."""
 
-    def __init__(self, items: list[Item], urdf: str | None, *, host: str = "127.0.0.1", port: int = 8765,
+    def __init__(self, items: list[Item], urdf: str | None, *, host: str = "127.0.0.1", port: int = DEFAULT_LIVE_PORT,
                  speed: float = 1.0, paused: bool = False, loop: bool = False, name: str = "rob6 playback",
                  clock: Callable[[], float] = time.monotonic):
         if not items:
@@ -205,3 +211,29 @@ def play(path: str | Path, **options: Any) -> Player:
     """A ``Player`` serving the recording at ``path`` (not started: call ``run()``)."""
     items, urdf = load(path)
     return Player(items, urdf, name=f"rob6 playback {Path(path).name}", **options)
+
+
+# --------------------------------------------------------------------------- joint states
+def replay_joints(path: str | os.PathLike[str], publish: Callable[[dict[str, Any]], Any], *,
+                  speed: float | None = 1.0, topic: str = "/driver/joint_state",
+                  stop: Callable[[], bool] | None = None,
+                  sleep: Callable[[float], Any] = time.sleep,
+                  clock: Callable[[], float] = time.monotonic) -> int:
+    """Call ``publish(state)`` for every recorded joint state, paced like the recording
+    (``speed`` 2.0 = twice as fast, ``None``/0 = as fast as possible). Returns the count.
+    ``stop()`` returning True ends it early."""
+    count = 0
+    t0 = None
+    start = clock()
+    for rec in RecordingReader(path).records([topic]):
+        if stop is not None and stop():
+            break
+        if t0 is None:
+            t0 = rec.log_time
+        if speed:
+            delay = start + (rec.log_time - t0) / 1e9 / speed - clock()
+            if delay > 0:
+                sleep(delay)
+        publish(rec.data)
+        count += 1
+    return count

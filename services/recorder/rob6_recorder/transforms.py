@@ -1,4 +1,6 @@
-"""Derived 3D channels: per-link ``/tf`` from the URDF and the flange pose from FK.
+"""The 3D messages computed from a joint state: per-link ``/tf`` from the URDF, the flange pose from FK.
+
+What is derived and how often is ``derived_channels.py``'s business; this module computes.
 
 ``TfDeriver`` turns a joint state (``q`` in degrees) into a ``foxglove.FrameTransforms``
 message with one transform per URDF joint (parent link -> child link), so Foxglove's

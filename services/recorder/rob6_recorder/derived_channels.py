@@ -1,5 +1,6 @@
-"""The Foxglove channels derived from the joint state: per-link ``/tf`` from the URDF and,
-with a forward-kinematics callable, ``/flange`` and an ``fk_flange`` frame on ``/tf``.
+"""The Foxglove channels derived from each joint state, and when: per-link ``/tf`` from the
+URDF and, with a forward-kinematics callable, ``/flange`` and an ``fk_flange`` frame on
+``/tf`` (the computation itself: ``transforms.py``).
 
 Runs on the recorder's writer thread, so it keeps itself cheap: at most ``tf_max_rate``
 derivations a second; an FK callable that raises is not called again (one warning), one
@@ -15,8 +16,8 @@ from typing import Any
 
 import msgspec
 
-from .geometry import Fk, TfDeriver, flange_message
 from .mcapfile import as_dict
+from .transforms import Fk, TfDeriver, flange_message
 
 log = logging.getLogger("rob6.recorder")
 

@@ -12,7 +12,7 @@ import numpy as np
 from rob6.robots import RobotModel
 from rob6.status import reach_term, status_flags, status_matches
 
-from .line import LinePath
+from .cartesian_line import LinePath
 from .trajectory import (
     MAX_CHANGE_EPS,
     MIN_LIMIT,
