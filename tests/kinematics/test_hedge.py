@@ -16,8 +16,7 @@ from typing import Any
 
 import pytest
 
-from rob6 import bus as bus_module
-from rob6.bus import HEDGE_DELAY_S, Bus, BusError, Context
+from rob6.bus import HEDGE_DELAY_S, Bus, BusError, Context, call as bus_call
 from rob6.config import BusSettings
 from rob6.deadlines import REMOTE_POSE_S
 from rob6.messages import OPS, Empty, FkReply, FkRequest, Op, PingReply
@@ -152,7 +151,7 @@ def test_when_every_copy_is_lost_the_call_times_out_at_its_deadline():
 def test_an_owner_service_is_never_sent_a_request_twice(monkeypatch):
     # even if its operation were marked hedged and idempotent by mistake: one robot, one owner
     monkeypatch.setitem(OPS, ("driver", "ping"), Op(Empty, PingReply, timeout=1.0, hedged=True))
-    monkeypatch.setattr(bus_module, "IDEMPOTENT_SERVICES", frozenset({"kinematics", "driver"}))
+    monkeypatch.setattr(bus_call, "IDEMPOTENT_SERVICES", frozenset({"kinematics", "driver"}))
     with zenoh_router("hedge") as settings:
         driver = _Replica(settings, "driver", "ping", "driver1", lambda n: 0.5,
                           PingReply(robot_time=1.0, wall_time=2.0))

@@ -2,7 +2,7 @@
 gets every client exchange of the session (the gateway's trace batches come from an
 advanced publisher that keeps 30 s of them; the restarted recorder's advanced subscriber
 asks for that history, and for what the history left out the cache is asked directly:
-rob6.bus ``_TraceSubscription._repair``), and what it could not get it says on
+rob6.bus.trace ``_TraceSubscription._repair``), and what it could not get it says on
 ``/recorder/status``.
 
 The gateway numbers the exchanges of a session (``seq`` 1, 2, ...): every number must be

@@ -1,4 +1,4 @@
-"""The trace subscription's repair (rob6.bus._TraceSubscription._repair): what zenoh.ext's
+"""The trace subscription's repair (rob6.bus.trace._TraceSubscription._repair): what zenoh.ext's
 own history and recovery left out is asked from the publisher's cache by sequence number,
 every batch is passed on once, and what the cache no longer has is reported missed. Seen in
 the multi-host topology: a restarted recorder whose history brought nothing from a
@@ -20,8 +20,7 @@ import msgspec
 import pytest
 import zenoh
 
-from rob6 import bus as bus_module
-from rob6.bus import Bus, trace_records
+from rob6.bus import Bus, trace as bus_trace, trace_records
 from rob6.config import BusSettings
 from tests.system import zenoh_router
 
@@ -39,11 +38,11 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
              ) -> Iterator[tuple[Bus, Callable[[], Bus], list[int], list[tuple[str, int]]]]:
     """A publisher ("gateway"), a function that subscribes a recorder, the record numbers it
     was given and the misses it was told of. ``drop(sn, times_seen)``: drop that arrival."""
-    monkeypatch.setattr(bus_module._TraceSubscription, "_declare", _without_history)
-    monkeypatch.setattr(bus_module, "TRACE_RESUBSCRIBE_S", 0.5)
-    monkeypatch.setattr(bus_module, "TRACE_REPAIR_S", 0.5)
+    monkeypatch.setattr(bus_trace._TraceSubscription, "_declare", _without_history)
+    monkeypatch.setattr(bus_trace, "TRACE_RESUBSCRIBE_S", 0.5)
+    monkeypatch.setattr(bus_trace, "TRACE_REPAIR_S", 0.5)
     if drop is not None:
-        original = bus_module._TraceSubscription._sample
+        original = bus_trace._TraceSubscription._sample
         arrivals: dict[int, int] = {}
 
         def dropping(self, sample: zenoh.Sample) -> None:
@@ -53,7 +52,7 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
                 return
             original(self, sample)
 
-        monkeypatch.setattr(bus_module._TraceSubscription, "_sample", dropping)
+        monkeypatch.setattr(bus_trace._TraceSubscription, "_sample", dropping)
     with zenoh_router("repair") as settings:
         publisher = Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance="pub"), "gateway")
         recorder = Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance="rec"), "recorder")

@@ -10,8 +10,7 @@ import time
 
 import pytest
 
-from rob6 import bus as bus_module
-from rob6.bus import Bus, BusError
+from rob6.bus import Bus, BusError, call as bus_call
 from rob6.config import BusSettings
 from rob6.messages import Empty, MoveRequest, PingReply
 from tests.system import zenoh_router
@@ -28,7 +27,7 @@ def _bus(settings: BusSettings, service: str, instance: str) -> Bus:
 
 
 def test_a_call_waits_for_an_owner_that_comes_up(settings, monkeypatch):
-    monkeypatch.setattr(bus_module, "LIVELINESS_GRACE_S", 20.0)  # a slow machine's start-up fits
+    monkeypatch.setattr(bus_call, "LIVELINESS_GRACE_S", 20.0)  # a slow machine's start-up fits
     client = _bus(settings, "test", "client")
     drivers: list[Bus] = []
 
@@ -51,7 +50,7 @@ def test_a_call_waits_for_an_owner_that_comes_up(settings, monkeypatch):
 
 
 def test_no_instance_fails_unavailable_after_the_grace_within_the_deadline(settings, monkeypatch):
-    monkeypatch.setattr(bus_module, "LIVELINESS_GRACE_S", 0.4)
+    monkeypatch.setattr(bus_call, "LIVELINESS_GRACE_S", 0.4)
     client = _bus(settings, "test", "client")
     try:
         started = time.monotonic()
@@ -60,7 +59,7 @@ def test_no_instance_fails_unavailable_after_the_grace_within_the_deadline(setti
         took = time.monotonic() - started
         assert (error.value.code, error.value.message) == ("unavailable", "planner unavailable")
         assert 0.4 <= took < 30
-        monkeypatch.setattr(bus_module, "LIVELINESS_GRACE_S", 30.0)
+        monkeypatch.setattr(bus_call, "LIVELINESS_GRACE_S", 30.0)
         started = time.monotonic()
         with pytest.raises(BusError) as error:  # the deadline (0.1 s) comes before the grace
             client.request("driver", "ping", Empty(), timeout=0.1)

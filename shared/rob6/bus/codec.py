@@ -1,0 +1,46 @@
+"""The bus's wire format: JSON encoding, decoders by message type, correlation ids, the
+attachment that marks an interim reply."""
+
+from __future__ import annotations
+
+import threading
+import uuid
+from typing import Any
+
+import msgspec
+
+from ..messages import Waiting
+
+_encoder = msgspec.json.Encoder()
+_DECODER_LOCK = threading.Lock()
+
+_waiting = msgspec.json.Decoder(Waiting)
+#: the Zenoh attachment of an interim reply (``Context.waiting``)
+WAITING = b"waiting"
+
+
+def new_cid() -> str:
+    return uuid.uuid4().hex[:12]
+
+
+class Decoders:
+    """A bus's decoders, one per message type, each built once: ``decoders(typ)``."""
+
+    def __init__(self) -> None:
+        self._decoders: dict[Any, msgspec.json.Decoder[Any]] = {}
+
+    def __call__(self, typ: Any) -> msgspec.json.Decoder[Any]:
+        decoder = self._decoders.get(typ)
+        if decoder is None:
+            # built under a lock: two threads building a decoder for the same generic type at
+            # once crashed the interpreter (SIGSEGV in msgspec's annotation walk, seen in CI)
+            with _DECODER_LOCK:
+                decoder = self._decoders.get(typ)
+                if decoder is None:
+                    decoder = self._decoders[typ] = msgspec.json.Decoder(typ)
+        return decoder
+
+
+def _parametrize(generic: Any, typ: type) -> Any:
+    """``generic[typ]`` for a type known only at run time (the operation's message type)."""
+    return generic[typ]

@@ -1,0 +1,36 @@
+"""The ``Bus`` class: the bus's jobs (mixins from the sibling modules) put together on one
+session, started in order and closed."""
+
+from __future__ import annotations
+
+import logging
+
+from ..config import BusSettings
+from .call import Calling
+from .pubsub import PubSub
+from .serve import Serving
+
+log = logging.getLogger("rob6.bus")
+
+
+class Bus(Serving, Calling, PubSub):
+    """One Zenoh session of one rob6 process (a service instance, the gateway, a tool)."""
+
+    def __init__(self, settings: BusSettings, service: str, *, mode: str | None = None,
+                 listen: tuple[str, ...] | None = None):
+        super().__init__(settings, service, mode=mode, listen=listen)  # the session
+        self._init_calls()
+        self._init_pubsub()
+        self._init_serving()
+        self._init_traces()
+        self._init_liveliness()  # last: the tokens' history comes at once
+
+    def close(self) -> None:
+        if self._closed.is_set():
+            return
+        self._flush_traces()  # what was traced before the close still goes out
+        self._closed.set()
+        try:
+            self.session.close()
+        except Exception:
+            log.debug("closing the zenoh session failed", exc_info=True)

@@ -1,0 +1,84 @@
+"""Publish and subscribe: messages on ``rob6/<id>/<suffix>`` (states, control, logs),
+each stamped with its publisher's instance, and subscriptions that follow an owner's.
+
+Every publication carries its instance id as the Zenoh attachment; a subscription made
+with ``owner=`` drops samples any instance but the followed one publishes, so a stray
+second driver is never mixed in.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import TypeVar
+
+import msgspec
+import zenoh
+
+from .codec import _encoder
+from .liveliness import Liveliness
+
+log = logging.getLogger("rob6.bus")
+
+T = TypeVar("T")
+
+
+class PubSub(Liveliness):
+    """Publications and subscriptions of the bus (a mixin of ``Bus``)."""
+
+    def _init_pubsub(self) -> None:
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._foreign_warned: set[tuple[str, str]] = set()
+
+    def publish(self, suffix: str, data: object, *, reliable: bool = False) -> None:
+        """Publish a message struct, dict or raw JSON bytes on ``rob6/<id>/<suffix>``.
+
+        ``reliable`` blocks rather than drops under congestion (logs, traces); state
+        streams drop, because only the latest sample matters to a controller.
+        """
+        if self._closed.is_set():  # shutting down: nothing is listening any more
+            return
+        publisher = self._publishers.get(suffix)
+        if publisher is None:
+            congestion = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
+            publisher = self._publishers[suffix] = self.session.declare_publisher(
+                self.key(suffix), congestion_control=congestion)
+        publisher.put(data if isinstance(data, bytes) else _encoder.encode(data), attachment=self._attachment)
+
+    def subscribe(self, suffix: str, on_message: Callable[[str, bytes], None], *,
+                  owner: str | None = None) -> zenoh.Subscriber[None]:
+        """Call ``on_message(key, payload)`` for every sample; it must not block.
+
+        ``owner``: an owner service; only what its followed instance publishes is passed
+        on, anything else is logged (once per publisher) and dropped.
+        """
+        def callback(sample: zenoh.Sample) -> None:
+            try:
+                if owner is not None and not self._from_owner(owner, suffix, sample):
+                    return
+                on_message(str(sample.key_expr), sample.payload.to_bytes())
+            except Exception:
+                log.exception("subscriber of %s failed", suffix)
+
+        subscriber = self.session.declare_subscriber(self.key(suffix), zenoh.handlers.Callback(callback))
+        self._declared.append(subscriber)
+        return subscriber
+
+    def _from_owner(self, service: str, suffix: str, sample: zenoh.Sample) -> bool:
+        attachment = sample.attachment
+        sender = attachment.to_bytes().decode(errors="replace") if attachment is not None else "?"
+        followed = self.owner(service)
+        if sender == followed:
+            return True
+        if followed is None:  # its liveliness token has not arrived yet (start-up)
+            return False
+        if (suffix, sender) not in self._foreign_warned and len(self._foreign_warned) < 100:
+            self._foreign_warned.add((suffix, sender))
+            log.warning("ignoring %s from %s: this %s follows the %s %s", self.key(suffix), sender,
+                        self.service, service, followed)
+        return False
+
+
+def decode(typ: type[T], payload: bytes) -> T:
+    """Decode a published message of type ``typ``."""
+    return msgspec.json.decode(payload, type=typ)

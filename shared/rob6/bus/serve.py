@@ -1,0 +1,136 @@
+"""Serving: a service's queryable, its worker threads, and the answer to each request
+(its envelope checked, its handler run, its reply and its trace record sent).
+
+A reply that waits for the arm (``Op.waits``) is announced first: the handler says how
+long and for what (``Context.waiting``), an interim reply the caller's deadline follows.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from queue import SimpleQueue
+from typing import Any
+
+import msgspec
+import zenoh
+
+from ..messages import OPS, SCHEMA_VERSION, ErrorBody, ReplyEnvelope, RequestEnvelope, Waiting
+from .codec import WAITING, _encoder, _parametrize
+from .errors import BusError
+from .trace import Tracing
+
+log = logging.getLogger("rob6.bus")
+
+
+def _no_announcement(seconds: float, what: str) -> None:
+    """Operations that never wait have no one to tell."""
+
+
+@dataclass(frozen=True)
+class Context:
+    """What a request handler knows about the call.
+
+    ``waiting(seconds, what)``: the reply will take up to ``seconds`` more, waiting for
+    ``what`` ("waiting for the arm to stop"); the caller's deadline follows (``Op.waits``
+    operations only). Announce before the wait, as soon as its bound is known."""
+
+    cid: str
+    op: str
+    waiting: Callable[[float, str], None] = _no_announcement
+
+
+#: a request handler: ``handler(request body, ctx) -> reply body``, of the types
+#: ``rob6.messages.OPS`` gives for its operation
+Handler = Callable[[Any, Context], Any]
+
+
+
+class Serving(Tracing):
+    """A service's side of the bus (a mixin of ``Bus``): every request it serves is traced."""
+
+    def _init_serving(self) -> None:
+        self._workers: list[threading.Thread] = []
+
+    def serve(self, handlers: Mapping[str, Handler], *, workers: int = 4,
+              inline: Iterable[str] = ()) -> None:
+        """Answer ``handlers[op](request, ctx)`` for this service and announce it as alive.
+
+        Handlers run on ``workers`` threads, so a long request (a motion) does not
+        hold up short ones (a ping). ``inline`` ops (quick, never blocking: a ping, a
+        state read, an Alter target, one pose) are answered on Zenoh's callback thread
+        itself, which saves the hand-off to a worker on the latency path.
+        """
+        unknown = [op for op in handlers if (self.service, op) not in OPS]
+        if unknown:
+            raise ValueError(f"operations not in rob6.messages.OPS: {unknown}")
+        quick = frozenset(inline)
+        queue: SimpleQueue[zenoh.Query | None] = SimpleQueue()
+
+        def on_query(query: zenoh.Query) -> None:
+            if str(query.key_expr).rsplit("/", 1)[-1] in quick:
+                self._answer(query, handlers)
+            else:
+                queue.put(query)
+
+        def on_close() -> None:  # the session is going away: the workers end
+            for _ in range(workers):
+                queue.put(None)
+
+        self._declared.append(self.session.declare_queryable(
+            self.key(self.service, self.instance, "*"), zenoh.handlers.Callback(on_query, on_close)))
+        for n in range(workers):
+            thread = threading.Thread(target=self._serve_loop, args=(queue, handlers),
+                                      name=f"{self.service}-worker-{n}", daemon=True)
+            thread.start()
+            self._workers.append(thread)
+        self.announce()
+
+    def announce(self) -> None:
+        """Declare this instance alive (its liveliness token) on the bus."""
+        self._declared.append(self.session.liveliness().declare_token(
+            self.key("alive", self.service, self.instance)))
+
+    def _serve_loop(self, queue: "SimpleQueue[zenoh.Query | None]", handlers: Mapping[str, Handler]) -> None:
+        while (query := queue.get()) is not None:
+            self._answer(query, handlers)
+
+    def _answer(self, query: zenoh.Query, handlers: Mapping[str, Handler]) -> None:
+        started = time.time()
+        op = str(query.key_expr).rsplit("/", 1)[-1]
+        cid = ""
+        raw = query.payload.to_bytes() if query.payload is not None else b""
+        try:
+            spec = OPS.get((self.service, op))
+            if spec is None or op not in handlers:
+                raise BusError("unknown_op", f"{self.service} has no operation {op!r}")
+            try:
+                envelope = self._decoder(_parametrize(RequestEnvelope, spec.request)).decode(raw)
+            except msgspec.DecodeError as exc:
+                raise BusError("schema", f"malformed {self.service}.{op} request: {exc}") from None
+            cid = envelope.cid
+            if envelope.v != SCHEMA_VERSION:
+                raise BusError("schema", f"schema version {envelope.v}, expected {SCHEMA_VERSION}")
+            waiting = functools.partial(self._announce, query) if spec.waits else _no_announcement
+            body = handlers[op](envelope.body, Context(cid=cid, op=op, waiting=waiting))
+            reply: ReplyEnvelope[Any] = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=True, instance=self.instance, body=body)
+        except BusError as exc:
+            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance,
+                                  error=ErrorBody(code=exc.code, message=exc.message))
+        except Exception as exc:  # never a traceback on the wire; the log has it
+            log.exception("%s.%s failed (cid %s)", self.service, op, cid)
+            reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance, error=ErrorBody(
+                code="internal", message=f"{self.service}.{op}: {type(exc).__name__}: {exc}"))
+        payload = _encoder.encode(reply)
+        query.reply(query.key_expr, payload)
+        query.drop()
+        self.trace(f"trace/{self.service}/{op}", b'{"t":%.6f,"dt":%.6f,"instance":"%s","request":%s,"reply":%s}' % (
+            started, time.time() - started, self.instance.encode(), raw or b"null", payload))
+
+    def _announce(self, query: zenoh.Query, seconds: float, what: str) -> None:
+        """An interim reply: the final one takes up to ``seconds`` more (``Context.waiting``)."""
+        query.reply(query.key_expr, _encoder.encode(Waiting(seconds=seconds, what=what)), attachment=WAITING)
