@@ -18,7 +18,7 @@ import numpy as np
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import IkBatchRequest
-from rob6.testing import running
+from tests.system import running
 
 from .busy import busy_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baselines

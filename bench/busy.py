@@ -8,7 +8,7 @@ import os
 import tempfile
 from collections.abc import Callable
 
-from rob6.testing import running
+from tests.system import running
 
 from .latency import percentiles
 from .workload import MixResult, cpu_hogs, mixed_session

@@ -14,7 +14,7 @@ import time
 
 import zenoh
 
-from rob6.testing import Client
+from tests.system import Client
 
 
 def percentiles(samples: list[float]) -> tuple[float, float]:

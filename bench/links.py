@@ -21,7 +21,7 @@ import numpy as np
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import Empty, LinkQuery
-from rob6.testing import free_port, running
+from tests.system import free_port, running
 
 from .latency import percentiles
 from .viewer import Viewer

@@ -144,7 +144,7 @@ def main(argv=None) -> int:
     parser.add_argument("--robot", default=DEFAULT_ROBOT)
     parser.add_argument("--skip-faults", action="store_true")
     opts = parser.parse_args(argv)
-    from rob6.testing import running
+    from tests.system import running
 
     t0 = time.monotonic()
     crashes = 0

@@ -31,12 +31,11 @@ from pathlib import Path
 
 import pytest
 
-from rob6.testing import free_port
 from tests.conformance import load, same
 from tests.deploy import zenoh_probe
 from tests.deploy.compose import compose_cmd, project_containers, run
 from tests.deploy.images import BASE_IMAGE, TAG
-from tests.system import CONFORMANCE, Client
+from tests.system import CONFORMANCE, Client, free_port
 
 pytestmark = pytest.mark.docker
 

@@ -17,8 +17,8 @@ import os
 import signal
 import time
 
-from rob6.testing import running
 from tests.reliability.fuzz import FuzzClient
+from tests.system import running
 
 # service -> (probe command, is the answer a correct one?)
 PROBES = {

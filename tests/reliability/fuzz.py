@@ -34,10 +34,10 @@ from hypothesis import strategies as st
 
 from rob6.bus import Bus
 from rob6.status import STATUS_WORDS as _CATEGORIES
-from rob6.testing import System
 from rob6_gateway.args import Args, ParseError
 from rob6_gateway.commands import COMMANDS, GRIPPER_REPLY_LINES, Close, Gateway, Options, _split_command
 from rob6_gateway.framing import Framer, _clean
+from tests.system import System
 
 COMMAND_NAMES = sorted(COMMANDS)
 STATUS_WORDS = [word for category in _CATEGORIES for word in category]

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from rob6.testing import Client, free_port, running
+from tests.system import Client, free_port, running
 
 
 def _raw_connect(port, source="127.0.0.1"):

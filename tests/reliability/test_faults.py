@@ -9,9 +9,9 @@ import time
 
 import pytest
 
-from rob6.testing import running
 from tests.reliability.faults import FAULTS, PROBES, SERVICES, _ask, inject
 from tests.reliability.fuzz import FuzzClient
+from tests.system import running
 
 
 @pytest.fixture(scope="module")

@@ -32,9 +32,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rob6.testing import Client, free_port
 from tests.deploy.compose import compose_cmd, project_containers, run
 from tests.deploy.images import TAG
+from tests.system import Client, free_port
 
 REPO = Path(__file__).resolve().parents[3]
 COMPOSE_FILE = REPO / "deploy" / "multihost" / "docker-compose.yml"
