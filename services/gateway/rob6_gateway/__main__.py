@@ -13,7 +13,7 @@ import click
 
 from rob6 import logs, service
 from rob6.bus import Bus
-from rob6.config import bus_options
+from rob6.config import BusSettings, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
 
@@ -42,8 +42,8 @@ log = logging.getLogger("rob6.gateway")
               help="An unterminated command is complete when no byte follows for this long.")
 @click.option("--idle-timeout", envvar="ROB6_IDLE_TIMEOUT", default=0.0, show_default=True, type=float,
               help="Close a client that sends nothing for this many seconds (0: never).")
-def main(settings, log_level, port, bind, allow_shutdown, allow_direct_adept_cmd, allow_clients,
-         pause_ms, idle_timeout):
+def main(settings: BusSettings, log_level: str, port: int, bind: str, allow_shutdown: bool,
+         allow_direct_adept_cmd: bool, allow_clients: tuple[str, ...], pause_ms: float, idle_timeout: float) -> None:
     """Serve the rob6server text protocol and forward the work to the rob6 services."""
     logs.configure("gateway", log_level)
     networks = [n.strip() for item in allow_clients for n in item.split(",") if n.strip()]
@@ -51,7 +51,8 @@ def main(settings, log_level, port, bind, allow_shutdown, allow_direct_adept_cmd
            AddressFilter(networks) if networks else None, pause_ms / 1000.0, idle_timeout)
 
 
-def _serve(settings, port, bind, options, allow, pause_s, idle_timeout) -> None:
+def _serve(settings: BusSettings, port: int, bind: str, options: Options, allow: AddressFilter | None,
+           pause_s: float, idle_timeout: float) -> None:
     bus = Bus(settings, "gateway")
     stop = threading.Event()
     stood_down: list[str] = []  # an earlier gateway of this robot appeared (see rob6.ownership)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,18 +23,26 @@ from rob6 import logs
 from rob6.bus import Bus, BusError, BusTimeout, CallAbandoned
 from rob6.messages import (
     OWNER_SERVICES,
+    Ack,
     AlterTarget,
     BackwardCalcRequest,
     ClientExchange,
     ConfigChange,
+    ConfigReply,
     Empty,
+    FkReply,
     FkRequest,
+    ForwardCalcReply,
     ForwardCalcRequest,
     GripperCommand,
+    GripperReply,
+    JointsReply,
     ModeRequest,
     MotionConfig,
     MotionKind,
+    MoveReply,
     MoveRequest,
+    PingReply,
     SessionEnd,
     SessionEvent,
     SignalRequest,
@@ -45,6 +53,7 @@ from rob6.state import JointStateMirror
 from rob6.vplus import SignalError, parse_signal
 
 from .args import Args, ParseError
+from .framing import Line
 from .state import ConfigMirror, Session
 
 log = logging.getLogger("rob6.gateway")
@@ -65,7 +74,7 @@ class Close(Exception):
         self.shutdown = shutdown
 
 
-def fmt(values) -> str:
+def fmt(values: Iterable[float]) -> str:
     return " ".join("%f" % v for v in values)
 
 
@@ -91,7 +100,7 @@ COMMANDS: dict[str, Handler] = {}
 VALUE_REPLIES: set[str] = set()
 
 
-def command(*names: str, value: bool = False):
+def command(*names: str, value: bool = False) -> Callable[[Handler], Handler]:
     """Register a handler; ``value``: the command answers a value, never ``false``."""
     def register(func: Handler) -> Handler:
         for name in names:
@@ -157,9 +166,10 @@ class Gateway:
             log.warning("%s failed: %s (%s)", name, exc.message, exc.code)
             return error(failure(name, exc), with_false=name not in VALUE_REPLIES)
 
-    def call(self, session: Session, service: str, op: str, body, **kwargs) -> Any:
+    def call(self, session: Session, service: str, op: str, body: object,
+             abandon: Callable[[], bool] | None = None) -> Any:
         """One request on the session's own thread, the reply received where it waits."""
-        return self.bus.request(service, op, body, cid=session.cid, **kwargs)
+        return self.bus.request(service, op, body, cid=session.cid, abandon=abandon)
 
     def current(self, session: Session) -> list[float]:
         """Where the robot is (or the virtual robot, while route testing).
@@ -172,7 +182,7 @@ class Gateway:
         state = self.joints.get() or self.call(session, "driver", "state", Empty())
         return state.q
 
-    def record(self, session: Session, received: float, line, reply: str | None) -> None:
+    def record(self, session: Session, received: float, line: Line, reply: str | None) -> None:
         """A copy of the exchange for the recorder, sent after the reply went out, numbered
         (1, 2, ... per session) so a recording shows whether any is missing."""
         session.seq += 1
@@ -206,7 +216,7 @@ class Gateway:
         """The planner stops whatever the client left running (Alter, a move), with the
         ramp, and answers at rest."""
         try:
-            reply = self.call(session, "planner", "session_end", SessionEnd(session=self.session_id(session)))
+            reply: Ack = self.call(session, "planner", "session_end", SessionEnd(session=self.session_id(session)))
         except BusError as exc:
             log.warning("planner did not confirm the end of session %d: %s", session.number,
                         failure("the end of the session", exc))
@@ -225,12 +235,12 @@ def _split_command(line: str) -> tuple[str, str, str]:
 
 # ====================================================================== management
 @command("GetRobot", value=True)
-def get_robot(gw, session, args):
+def get_robot(gw: Gateway, session: Session, args: Args) -> str:
     return gw.robot.name + "\n"
 
 
-def _identity(predicate):
-    def handler(gw, session, args):
+def _identity(predicate: Callable[[RobotModel], bool]) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         return boolean(predicate(gw.robot))
     return handler
 
@@ -243,27 +253,27 @@ command("IsKR16")(_identity(lambda r: r.is_kr16))
 
 
 @command("GetVersion", value=True)
-def get_version(gw, session, args):
+def get_version(gw: Gateway, session: Session, args: Args) -> str:
     return VERSION + "\n"
 
 
 @command("GetTimestamp", value=True)
-def get_timestamp(gw, session, args):
+def get_timestamp(gw: Gateway, session: Session, args: Args) -> str:
     return "%.3f\n" % time.time()
 
 
 @command("CM_PING", value=True)
-def cm_ping(gw, session, args):
+def cm_ping(gw: Gateway, session: Session, args: Args) -> str:
     return "PONG\n"
 
 
 @command("GetVerbosity", value=True)
-def get_verbosity(gw, session, args):
+def get_verbosity(gw: Gateway, session: Session, args: Args) -> str:
     return f"{gw.verbosity}\n"
 
 
 @command("SetVerbosity")
-def set_verbosity(gw, session, args):
+def set_verbosity(gw: Gateway, session: Session, args: Args) -> str:
     level = args.index()
     if not 0 <= level <= 4:
         log.error("invalid verbosity level %d", level)
@@ -275,12 +285,12 @@ def set_verbosity(gw, session, args):
 
 
 @command("Quit")
-def quit_(gw, session, args):
+def quit_(gw: Gateway, session: Session, args: Args) -> str:
     raise Close("bye!\n")
 
 
 @command("Shutdown")
-def shutdown(gw, session, args):
+def shutdown(gw: Gateway, session: Session, args: Args) -> str:
     if not gw.options.allow_shutdown:
         return error("Shutdown is disabled on this server (start the gateway with --allow-shutdown)",
                      with_false=False)
@@ -288,7 +298,7 @@ def shutdown(gw, session, args):
 
 
 @command("PingRobot", value=True)
-def ping_robot(gw, session, args):
+def ping_robot(gw: Gateway, session: Session, args: Args) -> str:
     """n round trips gateway -> driver, ``wait`` ms apart (default 10, 0).
 
     Reply (one line, like the original): mean round trip (s), robot time zero, server
@@ -308,7 +318,7 @@ def ping_robot(gw, session, args):
         if i and wait_ms:
             time.sleep(wait_ms / 1000.0)
         sent = time.time()
-        reply = gw.call(session, "driver", "ping", Empty())
+        reply: PingReply = gw.call(session, "driver", "ping", Empty())
         received = time.time()
         samples.append((received - sent, reply.robot_time, (sent + received) / 2))
     mean_rtt = sum(s[0] for s in samples) / count
@@ -332,33 +342,34 @@ def _drift_fit(points: list[tuple[float, float]]) -> tuple[float, float]:
 
 # ====================================================================== position
 @command("GetPositionJoints", value=True)
-def get_position_joints(gw, session, args):
+def get_position_joints(gw: Gateway, session: Session, args: Args) -> str:
     return fmt(gw.current(session)) + "\n"
 
 
 @command("GetPositionHomRowWise", value=True)
-def get_position_hom(gw, session, args):
-    reply = gw.call(session, "kinematics", "fk", FkRequest(joints=[gw.current(session)]))
+def get_position_hom(gw: Gateway, session: Session, args: Args) -> str:
+    reply: FkReply = gw.call(session, "kinematics", "fk", FkRequest(joints=[gw.current(session)]))
     return fmt(reply.poses[0]) + "\n"
 
 
 @command("GetStatus", value=True)
-def get_status(gw, session, args):
+def get_status(gw: Gateway, session: Session, args: Args) -> str:
     return " ".join(gw.robot.status(gw.current(session))) + "\n"
 
 
 # ====================================================================== limits and configuration
-def _config(gw, session) -> MotionConfig:
+def _config(gw: Gateway, session: Session) -> MotionConfig:
     """The planner's configuration: mirrored, or asked when the mirror cannot vouch for it."""
     config = gw.limits.current()
     if config is None:
-        config = gw.call(session, "planner", "config", Empty())
-        gw.limits.set(config)
+        asked: MotionConfig = gw.call(session, "planner", "config", Empty())
+        gw.limits.set(asked)
+        return asked
     return config
 
 
-def _config_getter(field: str):
-    def handler(gw, session, args):
+def _config_getter(field: str) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         return fmt(getattr(_config(gw, session), field)) + "\n"
     return handler
 
@@ -371,29 +382,30 @@ command("GetJointsMaxTurnMin", value=True)(_config_getter("turn_min"))
 command("GetMinChangeWeights", value=True)(_config_getter("weights"))
 
 
-def _change(gw, session, name: str, values=(), words=()) -> bool:
-    reply = gw.call(session, "planner", "config_change",
+def _change(gw: Gateway, session: Session, name: str, values: Iterable[float] = (),
+            words: Iterable[str] = ()) -> bool:
+    reply: ConfigReply = gw.call(session, "planner", "config_change",
                           ConfigChange(command=name, args=list(values), words=list(words)))
     gw.limits.set(reply.config)
     return reply.ok
 
 
-def _six(name):
-    def handler(gw, session, args):
+def _six(name: str) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         return boolean(_change(gw, session, name, args.joints()))
     return handler
 
 
-def _single(name):
-    def handler(gw, session, args):
+def _single(name: str) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         index = args.index()
         value = args.value()
         return boolean(_change(gw, session, name, (index, value)))
     return handler
 
 
-def _reset(name):
-    def handler(gw, session, args):
+def _reset(name: str) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         return boolean(_change(gw, session, name))
     return handler
 
@@ -418,12 +430,12 @@ command("ResetAllowedStatus")(_reset("ResetAllowedStatus"))
 
 
 @command("GetAllowedStatus", value=True)
-def get_allowed_status(gw, session, args):
+def get_allowed_status(gw: Gateway, session: Session, args: Args) -> str:
     return " ".join((_config(gw, session)).allowed) + "\n"
 
 
 @command("SetAllowedStatus", value=True)
-def set_allowed_status(gw, session, args):
+def set_allowed_status(gw: Gateway, session: Session, args: Args) -> str | None:
     try:
         words = args.status()
     except ParseError:
@@ -433,25 +445,25 @@ def set_allowed_status(gw, session, args):
 
 
 @command("GetRTSpeedControl", value=True)
-def get_rt_speed_control(gw, session, args):
+def get_rt_speed_control(gw: Gateway, session: Session, args: Args) -> str:
     return f"{(_config(gw, session)).rt_speed_control}\n"
 
 
 @command("SetRTSpeedControl")
-def set_rt_speed_control(gw, session, args):
+def set_rt_speed_control(gw: Gateway, session: Session, args: Args) -> str:
     return boolean(_change(gw, session, "SetRTSpeedControl", (args.index(),)))
 
 
 @command("SetKukaRTSpeed")
-def set_kuka_rt_speed(gw, session, args):
+def set_kuka_rt_speed(gw: Gateway, session: Session, args: Args) -> str:
     if not gw.robot.rt:  # kr16, kr3, ad850, kaw_fs: arguments not even read
         return FALSE
     return boolean(_change(gw, session, "SetKukaRTSpeed", args.joints()))
 
 
-def _adept_setting(name):
+def _adept_setting(name: str) -> Handler:
     # the original answers true to anything, on every robot type; only the Adept uses them
-    def handler(gw, session, args):
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         values = args.leading_doubles(2)
         if gw.robot.is_adept and values:
             _change(gw, session, name, values)
@@ -467,47 +479,47 @@ command("SetAdeptCoarse")(_adept_setting("SetAdeptCoarse"))
 
 # ====================================================================== kinematics
 @command("ForwardCalc")
-def forward_calc(gw, session, args):
+def forward_calc(gw: Gateway, session: Session, args: Args) -> str:
     numbers = args.leading_doubles(6)
     if not numbers:
         return FALSE
     config = gw.limits.config
-    reply = gw.call(session, "kinematics", "forward_calc", ForwardCalcRequest(
+    reply: ForwardCalcReply = gw.call(session, "kinematics", "forward_calc", ForwardCalcRequest(
         numbers=numbers, turn_min=config.turn_min, turn_max=config.turn_max))
     if reply.pose is None:
         return FALSE
     return fmt(reply.pose) + "\n" + reply.status + "\n"
 
 
-def _backward(gw, session, args) -> list[float] | None:
+def _backward(gw: Gateway, session: Session, args: Args) -> list[float] | None:
     pose = args.matrix()
     pattern = args.status()
     config = gw.limits.config
-    reply = gw.call(session, "kinematics", "backward_calc", BackwardCalcRequest(
+    reply: JointsReply = gw.call(session, "kinematics", "backward_calc", BackwardCalcRequest(
         pose=pose, pattern=pattern, current=gw.current(session), turn_min=config.turn_min,
         turn_max=config.turn_max, max_change=config.max_change, weights=config.weights))
     return reply.joints
 
 
 @command("BackwardCalc", "GetJointsRowWise")
-def backward_calc(gw, session, args):
+def backward_calc(gw: Gateway, session: Session, args: Args) -> str:
     joints = _backward(gw, session, args)
     return FALSE if joints is None else fmt(joints) + "\n"
 
 
 @command("IsPossible")
-def is_possible(gw, session, args):
+def is_possible(gw: Gateway, session: Session, args: Args) -> str:
     return boolean(_backward(gw, session, args) is not None)
 
 
 # ====================================================================== motion
-def _move(gw, session, kind: MotionKind, **fields) -> str:
+def _move(gw: Gateway, session: Session, kind: MotionKind, **fields: Any) -> str:
     if session.routetest is not None:  # real moves are refused while route testing
         return FALSE
     state = gw.joints.get()  # the planner starts from it rather than follow the state itself
     # the client may leave mid-move: the move is abandoned, the session's end stops the robot
     try:
-        reply = gw.call(session, "planner", "move", MoveRequest(
+        reply: MoveReply = gw.call(session, "planner", "move", MoveRequest(
             kind=kind, start=state.q if state is not None else None, session=gw.session_id(session), **fields),
             abandon=session.client_gone)
     except CallAbandoned:
@@ -522,23 +534,23 @@ def _move(gw, session, kind: MotionKind, **fields) -> str:
 
 
 @command("MovePTPJoints")
-def move_ptp_joints(gw, session, args):
+def move_ptp_joints(gw: Gateway, session: Session, args: Args) -> str:
     return _move(gw, session, "MovePTPJoints", joints=args.joints())
 
 
 @command("MovePTPJointsStatus")
-def move_ptp_joints_status(gw, session, args):
+def move_ptp_joints_status(gw: Gateway, session: Session, args: Args) -> str:
     joints = args.joints()
     return _move(gw, session, "MovePTPJointsStatus", joints=joints, pattern=args.status())
 
 
 @command("MovePTPHomRowWise")
-def move_ptp_hom(gw, session, args):
+def move_ptp_hom(gw: Gateway, session: Session, args: Args) -> str:
     return _move(gw, session, "MovePTPHomRowWise", pose=args.matrix())
 
 
-def _pose_status_move(kind: MotionKind):
-    def handler(gw, session, args):
+def _pose_status_move(kind: MotionKind) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         pose = args.matrix()
         return _move(gw, session, kind, pose=pose, pattern=args.status())
     return handler
@@ -550,7 +562,7 @@ command("MoveMinChangeRowWiseStatus")(_pose_status_move("MoveMinChangeRowWiseSta
 
 # ---------------------------------------------------------------------- route test
 @command("EnableRoutetest")
-def enable_routetest(gw, session, args):
+def enable_routetest(gw: Gateway, session: Session, args: Args) -> str:
     if session.routetest is not None:
         return FALSE
     session.routetest = list(gw.current(session))
@@ -558,28 +570,28 @@ def enable_routetest(gw, session, args):
 
 
 @command("DisableRoutetest")
-def disable_routetest(gw, session, args):
+def disable_routetest(gw: Gateway, session: Session, args: Args) -> str:
     session.routetest = None
     return TRUE
 
 
-def _routetest(gw, session, request: MoveRequest) -> str:
+def _routetest(gw: Gateway, session: Session, request: MoveRequest) -> str:
     request.dry_run, request.start = True, session.routetest
-    reply = gw.call(session, "planner", "move", request)
+    reply: MoveReply = gw.call(session, "planner", "move", request)
     if reply.ok and reply.joints is not None:
         session.routetest = list(reply.joints)
     return boolean(reply.ok)
 
 
 @command("RoutetestJoints")
-def routetest_joints(gw, session, args):
+def routetest_joints(gw: Gateway, session: Session, args: Args) -> str:
     if session.routetest is None:
         return FALSE
     return _routetest(gw, session, MoveRequest(kind="MovePTPJoints", joints=args.joints()))
 
 
 @command("RoutetestRowWiseStatus")
-def routetest_row_wise_status(gw, session, args):
+def routetest_row_wise_status(gw: Gateway, session: Session, args: Args) -> str:
     if session.routetest is None:
         return FALSE
     pose = args.matrix()
@@ -588,10 +600,10 @@ def routetest_row_wise_status(gw, session, args):
 
 
 # ---------------------------------------------------------------------- real-time (Alter) and LIN modes
-def _mode(name):
-    def handler(gw, session, args):
+def _mode(name: str) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         try:
-            reply = gw.call(session, "planner", "mode", ModeRequest(command=name))
+            reply: Ack = gw.call(session, "planner", "mode", ModeRequest(command=name))
         except BusError as exc:
             if name != "DisableAlter" or not reached(exc):
                 raise
@@ -615,30 +627,30 @@ command("EnableLin")(_mode("EnableLin"))
 command("DisableLin")(_mode("DisableLin"))
 
 
-def _alter_move(kind: MotionKind, parse):
-    def handler(gw, session, args):
+def _alter_move(kind: MotionKind, parse: Callable[[Args], dict[str, Any]]) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         if not gw.alter:  # the original answers false without reading the arguments
             return FALSE
         return _move(gw, session, kind, **parse(args))
     return handler
 
 
-def _pose_and_status(args):
+def _pose_and_status(args: Args) -> dict[str, Any]:
     pose = args.matrix()
     return {"pose": pose, "pattern": args.status()}
 
 
-def _alter_joints(relative: bool):
+def _alter_joints(relative: bool) -> Handler:
     """Joint targets go straight to the driver, one hop on the real-time path; the driver
     checks them (Alter mode, turn limits, max change). Cartesian ones need the planner's IK."""
-    def handler(gw, session, args):
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         if not gw.alter:  # the original answers false without reading the arguments
             return FALSE
         joints = args.joints()
         if session.routetest is not None:  # real moves are refused while route testing
             return FALSE
         config = _config(gw, session)
-        reply = gw.call(session, "driver", "alter_target", AlterTarget(
+        reply: Ack = gw.call(session, "driver", "alter_target", AlterTarget(
             q=joints, synchronized=config.rt_speed_control == 0, relative=relative))
         if not reply.ok and reply.error:  # the robot failed (not connected, link lost)
             return error(f"driver: {reply.error}")
@@ -656,7 +668,7 @@ command("DoAlterCart")(_alter_move("DoAlterCart", lambda a: {"pose": a.doubles(6
 
 
 @command("MoveLINHomRowWise")
-def move_lin(gw, session, args):
+def move_lin(gw: Gateway, session: Session, args: Args) -> str:
     # the planner knows whether LIN mode is on; without it the answer is false
     try:
         pose = args.matrix()
@@ -698,8 +710,8 @@ def _gripper_failure(name: str, reason: str, info: str) -> str:
     return "".join(info + "\n" for _ in range(lines - 2)) + error(reason)
 
 
-def _gripper(name: str, needs_value: bool):
-    def handler(gw, session, args):
+def _gripper(name: str, needs_value: bool) -> Handler:
+    def handler(gw: Gateway, session: Session, args: Args) -> str:
         if not gw.robot.is_adept:  # the original: false, arguments not read
             return FALSE
         value = None
@@ -708,7 +720,7 @@ def _gripper(name: str, needs_value: bool):
             if value is None:
                 return _gripper_failure(name, "incorrect value", "Gripper not moved")
         try:
-            reply = gw.call(session, "gripper", "command", GripperCommand(command=name, value=value))
+            reply: GripperReply = gw.call(session, "gripper", "command", GripperCommand(command=name, value=value))
         except BusError as exc:
             log.warning("%s failed: %s (%s)", name, exc.message, exc.code)
             return _gripper_failure(name, exc.message, _where(None))
@@ -728,7 +740,7 @@ command("GripperMoveToPosition")(_gripper("GripperMoveToPosition", True))
 
 
 @command("DirectAdeptCmd")
-def direct_adept_cmd(gw, session, args):
+def direct_adept_cmd(gw: Gateway, session: Session, args: Args) -> str:
     """The V+ SIGNAL instruction (``signal 5, -6``) reaches the Adept's digital outputs, by
     default: it switches outputs and nothing else, and clients (RobPraktikum's suction cup)
     need it unchanged. Any other V+ instruction has no channel to the controller."""
@@ -739,7 +751,7 @@ def direct_adept_cmd(gw, session, args):
     except SignalError as exc:
         return error(f"DirectAdeptCmd: {exc}; nothing was switched")
     if signals is not None:
-        ack = gw.call(session, "driver", "signal", SignalRequest(signals=signals))
+        ack: Ack = gw.call(session, "driver", "signal", SignalRequest(signals=signals))
         if not ack.ok:
             return error(f"driver: {ack.error}" if ack.error else f"DirectAdeptCmd: {ack.reason}")
         return TRUE  # the protocol description's reply to a DirectAdeptCmd that ran

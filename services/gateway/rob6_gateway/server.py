@@ -148,7 +148,7 @@ class Server:
                 log.exception("could not take the client %s", peer)
                 _close(sock)
 
-    def accept(self, sock: socket.socket, peer: tuple) -> None:
+    def accept(self, sock: socket.socket, peer: tuple[str, int] | tuple[str, int, int, int]) -> None:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         peer_text = f"{peer[0]}:{peer[1]}" if peer else "?"
         if self.allow is not None and peer and not self.allow.allows(peer[0]):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from typing import TypedDict
 
 import numpy as np
 
@@ -28,8 +29,19 @@ def _random_joints(config: MotionSettings, rng: np.random.Generator, n: int) -> 
     return rng.uniform(lo + margin, hi - margin, size=(n, 6))
 
 
+class PtpBench(TypedDict):
+    robot: str
+    n: int
+    sample: bool
+    p50_us: float
+    p99_us: float
+    max_us: float
+    mean_us: float
+    mean_samples: float
+
+
 def bench_ptp(robot: str = DEFAULT_ROBOT, n: int = 2000, seed: int = 0, sample: bool = True,
-              warmup: int = 50) -> dict:
+              warmup: int = 50) -> PtpBench:
     """PTP planning time percentiles (µs): {'p50_us', 'p99_us', 'max_us', 'mean_us', 'n', ...}."""
     config = MotionSettings(robot)
     planner = TrajectoryPlanner(robot)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from rob6.rotations import quat_from_matrix
 
@@ -44,16 +45,18 @@ def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray) -> np.ndarray:
     s = np.asarray(s, float)[:, None]
     if dot > 0.9999995:
         out = q0 + s * (q1 - q0)
-        return out / np.linalg.norm(out, axis=1, keepdims=True)
+        unit: np.ndarray = out / np.linalg.norm(out, axis=1, keepdims=True)
+        return unit
     theta = math.acos(min(dot, 1.0))
     sin_t = math.sin(theta)
-    return (np.sin((1 - s) * theta) * q0 + np.sin(s * theta) * q1) / sin_t
+    arc: np.ndarray = (np.sin((1 - s) * theta) * q0 + np.sin(s * theta) * q1) / sin_t
+    return arc
 
 
 class LinePath:
     """p(s) = p0 + s (p1 - p0), R(s) = slerp(R0, R1, s), s in [0, 1]."""
 
-    def __init__(self, pose0, pose1):
+    def __init__(self, pose0: ArrayLike, pose1: ArrayLike) -> None:
         T0 = np.asarray(pose0, float).reshape(3, 4)
         T1 = np.asarray(pose1, float).reshape(3, 4)
         self.p0, self.p1 = T0[:, 3].copy(), T1[:, 3].copy()

@@ -29,7 +29,8 @@ the planner's live, validated state, ``MotionConfig`` the message that carries a
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any, TypedDict
 
 from rob6.robots import RobotModel, get_robot
 from rob6.status import TOGGLE_ALL, parse_status, status_matches
@@ -37,18 +38,31 @@ from rob6.status import TOGGLE_ALL, parse_status, status_matches
 N_JOINTS = 6
 
 
+class SettingsDict(TypedDict):
+    """``MotionSettings.to_dict()``: the fields of ``rob6.messages.MotionConfig``."""
+
+    speed: list[float]
+    accel: list[float]
+    max_change: list[float]
+    turn_max: list[float]
+    turn_min: list[float]
+    weights: list[float]
+    allowed: list[str]
+    rt_speed_control: int
+
+
 FIELDS = ("speed", "accel", "max_change", "turn_max", "turn_min", "weights",
           "allowed", "rt_speed_control")
 
 
-def _finite(value) -> bool:
+def _finite(value: float) -> bool:
     try:
         return math.isfinite(float(value))
     except (TypeError, ValueError):
         return False
 
 
-def _index(j) -> int | None:
+def _index(j: float) -> int | None:
     """Protocol joint index 1..6 -> 0..5, or None."""
     try:
         f = float(j)
@@ -60,7 +74,7 @@ def _index(j) -> int | None:
     return i - 1 if 1 <= i <= N_JOINTS else None
 
 
-def _six(values) -> list[float] | None:
+def _six(values: Iterable[float]) -> list[float] | None:
     """The first 6 values as floats (extras ignored, as the original), or None."""
     values = list(values)
     if len(values) < N_JOINTS:
@@ -138,7 +152,7 @@ class MotionSettings:
         return 0.0 <= a <= self.robot.max_accel_bound
 
     # ------------------------------------------------------------------ speeds / accels
-    def _set_partial(self, target: list[float], values, ok) -> bool:
+    def _set_partial(self, target: list[float], values: Iterable[float], ok: Callable[[int, float], bool]) -> bool:
         values = list(values)
         if len(values) < N_JOINTS:
             return False
@@ -148,7 +162,7 @@ class MotionSettings:
             target[i] = float(v)
         return True
 
-    def _set_single(self, target: list[float], j, v, ok) -> bool:
+    def _set_single(self, target: list[float], j: float, v: float, ok: Callable[[int, float], bool]) -> bool:
         i = _index(j)
         if i is None or not _finite(v) or not ok(i, float(v)):
             return False
@@ -158,13 +172,13 @@ class MotionSettings:
     def set_speed(self, values: Sequence[float]) -> bool:
         return self._set_partial(self.speed, values, self._speed_ok)
 
-    def set_single_speed(self, j: int, v: float) -> bool:
+    def set_single_speed(self, j: float, v: float) -> bool:
         return self._set_single(self.speed, j, v, self._speed_ok)
 
     def set_accel(self, values: Sequence[float]) -> bool:
         return self._set_partial(self.accel, values, self._accel_ok)
 
-    def set_single_accel(self, j: int, a: float) -> bool:
+    def set_single_accel(self, j: float, a: float) -> bool:
         return self._set_single(self.accel, j, a, self._accel_ok)
 
     # ------------------------------------------------------------------ max change
@@ -175,7 +189,7 @@ class MotionSettings:
         self.max_change = six
         return True
 
-    def set_single_max_change(self, j: int, c: float) -> bool:
+    def set_single_max_change(self, j: float, c: float) -> bool:
         return self._set_single(self.max_change, j, c, lambda i, v: v > 0.0)
 
     # ------------------------------------------------------------------ turn limits
@@ -193,10 +207,10 @@ class MotionSettings:
         self.turn_min = six
         return True
 
-    def set_single_turn_max(self, j: int, v: float) -> bool:
+    def set_single_turn_max(self, j: float, v: float) -> bool:
         return self._set_single(self.turn_max, j, v, lambda i, x: True)
 
-    def set_single_turn_min(self, j: int, v: float) -> bool:
+    def set_single_turn_min(self, j: float, v: float) -> bool:
         return self._set_single(self.turn_min, j, v, lambda i, x: True)
 
     # ------------------------------------------------------------------ weights / status / rt
@@ -214,7 +228,7 @@ class MotionSettings:
             return False
         return True
 
-    def set_rt_speed_control(self, n) -> bool:
+    def set_rt_speed_control(self, n: float) -> bool:
         try:
             f = float(n)
         except (TypeError, ValueError):
@@ -248,10 +262,10 @@ class MotionSettings:
         """Apply one parsed Set*/Reset* protocol command; ``False`` for unknown commands."""
         a = list(args)
 
-        def single(fn):
+        def single(fn: Callable[[float, float], bool]) -> bool:
             return fn(a[0], a[1]) if len(a) >= 2 else False
 
-        table = {
+        table: dict[str, Callable[[], bool]] = {
             "SetJointsMaxSpeed": lambda: self.set_speed(a),
             "SetSingleJointMaxSpeed": lambda: single(self.set_single_speed),
             "ResetJointsMaxSpeed": self.reset_speed,
@@ -282,7 +296,7 @@ class MotionSettings:
         return bool(fn()) if fn is not None else False
 
     # ------------------------------------------------------------------ serialisation
-    def to_dict(self) -> dict:
+    def to_dict(self) -> SettingsDict:
         return {
             "speed": list(self.speed),
             "accel": list(self.accel),
@@ -295,12 +309,12 @@ class MotionSettings:
         }
 
     @classmethod
-    def from_dict(cls, robot: RobotModel | str, data: dict) -> "MotionSettings":
+    def from_dict(cls, robot: RobotModel | str, data: Mapping[str, Any]) -> "MotionSettings":
         config = cls(robot)
         config.update_from_dict(data)
         return config
 
-    def update_from_dict(self, data: dict) -> None:
+    def update_from_dict(self, data: Mapping[str, Any]) -> None:
         for key in ("speed", "accel", "max_change", "turn_max", "turn_min", "weights"):
             if key in data:
                 values = [float(v) for v in data[key]]
@@ -318,7 +332,7 @@ class MotionSettings:
     def copy(self) -> "MotionSettings":
         return MotionSettings.from_dict(self.robot, self.to_dict())
 
-    def __eq__(self, other) -> bool:
+    def __eq__(self, other: object) -> bool:
         return (isinstance(other, MotionSettings) and self.robot.name == other.robot.name
                 and self.to_dict() == other.to_dict())
 

@@ -5,9 +5,11 @@ Ruckig profile of the path parameter (``plan_lin``)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from rob6.robots import RobotModel
 from rob6.status import reach_term, status_flags, status_matches
@@ -17,6 +19,7 @@ from .trajectory import (
     MAX_CHANGE_EPS,
     MIN_LIMIT,
     N_JOINTS,
+    Limits,
     PlanResult,
     SampledTrajectory,
     TrajectoryPlanner,
@@ -24,6 +27,11 @@ from .trajectory import (
     sample_profiles,
     turn_limit_violation,
 )
+
+#: poses (N, 3, 4) -> joints (N, 6) in the current configuration, NaN where unreachable
+IkFn = Callable[[np.ndarray], ArrayLike]
+#: joints (N, 6) -> manipulability (N,)
+ManipFn = Callable[[np.ndarray], ArrayLike]
 
 
 @dataclass
@@ -54,13 +62,13 @@ def _unwrap_sequence(q: np.ndarray, q_start: np.ndarray) -> np.ndarray:
     return q
 
 
-def _validate_joint_path(robot: RobotModel, q0, Q: np.ndarray, s: np.ndarray, path: LinePath,
-                         config, opts: LinOptions, manip_fn) -> str:
+def _validate_joint_path(robot: RobotModel, q0: np.ndarray, Q: np.ndarray, s: np.ndarray, path: LinePath,
+                         config: Limits, opts: LinOptions, manip_fn: ManipFn | None) -> str:
     """Reason why the joint path Q (N,6) (Q[0] == q0) is not acceptable, or ''.
 
     Of all problems, the one nearest to the start of the line is reported.
     """
-    def at(k):
+    def at(k: int) -> str:
         return f"at {100 * s[k]:.1f}% of the line"
 
     problems: list[tuple[int, str]] = []  # (sample index, reason); first wins
@@ -123,13 +131,13 @@ def _validate_joint_path(robot: RobotModel, q0, Q: np.ndarray, s: np.ndarray, pa
     return min(problems, key=lambda kp: kp[0])[1]
 
 
-def _ik(ik_fn, poses: np.ndarray, q0) -> np.ndarray:
+def _ik(ik_fn: IkFn, poses: np.ndarray, q0: np.ndarray) -> np.ndarray:
     Q = np.asarray(ik_fn(poses), float).reshape(len(poses), N_JOINTS)
     return _unwrap_sequence(Q, q0)
 
 
-def plan_lin(planner: TrajectoryPlanner, q0, pose0, pose1, config, ik_fn, *,
-             manip_fn=None, options: LinOptions | None = None) -> PlanResult:
+def plan_lin(planner: TrajectoryPlanner, q0: ArrayLike, pose0: ArrayLike, pose1: ArrayLike, config: Limits,
+             ik_fn: IkFn, *, manip_fn: ManipFn | None = None, options: LinOptions | None = None) -> PlanResult:
     """Plan a LIN move from the current joints q0 (whose pose is pose0) to pose1.
 
     * The line (position lerp, orientation slerp) is sampled every ``step_mm`` /

@@ -11,6 +11,8 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
+from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 
@@ -23,9 +25,13 @@ from rob6.messages import (
     ConfigChange,
     ConfigReply,
     Empty,
+    ExecuteReply,
     ExecuteRequest,
+    FkReply,
     FkRequest,
+    IkBatchReply,
     IkBatchRequest,
+    JointsReply,
     LimitsUpdate,
     ModeRequest,
     MotionConfig,
@@ -41,7 +47,7 @@ from rob6.status import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN
 
 from .config import MotionSettings
 from .lin_planner import plan_lin
-from .trajectory import TrajectoryPlanner
+from .trajectory import SampledTrajectory, TrajectoryPlanner
 
 log = logging.getLogger("rob6.planner")
 
@@ -51,7 +57,7 @@ JOINT_MOVES: frozenset[MotionKind] = frozenset({"MovePTPJoints", "MovePTPJointsS
 ALTER_MOVES: frozenset[MotionKind] = frozenset({
     "MoveRTJoints", "MoveRTHomRowWise", "MoveRTHomRowWiseStatus", "DoAlterJoint", "DoAlterCart"})
 ADEPT_SETTINGS = {"SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoarse"}
-LIMIT_FIELDS = ("speed", "accel", "turn_min", "turn_max", "max_change")
+LIMIT_FIELDS: tuple[Literal["speed", "accel", "turn_min", "turn_max", "max_change"], ...] = ("speed", "accel", "turn_min", "turn_max", "max_change")
 
 
 class MotionRefused(Exception):
@@ -149,7 +155,7 @@ class PlannerService:
         if command == "EnableAdeptAlter" and not self.robot.is_adept:
             return Ack(ok=False, reason="EnableAdeptAlter is for the Adept only")
         if command in ("EnableAlter", "EnableAdeptAlter"):  # waits for a stop in progress
-            reply = self.bus.request("driver", "alter_mode", AlterMode(
+            reply: Ack = self.bus.request("driver", "alter_mode", AlterMode(
                 enable=True, synchronized=self.config.rt_speed_control == 0,
                 timeout_s=self.alter_timeout_s), cid=ctx.cid, waiting=ctx.waiting)
             self.alter = reply.ok
@@ -158,8 +164,9 @@ class PlannerService:
             if not self.alter:
                 return Ack(ok=True)  # already off: the original answers true as well
             self.alter = False  # answered once the robot is at rest
-            return self.bus.request("driver", "alter_mode", AlterMode(enable=False), cid=ctx.cid,
-                                    waiting=ctx.waiting)
+            off: Ack = self.bus.request("driver", "alter_mode", AlterMode(enable=False), cid=ctx.cid,
+                                        waiting=ctx.waiting)
+            return off
         if command in ("EnableLin", "DisableLin"):
             self.lin = command == "EnableLin"
             return Ack(ok=True)
@@ -218,6 +225,9 @@ class PlannerService:
             target = list(_given(req.joints, "joints", req.kind))
         elif req.kind in POSE_MOVES:
             pattern = PTP_HOM_PATTERN if req.kind == "MovePTPHomRowWise" else req.pattern
+            # the gateway always sends them with these kinds (as before, a request without
+            # them fails as an internal error)
+            assert req.pose is not None and pattern is not None
             target = self._select(req.pose, pattern, start, cid)
         else:
             raise MotionRefused(f"unknown motion {req.kind}")
@@ -228,11 +238,12 @@ class PlannerService:
             raise MotionRefused(plan.reason)
         if req.dry_run:
             return MoveReply(ok=True, joints=target)
+        assert plan.trajectory is not None  # a sampled plan that is ok has one
         return self._execute(plan.trajectory, req, ctx)
 
-    def _select(self, pose, pattern, current, cid) -> list[float]:
+    def _select(self, pose: Sequence[float], pattern: Sequence[str], current: list[float], cid: str) -> list[float]:
         c = self.config
-        reply = self.bus.request("kinematics", "select", SelectRequest(
+        reply: JointsReply = self.bus.request("kinematics", "select", SelectRequest(
             pose=list(pose), pattern=list(pattern), current=current, turn_min=list(c.turn_min),
             turn_max=list(c.turn_max), max_change=list(c.max_change), weights=list(c.weights),
             allowed=list(c.allowed)), cid=cid)
@@ -240,7 +251,7 @@ class PlannerService:
             raise MotionRefused("no admissible solution for that pose and status")
         return reply.joints
 
-    def _execute(self, trajectory, req: MoveRequest, ctx: Context) -> MoveReply:
+    def _execute(self, trajectory: SampledTrajectory, req: MoveRequest, ctx: Context) -> MoveReply:
         """Hand the motion to the driver and wait for its end, as long as the driver says
         (its announcement also says it took the motion: a stop sent now stops it)."""
         request = ExecuteRequest(trajectory=Trajectory(
@@ -255,7 +266,7 @@ class PlannerService:
             ctx.waiting(seconds, what)
 
         try:
-            reply = self.bus.request("driver", "execute", request, cid=ctx.cid, waiting=started)
+            reply: ExecuteReply = self.bus.request("driver", "execute", request, cid=ctx.cid, waiting=started)
         finally:
             self._handed_over()
         joints = reply.state.q if reply.state is not None else None
@@ -267,12 +278,12 @@ class PlannerService:
             raise MotionRefused("LIN mode is off (EnableLin first)")
         if req.dry_run:
             raise MotionRefused("route test of LIN moves is not supported")
-        fk = self.bus.request("kinematics", "fk", FkRequest(joints=[start]), cid=cid)
+        fk: FkReply = self.bus.request("kinematics", "fk", FkRequest(joints=[start]), cid=cid)
         branch = " ".join(self.robot.status(start))
         pose0 = np.asarray(fk.poses[0], float).reshape(3, 4)
 
         def ik_fn(poses: np.ndarray) -> np.ndarray:
-            reply = self.bus.request("kinematics", "ik_batch", IkBatchRequest(
+            reply: IkBatchReply = self.bus.request("kinematics", "ik_batch", IkBatchRequest(
                 poses=np.asarray(poses, float).reshape(-1, 12).tolist()), cid=cid)
             index = reply.branches.index(branch)
             return np.array([[np.nan] * 6 if s[index] is None else s[index] for s in reply.solutions])
@@ -281,6 +292,7 @@ class PlannerService:
                         self._planning_config(), ik_fn)
         if not plan.ok:
             raise MotionRefused(plan.reason)
+        assert plan.trajectory is not None  # a LIN plan that is ok has one
         return self._execute(plan.trajectory, req, ctx)
 
     def _alter_move(self, req: MoveRequest, cid: str) -> MoveReply:
@@ -293,18 +305,23 @@ class PlannerService:
             target = list(_given(req.joints, "joints", req.kind))
         else:
             current = self._current(req)
+            # the gateway always sends a pose with these kinds (as before, a request
+            # without one fails as an internal error)
+            assert req.pose is not None
             if req.kind == "DoAlterCart":
                 pose = _shifted_pose(self._pose(current, cid), req.pose)
                 target = self._select(pose, KEEP_CONFIGURATION, current, cid)
             else:  # MoveRTHomRowWise keeps the configuration, ...Status chooses by its pattern
                 pattern = req.pattern if req.kind == "MoveRTHomRowWiseStatus" else KEEP_CONFIGURATION
+                assert pattern is not None  # the gateway always sends it with MoveRTHomRowWiseStatus
                 target = self._select(req.pose, pattern, current, cid)
-        reply = self.bus.request("driver", "alter_target", AlterTarget(
+        reply: Ack = self.bus.request("driver", "alter_target", AlterTarget(
             q=target, synchronized=self.config.rt_speed_control == 0, relative=relative), cid=cid)
         return MoveReply(ok=reply.ok, joints=None if relative else target, reason=reply.reason, error=reply.error)
 
-    def _pose(self, joints, cid) -> list[float]:
-        return self.bus.request("kinematics", "fk", FkRequest(joints=[joints]), cid=cid).poses[0]
+    def _pose(self, joints: list[float], cid: str) -> list[float]:
+        reply: FkReply = self.bus.request("kinematics", "fk", FkRequest(joints=[joints]), cid=cid)
+        return reply.poses[0]
 
     def serve(self) -> None:
         self.bus.serve({"config": self.get_config, "config_change": self.config_change, "move": self.move,
@@ -314,7 +331,7 @@ class PlannerService:
             threading.Thread(target=self._push_limits, daemon=True).start()
 
 
-def _shifted_pose(pose12, step) -> list[float]:
+def _shifted_pose(pose12: Sequence[float], step: Sequence[float]) -> list[float]:
     """DoAlterCart: translate by (dx, dy, dz) mm and rotate by (rx, ry, rz) deg about the
     base axes (applied in x, y, z order), both in the robot's base frame."""
     T = np.asarray(pose12, float).reshape(3, 4)

@@ -26,9 +26,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import ruckig
+from numpy.typing import ArrayLike
 
 from rob6.robots import RobotModel, get_robot
 from rob6.status import status_matches
@@ -46,6 +48,22 @@ MAX_DURATION_S = 600.0
 
 
 # ====================================================================== limits
+class Limits(Protocol):
+    """What planning reads of a configuration: a ``MotionSettings``, a ``MotionConfig`` or
+    anything else with these per-joint protocol values."""
+
+    @property
+    def speed(self) -> Sequence[float]: ...
+    @property
+    def accel(self) -> Sequence[float]: ...
+    @property
+    def max_change(self) -> Sequence[float]: ...
+    @property
+    def turn_min(self) -> Sequence[float]: ...
+    @property
+    def turn_max(self) -> Sequence[float]: ...
+
+
 @dataclass(frozen=True)
 class JointLimits:
     """Per-joint kinematic limits in deg/s, deg/s^2, deg/s^3."""
@@ -61,7 +79,7 @@ class JointLimits:
         return cls(np.array(speed_si(speed)), np.array(a), np.array(jerk_si(a, jerk_ramp_s)))
 
     @classmethod
-    def from_config(cls, config) -> "JointLimits":
+    def from_config(cls, config: Limits) -> "JointLimits":
         return cls.from_protocol(config.speed, config.accel)
 
 
@@ -86,10 +104,11 @@ class SampledTrajectory:
 
     @property
     def end(self) -> np.ndarray:
-        return self.q[-1]
+        end: np.ndarray = self.q[-1]
+        return end
 
     @classmethod
-    def still(cls, q, dt) -> "SampledTrajectory":
+    def still(cls, q: ArrayLike, dt: float) -> "SampledTrajectory":
         q = np.asarray(q, float).reshape(1, N_JOINTS)
         z = np.zeros_like(q)
         return cls(dt, np.zeros(1), q.copy(), z, z.copy())
@@ -100,14 +119,14 @@ class PlanResult:
     ok: bool
     reason: str = ""
     trajectory: SampledTrajectory | None = None
-    info: dict = field(default_factory=dict)
+    info: dict[str, float] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
         return self.ok
 
 
 # ====================================================================== sampling
-def sample_profiles(traj: ruckig.Trajectory, times: np.ndarray):
+def sample_profiles(traj: ruckig.Trajectory, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vectorised sampling of a Ruckig trajectory (no brake phase) at sorted ``times``.
 
     Uses the 7-phase constant-jerk profiles of each DoF; after a profile's end the DoF
@@ -161,7 +180,7 @@ def sample_profiles(traj: ruckig.Trajectory, times: np.ndarray):
     return q, qd, qdd
 
 
-def sample_at_time(traj: ruckig.Trajectory, times: np.ndarray):
+def sample_at_time(traj: ruckig.Trajectory, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Reference sampler through Ruckig's ``at_time`` (slow; for tests and brake phases)."""
     out = [traj.at_time(float(t)) for t in times]
     q = np.array([o[0] for o in out])
@@ -171,7 +190,7 @@ def sample_at_time(traj: ruckig.Trajectory, times: np.ndarray):
 
 
 def finite_difference_violations(q: np.ndarray, dt: float, vmax: np.ndarray, amax: np.ndarray,
-                                 qd0=None, rtol: float = 1e-6, atol_v: float = 1e-9,
+                                 qd0: ArrayLike | None = None, rtol: float = 1e-6, atol_v: float = 1e-9,
                                  atol_a: float = 1e-6) -> list[str]:
     """Speed/acceleration violations of samples q (N,6) seen as a cycle-by-cycle monitor.
 
@@ -195,7 +214,8 @@ def finite_difference_violations(q: np.ndarray, dt: float, vmax: np.ndarray, ama
 
 
 # ====================================================================== checks
-def turn_limit_violation(q: np.ndarray, turn_min, turn_max, start=None) -> tuple[int, int] | None:
+def turn_limit_violation(q: ArrayLike, turn_min: ArrayLike, turn_max: ArrayLike,
+                         start: ArrayLike | None = None) -> tuple[int, int] | None:
     """First (sample, joint) not strictly inside the turn limits, or None.
 
     ``start``: if given, a joint that already is outside its limits there (limits changed
@@ -217,7 +237,7 @@ def turn_limit_violation(q: np.ndarray, turn_min, turn_max, start=None) -> tuple
     return int(k), int(j)
 
 
-def check_target(q0, q1, config, pattern=None) -> str:
+def check_target(q0: ArrayLike, q1: ArrayLike, config: Limits, pattern: Sequence[str] | None = None) -> str:
     """Validation of a joint target before any motion: '' if OK, else the reason.
 
     Strict turn limits at the target (``min < q < max``), max change per joint from the
@@ -277,11 +297,11 @@ class TrajectoryPlanner:
         self._inp1.duration_discretization = ruckig.DurationDiscretization.Discrete
         self._traj1 = ruckig.Trajectory(1)
 
-    def limits(self, config) -> JointLimits:
+    def limits(self, config: Limits) -> JointLimits:
         return JointLimits.from_protocol(config.speed, config.accel, self.jerk_ramp_s)
 
     # ------------------------------------------------------------------ PTP
-    def plan_ptp(self, q0, q1, config, *, check: bool = True, sample: bool = True,
+    def plan_ptp(self, q0: ArrayLike, q1: ArrayLike, config: Limits, *, check: bool = True, sample: bool = True,
                  pattern: Sequence[str] | None = None) -> PlanResult:
         """Jerk-limited, time-synchronised joint move q0 -> q1 (rest to rest).
 
@@ -349,7 +369,7 @@ class TrajectoryPlanner:
         qdd[-1] = 0.0
         return PlanResult(True, trajectory=SampledTrajectory(self.dt, times, q, qd, qdd), info=info)
 
-    def ptp_duration(self, q0, q1, config) -> float:
+    def ptp_duration(self, q0: ArrayLike, q1: ArrayLike, config: Limits) -> float:
         """Duration (s) of the PTP move, no sampling, no target checks."""
         res = self.plan_ptp(q0, q1, config, check=False, sample=False)
         if not res.ok:
