@@ -24,6 +24,7 @@ from .busy import busy_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baselines
 from .links import links_table, live_realtime_table
 from .tables import table
+from .transport import transport_table
 
 COUNT = int(os.environ.get("ROB6_BENCH_COUNT", "3000"))
 
@@ -254,6 +255,7 @@ def recording_table() -> None:
 
 def main() -> int:
     gateway_tables()
+    transport_table(COUNT, table)
     idle_table()
     kinematics_tables()
     planner_table()

@@ -49,9 +49,11 @@ bounded by the quick-call deadline: the handler announces how long and for what
 ``rob6.deadlines.HOP_S``; a caller that is itself a handler passes the announcement on
 (``request(..., waiting=ctx.waiting)``), so each hop outward waits a little longer.
 
-Zenoh runs callbacks on its own threads: the callbacks here only hand data over
-(release the waiting caller, update a dict) and never block. Served requests are taken from a
-FIFO channel by worker threads.
+A caller receives its reply on its own thread, from the query's Zenoh channel: no Python
+callback and no hand-over between threads on the request path (``call._Exchange``). Zenoh
+runs the other callbacks (liveliness, subscriptions, a hedge's second copy, the
+queryables) on its own threads: they only hand data over and never block. Quick operations
+are answered on Zenoh's thread; the others are taken from a FIFO queue by worker threads.
 
 The bus is one package, a module per job; ``Bus`` (``core``) puts them together:
 

@@ -51,10 +51,11 @@ log = logging.getLogger("rob6.bus")
 #: timeout, so the copy is out before a stalled exchange would recover by itself.
 HEDGE_DELAY_S = 0.15
 #: how long a call waits for a service with no live instance before it answers
-#: ``unavailable`` (never past its deadline). In full multi-host test runs the gateway lost
-#: the planner's token right after the recorder restarted, cause not known
-#: (deploy/MULTI_HOST.md); a peer that reconnects is back within 0.25-1 s. A service really
-#: gone costs its callers this long once per call.
+#: ``unavailable`` (never past its deadline): a peer that reconnects to its router (a router
+#: restart) loses and regains its token within 0.25-1 s, and calls in that window wait
+#: instead of failing. (It was added for a supposed token loss after a recorder restart,
+#: which was a late reply misreported: deploy/MULTI_HOST.md.) A service really gone costs
+#: its callers this long once per call.
 LIVELINESS_GRACE_S = 1.0
 #: a waiting operation's Zenoh query lives this long at most: its real deadline is the
 #: bus's own, which the service's announcements move; the query is cancelled with it

@@ -1,0 +1,80 @@
+"""Zenoh's transport options side by side: a bare query between two processes over loopback
+TCP and a unix socket, each with the default transport and with ``lowlatency``."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+
+import zenoh
+
+from tests.system import free_port
+
+from .latency import percentiles
+
+_QUERYABLE = r"""
+import json, sys, zenoh
+config = zenoh.Config()
+config.insert_json5("mode", '"peer"')
+config.insert_json5("scouting/multicast/enabled", "false")
+config.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+if sys.argv[2] == "lowlatency":
+    config.insert_json5("transport/unicast/lowlatency", "true")
+    config.insert_json5("transport/unicast/qos/enabled", "false")
+session = zenoh.open(config)
+queryable = session.declare_queryable("bench/bare", lambda query: query.reply(query.key_expr, b"pong"))
+print("ready", flush=True)
+sys.stdin.read()
+"""
+
+
+def _config(endpoint: str, transport: str) -> zenoh.Config:
+    config = zenoh.Config()
+    config.insert_json5("mode", '"peer"')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    if transport == "lowlatency":  # both ends must agree, QoS off
+        config.insert_json5("transport/unicast/lowlatency", "true")
+        config.insert_json5("transport/unicast/qos/enabled", "false")
+    return config
+
+
+def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -> None:
+    with tempfile.TemporaryDirectory() as folder:
+        # one queryable process per variant, each on its own port or socket
+        variants = [("loopback TCP, default", f"tcp/127.0.0.1:{free_port()}", "default"),
+                    ("loopback TCP, lowlatency", f"tcp/127.0.0.1:{free_port()}", "lowlatency"),
+                    ("unix socket, default", f"unixsock-stream/{folder}/a.sock", "default"),
+                    ("unix socket, lowlatency", f"unixsock-stream/{folder}/b.sock", "lowlatency")]
+        servers, sessions = [], []
+        try:
+            for _, endpoint, transport in variants:
+                server = subprocess.Popen([sys.executable, "-c", _QUERYABLE, endpoint, transport],
+                                          stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+                servers.append(server)
+                assert server.stdout is not None and server.stdout.readline().strip() == "ready"
+                sessions.append(zenoh.open(_config(endpoint, transport)))
+            time.sleep(0.5)
+            samples: list[list[float]] = [[] for _ in variants]
+            for i in range(warmup + count):  # interleaved: every variant sees the same moments
+                for k, session in enumerate(sessions):
+                    start = time.perf_counter()
+                    replies = list(session.get("bench/bare", consolidation=zenoh.ConsolidationMode.NONE))
+                    elapsed = time.perf_counter() - start
+                    if len(replies) != 1 or replies[0].ok is None:
+                        raise RuntimeError("the bare queryable did not answer once")
+                    if i >= warmup:
+                        samples[k].append(elapsed)
+        finally:
+            for session in sessions:
+                session.close()
+            for server in servers:
+                server.kill()
+                server.wait()
+    rows = [(name, *("%.3f" % v for v in percentiles(x))) for (name, _, _), x in zip(variants, samples, strict=True)]
+    table(f"Zenoh transports: a bare query between two processes, blocking receive, ms ({count} each, interleaved)",
+          ("link, transport", "p50", "p99"), rows)
