@@ -68,43 +68,32 @@ def gateway_latency(services: tuple[str, ...] = (), log_dir: str | None = None,
                     command = f"BackwardCalc {pose}"
                 if command == "MoveRTJoints":
                     assert client.ask("EnableAlter") == "true\n"
-                    results[command] = measure_alter(client, COUNT)
+                    results[command] = measure_alternating(
+                        client, ("MoveRTJoints 0.00 0 0 0 0 0\n", "MoveRTJoints 0.01 0 0 0 0 0\n"), COUNT)
                     client.ask("DisableAlter", timeout=10)
                     continue
                 if command == "MovePTPJoints":
-                    results[command] = measure_moves(client, COUNT)
+                    results[command] = measure_alternating(
+                        client, ("MovePTPJoints 10 -60 80 20 40 30\n", "MovePTPJoints 11 -60 80 20 40 30\n"), COUNT)
                     continue
                 results[command.split()[0]] = measure(client, command, lines, COUNT)
     return results
 
 
-def measure_alter(client, count: int) -> list[float]:
-    """MoveRTJoints on the dummy kr16: a target 0.01 deg from the last, each answered true."""
+def measure_alternating(client, lines: tuple[str, str], count: int, warmup: int = 200) -> list[float]:
+    """A command that must answer ``true``, sent with two arguments in turn (a target 0.01 deg
+    from the last for MoveRTJoints, between two poses for MovePTPJoints on the dummy kr16,
+    whose motion takes no time)."""
     samples = []
-    for k in range(count + 200):
-        line = "MoveRTJoints %.2f 0 0 0 0 0\n" % (0.01 * (k % 2))
+    for k in range(count + warmup):
+        line = lines[k % 2]
         start = time.perf_counter()
         client.send(line)
         reply = client.read_lines(1)
-        if k >= 200:
+        if k >= warmup:
             samples.append(time.perf_counter() - start)
         if reply != "true\n":
-            raise RuntimeError(f"MoveRTJoints: {reply!r}")
-    return samples
-
-
-def measure_moves(client, count: int) -> list[float]:
-    """MovePTPJoints on the dummy kr16 (the motion takes no time): between two poses."""
-    samples = []
-    for k in range(count + 200):
-        line = "MovePTPJoints %d -60 80 20 40 30\n" % (10 + k % 2)
-        start = time.perf_counter()
-        client.send(line)
-        reply = client.read_lines(1)
-        if k >= 200:
-            samples.append(time.perf_counter() - start)
-        if reply != "true\n":
-            raise RuntimeError(f"MovePTPJoints: {reply!r}")
+            raise RuntimeError(f"{line.strip()}: {reply!r}")
     return samples
 
 

@@ -4,6 +4,7 @@ bare TCP echo and a bare Zenoh query between two processes."""
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import socket
 import statistics
@@ -64,17 +65,36 @@ def echo_baseline(count: int) -> list[float]:
 
 
 _BARE_QUERYABLE = """
-import sys, time, zenoh
+import json, sys, zenoh
 config = zenoh.Config()
-config.insert_json5("mode", '"peer"')
-config.insert_json5("connect/endpoints", '["tcp/127.0.0.1:%s"]' % sys.argv[1])
-config.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
-config.insert_json5("scouting/multicast/enabled", "false")
+for key, value in json.loads(sys.argv[1]).items():
+    config.insert_json5(key, json.dumps(value))
 session = zenoh.open(config)
 queryable = session.declare_queryable("bench/bare", lambda query: query.reply(query.key_expr, b"pong"))
 print("ready", flush=True)
 sys.stdin.read()
 """
+
+
+def peer_config(**settings: object) -> dict[str, object]:
+    """Zenoh settings (key -> value) of a bare peer: no scouting, and ``settings``."""
+    return {"mode": "peer", "scouting/multicast/enabled": False, **settings}
+
+
+def open_peer(settings: dict[str, object]) -> zenoh.Session:
+    config = zenoh.Config()
+    for key, value in settings.items():
+        config.insert_json5(key, json.dumps(value))
+    return zenoh.open(config)
+
+
+def bare_queryable(settings: dict[str, object]) -> subprocess.Popen[str]:
+    """A process with one queryable, ``bench/bare``, answering ``pong``; ready when returned.
+    Kill it when done."""
+    server = subprocess.Popen([sys.executable, "-c", _BARE_QUERYABLE, json.dumps(settings)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert server.stdout is not None and server.stdout.readline().strip() == "ready"
+    return server
 
 
 def zenoh_baselines(router_port: int, count: int, warmup: int = 200) -> dict[str, list[float]]:
@@ -84,19 +104,14 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200) -> dict[str
     taken on the asking thread (``for reply in session.get(...)``), the floor of a request
     that crosses the bus; ``asyncio``, awaited on an event loop through
     ``call_soon_threadsafe`` (what the gateway did before it served on threads)."""
-    server = subprocess.Popen([sys.executable, "-c", _BARE_QUERYABLE, str(router_port)],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    config = zenoh.Config()
-    config.insert_json5("mode", '"peer"')
-    config.insert_json5("connect/endpoints", f'["tcp/127.0.0.1:{router_port}"]')
-    config.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')  # a direct link, as rob6's peers have
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
+    # peers beside the router, with a direct link between them, as rob6's processes have
+    settings = peer_config(**{"connect/endpoints": [f"tcp/127.0.0.1:{router_port}"],
+                              "listen/endpoints": ["tcp/127.0.0.1:0"]})
+    server = bare_queryable(settings)
+    session = open_peer(settings)
     blocking: list[float] = []
     bridged: list[float] = []
     try:
-        assert server.stdout is not None and server.stdout.readline().strip() == "ready"
-
         def blocking_once() -> float:
             start = time.perf_counter()
             replies = list(session.get("bench/bare", consolidation=zenoh.ConsolidationMode.NONE))

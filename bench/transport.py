@@ -3,9 +3,6 @@ TCP and a unix socket, each with the default transport and with ``lowlatency``."
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -14,33 +11,10 @@ import zenoh
 
 from tests.system import free_port
 
-from .latency import percentiles
+from .latency import bare_queryable, open_peer, peer_config, percentiles
 
-_QUERYABLE = r"""
-import json, sys, zenoh
-config = zenoh.Config()
-config.insert_json5("mode", '"peer"')
-config.insert_json5("scouting/multicast/enabled", "false")
-config.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
-if sys.argv[2] == "lowlatency":
-    config.insert_json5("transport/unicast/lowlatency", "true")
-    config.insert_json5("transport/unicast/qos/enabled", "false")
-session = zenoh.open(config)
-queryable = session.declare_queryable("bench/bare", lambda query: query.reply(query.key_expr, b"pong"))
-print("ready", flush=True)
-sys.stdin.read()
-"""
-
-
-def _config(endpoint: str, transport: str) -> zenoh.Config:
-    config = zenoh.Config()
-    config.insert_json5("mode", '"peer"')
-    config.insert_json5("scouting/multicast/enabled", "false")
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    if transport == "lowlatency":  # both ends must agree, QoS off
-        config.insert_json5("transport/unicast/lowlatency", "true")
-        config.insert_json5("transport/unicast/qos/enabled", "false")
-    return config
+#: what ``lowlatency`` needs on both ends (QoS off)
+_LOWLATENCY = {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
 
 
 def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -> None:
@@ -53,11 +27,9 @@ def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -
         servers, sessions = [], []
         try:
             for _, endpoint, transport in variants:
-                server = subprocess.Popen([sys.executable, "-c", _QUERYABLE, endpoint, transport],
-                                          stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-                servers.append(server)
-                assert server.stdout is not None and server.stdout.readline().strip() == "ready"
-                sessions.append(zenoh.open(_config(endpoint, transport)))
+                extra = _LOWLATENCY if transport == "lowlatency" else {}
+                servers.append(bare_queryable(peer_config(**{"listen/endpoints": [endpoint]}, **extra)))
+                sessions.append(open_peer(peer_config(**{"connect/endpoints": [endpoint]}, **extra)))
             time.sleep(0.5)
             samples: list[list[float]] = [[] for _ in variants]
             for i in range(warmup + count):  # interleaved: every variant sees the same moments
