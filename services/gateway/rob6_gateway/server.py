@@ -48,8 +48,9 @@ class Connection:
     """One client's socket, read by its session's thread: the lines it sent, and whether
     it closed.
 
-    ``next_line`` blocks for the next command; ``poll`` (while a move waits) takes in
-    what has arrived without blocking and tells whether the client has gone.
+    ``next_line`` blocks for the next command; ``poll`` (the bus's watcher thread, while the
+    session's thread waits for a move) takes in what has arrived without blocking and tells
+    whether the client has gone.
     """
 
     def __init__(self, sock: socket.socket, max_line: int, pause_s: float, idle_timeout_s: float | None):

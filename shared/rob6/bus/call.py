@@ -90,8 +90,9 @@ class Calling(Liveliness):
         another replica when there is one: the first answer wins. ``waiting``: called with
         what the service announces it waits for (``Context.waiting``), each time plus
         ``HOP_S``: a handler passes its own ``ctx.waiting`` to tell its caller in turn.
-        ``abandon``: asked every ``WAIT_SLICE_S`` while the reply is awaited; when it
-        answers True (the client left), the query is cancelled and ``CallAbandoned`` raised.
+        ``abandon`` (waiting operations): asked every ``WATCH_TICK_S`` by the bus's watcher
+        thread while the caller waits, never after the call ended; when it answers True (the
+        client left), the query is cancelled and ``CallAbandoned`` raised.
         """
         call = _Request(self, service, op, body, timeout, cid, instance, waiting)
         while True:
@@ -257,6 +258,11 @@ class _Exchange:
         self._hedge_done.acquire()
         self._hedge_outcome: tuple[bytes, str] | BaseException | None = None
         self._answered = False  # the channel gave the reply: the query ends by itself
+        # the watcher's look and the call's end exclude each other: ``abandon`` reads the
+        # client's socket, which is the caller's again once the call is over, and a hedge
+        # sent after the end would be left behind
+        self._watch_lock = threading.Lock()
+        self._closed = False
         self.hedge_at: float | None = None
         self.watched = False
 
@@ -318,15 +324,18 @@ class _Exchange:
 
     def tick(self, now: float) -> None:
         """The watcher's look (``WATCH_TICK_S``): a hedge due, a deadline past, an abandon."""
-        if self.hedge_at is not None and now >= self.hedge_at:
-            self.hedge_at = None
-            self._send_hedge()
-        call = self.call
-        if call.spec.waits:
-            if self.abandon is not None and self.abandon():
-                self.end(CallAbandoned(f"{call.service}.{call.op} abandoned by its caller"), self.target)
-            elif call.remaining() + REPLY_GRACE_S <= 0:
-                self.end(_InstanceLost("no reply in time"), self.target)
+        with self._watch_lock:
+            if self._closed:
+                return
+            if self.hedge_at is not None and now >= self.hedge_at:
+                self.hedge_at = None
+                self._send_hedge()
+            call = self.call
+            if call.spec.waits:
+                if self.abandon is not None and self.abandon():
+                    self.end(CallAbandoned(f"{call.service}.{call.op} abandoned by its caller"), self.target)
+                elif call.remaining() + REPLY_GRACE_S <= 0:
+                    self.end(_InstanceLost("no reply in time"), self.target)
 
     def _send_hedge(self) -> None:
         """No answer yet: the second copy, to another live instance (the same one if it is
@@ -373,6 +382,8 @@ class _Exchange:
 
     def close(self) -> None:
         """The call is over: nothing waits for either copy any more."""
+        with self._watch_lock:  # a look under way ends first; none comes after
+            self._closed = True
         with self._lock:
             if self._ended is None:
                 self._ended = (CallAbandoned("closed"), self.target)
