@@ -43,7 +43,7 @@ class RsiController:
         self._stderr_thread: threading.Thread | None = None
 
     # ---- lifecycle -----------------------------------------------------------
-    def start(self) -> "RsiController":
+    def start(self) -> RsiController:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "kuka_rsi_sim", *self.args],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -122,7 +122,7 @@ class RsiController:
                     pass
         self._ctl_file = self._ctl = None
 
-    def __enter__(self) -> "RsiController":
+    def __enter__(self) -> RsiController:
         return self.start()
 
     def __exit__(self, *exc) -> None:

@@ -62,7 +62,7 @@ class Geometry:
     d6: float
 
     @classmethod
-    def of(cls, robot) -> "Geometry":
+    def of(cls, robot) -> Geometry:
         return cls(robot.d1, robot.a1, robot.a2, robot.a3, robot.d4, robot.d6)
 
     @property

@@ -123,7 +123,7 @@ def command_log(topic: str, data: Any, log_time: int) -> dict[str, Any] | None:
 class _Listener(ServerListener):
     """Server callbacks: re-send latched topics to a new subscriber; playback control."""
 
-    def __init__(self, view: "LiveView"):
+    def __init__(self, view: LiveView):
         self.view = view
 
     def on_subscribe(self, client: Client, channel: ChannelView) -> None:

@@ -540,7 +540,7 @@ class AdeptLink(Link):
         while not self._closing.is_set():
             try:
                 data = sock.recv(4096)
-            except socket.timeout:
+            except TimeoutError:
                 if time.monotonic() - heard > self.state_timeout_s:
                     ms = round(self.state_timeout_s * 1000)
                     return f"no state message from the controller at {self.state_name} for {ms} ms"
