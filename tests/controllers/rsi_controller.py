@@ -11,6 +11,7 @@ From any test module: ``from tests.controllers.rsi_controller import RsiControll
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import re
@@ -92,10 +93,8 @@ class RsiController:
         if self.proc is None:
             return None
         if self.proc.poll() is None and self._ctl_file is not None:
-            try:
+            with contextlib.suppress(OSError, RsiControllerError, ValueError):
                 self.request({"cmd": "quit"})
-            except (OSError, RsiControllerError, ValueError):
-                pass
         self._close_control()
         try:
             code = self.proc.wait(timeout)
@@ -116,10 +115,8 @@ class RsiController:
     def _close_control(self) -> None:
         for f in (self._ctl_file, self._ctl):
             if f is not None:
-                try:
+                with contextlib.suppress(OSError):
                     f.close()
-                except OSError:
-                    pass
         self._ctl_file = self._ctl = None
 
     def __enter__(self) -> RsiController:

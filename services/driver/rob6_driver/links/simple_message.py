@@ -57,6 +57,7 @@ wire), see ``to_controller_deg`` and deploy/adept/README.md.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import queue
@@ -753,10 +754,8 @@ class AdeptLink(Link):
         return sock
 
     def _wake(self) -> None:
-        try:
+        with contextlib.suppress(OSError):  # full (the thread will look anyway) or closed
             self._wake_w.send(b"\0")
-        except OSError:  # full (the thread will look anyway) or closed
-            pass
 
     def _drain_wake(self) -> None:
         try:
