@@ -32,8 +32,7 @@ class PinModel:
 
     # ------------------------------------------------------------------
     def _q(self, q_deg) -> np.ndarray:
-        q = np.asarray(q_deg, dtype=float).reshape(6) * DEG
-        return q
+        return np.asarray(q_deg, dtype=float).reshape(6) * DEG
 
     def fk(self, q_deg) -> np.ndarray:
         """Flange pose (3,4), mm, of joints q (deg)."""
