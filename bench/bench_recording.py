@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import shutil
 import tempfile
 import time
@@ -146,21 +147,22 @@ def bench_writers(n: int = 300_000) -> list[dict]:
     rows = []
     try:
         for files in (1, 2):
-            fhs = [open(d / f"mcap{files}_{k}.mcap", "wb") for k in range(files)]
-            writers = [Writer(fh, compression=CompressionType.ZSTD) for fh in fhs]
-            channels = []
-            for w in writers:
-                w.start()
-                channels.append(w.register_channel("/driver/joint_state", "json",
-                                                   w.register_schema("rob6.JointState", "jsonschema", schema)))
-            t = time.time_ns()
-            start = time.perf_counter()
-            for i, p in enumerate(payloads):
-                for w, ch in zip(writers, channels, strict=True):
-                    w.add_message(ch, t + i, p, t + i, i)
-            for w, fh in zip(writers, fhs, strict=True):
-                w.finish()
-                fh.close()
+            with contextlib.ExitStack() as files_open:  # closed below, and on an error too
+                fhs = [files_open.enter_context(open(d / f"mcap{files}_{k}.mcap", "wb")) for k in range(files)]
+                writers = [Writer(fh, compression=CompressionType.ZSTD) for fh in fhs]
+                channels = []
+                for w in writers:
+                    w.start()
+                    channels.append(w.register_channel("/driver/joint_state", "json",
+                                                       w.register_schema("rob6.JointState", "jsonschema", schema)))
+                t = time.time_ns()
+                start = time.perf_counter()
+                for i, p in enumerate(payloads):
+                    for w, ch in zip(writers, channels, strict=True):
+                        w.add_message(ch, t + i, p, t + i, i)
+                for w, fh in zip(writers, fhs, strict=True):
+                    w.finish()
+                    fh.close()
             rows.append({"writer": "mcap package (Python)", "files": files,
                          "msgs_per_s": n / (time.perf_counter() - start),
                          "bytes_per_msg": (d / f"mcap{files}_0.mcap").stat().st_size / n})

@@ -107,7 +107,7 @@ class System:
                     pids["router"] = int(pid)
         return pids
 
-    def client(self, **kwargs: Any) -> "Client":
+    def client(self, **kwargs: Any) -> Client:
         return Client(self.port, **kwargs)
 
     def stop(self, timeout: float = 5.0) -> int:
@@ -153,7 +153,7 @@ class Client:
         while self.buffer.count(b"\n") < count:
             try:
                 chunk = self.sock.recv(65536)
-            except socket.timeout:
+            except TimeoutError:
                 break
             if not chunk:
                 break
@@ -169,7 +169,7 @@ class Client:
         while True:
             try:
                 chunk = self.sock.recv(65536)
-            except socket.timeout:
+            except TimeoutError:
                 break
             if not chunk:
                 break
@@ -186,7 +186,7 @@ class Client:
         self.sock.settimeout(timeout)
         try:
             return self.sock.recv(1) == b""
-        except socket.timeout:
+        except TimeoutError:
             return False
         except ConnectionError:
             return True
@@ -194,7 +194,7 @@ class Client:
     def close(self) -> None:
         self.sock.close()
 
-    def __enter__(self) -> "Client":
+    def __enter__(self) -> Client:
         return self
 
     def __exit__(self, *exc: object) -> None:

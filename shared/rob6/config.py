@@ -41,7 +41,7 @@ class BusSettings:
     instance: str = field(default_factory=lambda: default_instance())
 
     @classmethod
-    def from_env(cls, **overrides: Any) -> "BusSettings":
+    def from_env(cls, **overrides: Any) -> BusSettings:
         """Settings from ROB6_* variables (used by tests and tools without a CLI)."""
         env = os.environ
         values: dict[str, Any] = dict(

@@ -257,14 +257,12 @@ def test_quit_on_close(connect):
 def test_alter_is_disabled_even_when_the_block_fails(connect):
     robot, server = connect({"EnableAlter": ["true"], "DisableAlter": ["true"],
                              f"MoveRTJoints {HOME}": ["true"], "EnableAdeptAlter": ["false"]})
-    with pytest.raises(KeyError):
-        with robot.alter():
-            assert robot.move_rt_joints([0] * 6) is True
-            raise KeyError("the client's own bug")
+    with pytest.raises(KeyError), robot.alter():
+        assert robot.move_rt_joints([0] * 6) is True
+        raise KeyError("the client's own bug")
     assert server.commands()[-1] == "DisableAlter\n"
-    with pytest.raises(Rob6Error, match="refused"):
-        with robot.alter(adept=True):
-            pass
+    with pytest.raises(Rob6Error, match="refused"), robot.alter(adept=True):
+        pass
     assert server.commands()[-1] == "EnableAdeptAlter\n"
 
 

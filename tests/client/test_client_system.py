@@ -100,10 +100,9 @@ def test_lab_session(kr16):
             stream(robot, Q, 25)
             assert robot.move_ptp_joints(Q) is False  # no PTP while Alter is on
         assert robot.move_rt_joints(Q) is False
-        with pytest.raises(ZeroDivisionError):
-            with robot.alter():
-                assert robot.do_alter_joint([0.1, 0, 0, 0, 0, 0]) is True
-                raise ZeroDivisionError
+        with pytest.raises(ZeroDivisionError), robot.alter():
+            assert robot.do_alter_joint([0.1, 0, 0, 0, 0, 0]) is True
+            raise ZeroDivisionError
         assert robot.move_rt_joints(Q) is False  # disabled on the way out
         time.sleep(0.3)
         assert robot.move_ptp_joints(Q) is True

@@ -41,7 +41,7 @@ class AdeptController:
         self._ctl_file: io.BufferedRWPair | None = None
 
     # ---- lifecycle -----------------------------------------------------------
-    def start(self) -> "AdeptController":
+    def start(self) -> AdeptController:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "adept_sm_sim", *self.args],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -104,7 +104,7 @@ class AdeptController:
         self._stderr_thread.join(5)
         return self.proc.returncode
 
-    def __enter__(self) -> "AdeptController":
+    def __enter__(self) -> AdeptController:
         return self.start()
 
     def __exit__(self, *exc) -> None:

@@ -11,6 +11,7 @@ From any test module: ``from tests.controllers.rsi_controller import RsiControll
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import re
@@ -43,7 +44,7 @@ class RsiController:
         self._stderr_thread: threading.Thread | None = None
 
     # ---- lifecycle -----------------------------------------------------------
-    def start(self) -> "RsiController":
+    def start(self) -> RsiController:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "kuka_rsi_sim", *self.args],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -92,10 +93,8 @@ class RsiController:
         if self.proc is None:
             return None
         if self.proc.poll() is None and self._ctl_file is not None:
-            try:
+            with contextlib.suppress(OSError, RsiControllerError, ValueError):
                 self.request({"cmd": "quit"})
-            except (OSError, RsiControllerError, ValueError):
-                pass
         self._close_control()
         try:
             code = self.proc.wait(timeout)
@@ -116,13 +115,11 @@ class RsiController:
     def _close_control(self) -> None:
         for f in (self._ctl_file, self._ctl):
             if f is not None:
-                try:
+                with contextlib.suppress(OSError):
                     f.close()
-                except OSError:
-                    pass
         self._ctl_file = self._ctl = None
 
-    def __enter__(self) -> "RsiController":
+    def __enter__(self) -> RsiController:
         return self.start()
 
     def __exit__(self, *exc) -> None:

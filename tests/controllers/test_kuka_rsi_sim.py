@@ -109,7 +109,7 @@ class Responder:
         while not self._closed:
             try:
                 data, addr = self.sock.recvfrom(65535)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             except OSError:
                 return

@@ -569,6 +569,6 @@ def test_secure_profile_end_to_end(built, entry_points, certs):
             with connect(stack.port) as client:  # traffic the intruder must not see
                 client.ask("GetPositionJoints")
             time.sleep(1)
-            assert not inbox.samples, inbox.keys()[:5]
+            assert not inbox.samples, inbox.key_exprs()[:5]
     finally:
         stack.down()

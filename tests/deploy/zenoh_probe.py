@@ -149,7 +149,7 @@ class Inbox:
         with self._lock:
             self.samples.append((str(sample.key_expr), sample.payload.to_bytes()))
 
-    def keys(self) -> list[str]:
+    def key_exprs(self) -> list[str]:
         with self._lock:
             return [key for key, _ in self.samples]
 
@@ -241,14 +241,14 @@ def secure_profile_checks(endpoint: str, certs: Path, robot_id: str = ROBOT_ID,
         s["intruder"].put(f"{prefix}/control/shutdown", b"{}")
         s["gateway"].put(f"{prefix}/control/verbosity", b'{"level": 2}')
         time.sleep(WAIT_S)
-        check("gateway receives driver state", True, f"{prefix}/driver/state" in inbox["gateway"].keys())
+        check("gateway receives driver state", True, f"{prefix}/driver/state" in inbox["gateway"].key_exprs())
         check("intruder receives anything (rob6/<id>/**, **, driver/state)", False,
-              bool(inbox["intruder"].keys() or inbox["intruder-all"].keys() or inbox["intruder-state"].keys()))
+              bool(inbox["intruder"].key_exprs() or inbox["intruder-all"].key_exprs() or inbox["intruder-state"].key_exprs()))
         check("members receive the intruder's control/shutdown", False,
-              bool(inbox["gateway-control"].keys()))
+              bool(inbox["gateway-control"].key_exprs()))
         check("driver receives the gateway's control/verbosity", True,
-              f"{prefix}/control/verbosity" in inbox["driver-control"].keys())
-        check("recorder receives traces", True, f"{prefix}/trace/driver/execute" in inbox["recorder"].keys())
+              f"{prefix}/control/verbosity" in inbox["driver-control"].key_exprs())
+        check("recorder receives traces", True, f"{prefix}/trace/driver/execute" in inbox["recorder"].key_exprs())
         check("gateway sees driver liveliness", True, bool(alive(s["gateway"], f"{prefix}/alive/**")))
         check("intruder sees liveliness", False, bool(alive(s["intruder"], f"{prefix}/alive/**")))
         del keep, token

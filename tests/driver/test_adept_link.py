@@ -7,6 +7,7 @@ Assertions are about what was sent and said, never about how fast this machine i
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import select
@@ -66,19 +67,15 @@ class FakeController:
     def close(self) -> None:
         self._closing = True
         for sock in (self.motion_server, self.state_server, *self._sockets):
-            try:
+            with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
             sock.close()
 
     def drop(self) -> None:
         """Close every connection (the ports take new ones)."""
         for sock in self._sockets:
-            try:
+            with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
         self._sockets.clear()
 
     def _accept(self, server, serve) -> None:

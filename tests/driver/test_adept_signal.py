@@ -46,10 +46,10 @@ def test_signal_switches_the_controllers_outputs():
 
 def test_an_unreachable_io_port_fails_and_switches_nothing():
     closed = free_port()
-    with AdeptController("--state-period", "0.02") as ctl:
-        with adept_system(ctl, closed) as system, Client(system.port) as client:
-            reply = client.ask("DirectAdeptCmd signal 5, -6", lines=2)
-            assert reply == (f"ERROR: driver: cannot reach the controller's I/O port 127.0.0.1:{closed}: "
-                             "Connection refused (nothing switched)\nfalse\n")
-            assert driver_state(system).outputs == [] and ctl.status()["outputs"] == []
-            assert client.ask("GetRobot") == "ad850\n"
+    with (AdeptController("--state-period", "0.02") as ctl, adept_system(ctl, closed) as system,
+          Client(system.port) as client):
+        reply = client.ask("DirectAdeptCmd signal 5, -6", lines=2)
+        assert reply == (f"ERROR: driver: cannot reach the controller's I/O port 127.0.0.1:{closed}: "
+                         "Connection refused (nothing switched)\nfalse\n")
+        assert driver_state(system).outputs == [] and ctl.status()["outputs"] == []
+        assert client.ask("GetRobot") == "ad850\n"

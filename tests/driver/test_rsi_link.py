@@ -53,7 +53,7 @@ class Controller:
         self.sock.settimeout(timeout)
         try:
             data = self.sock.recv(4096)
-        except socket.timeout:
+        except TimeoutError:
             return None
         m = SEN.match(data)
         assert m, data

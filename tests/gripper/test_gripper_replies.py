@@ -39,28 +39,28 @@ def assert_failure(lines: list[str], command: str, reason: str, info: str) -> No
 
 def test_success_and_failure_line_counts_with_the_simulated_gripper():
     # an object 30 mm wide between the jaws: closing onto it works, moving to 10 mm is blocked
-    with running("ad850", dummy=True, extra_env={"ROB6_GRIPPER_OBJECT": "0.03"}) as system:
-        with Client(system.port) as client:
-            assert reply(client, "HasGripper") == ["true"]
-            assert reply(client, "GripperGoHome") == [
-                "Start moving to home position", "Gripper at 0.0400 m", "true"]
-            assert reply(client, "GripperMoveToPosition 0.05") == [
-                "Start moving to position 0.0500 m", "Gripper at 0.0500 m", "true"]
-            assert reply(client, "GripperMove -1") == ["Start moving with amperage -1.000", "true"]
-            assert reply(client, "GripperMove 2.5") == ["Start moving with amperage 2.500", "true"]
-            # failures: the device's reason, where the jaws are, the same number of lines
-            assert_failure(reply(client, "GripperMoveToPosition 0.01"), "GripperMoveToPosition",
-                           "GripperMoveToPosition: ", "Gripper at 0.0300 m")
-            assert_failure(reply(client, "GripperMoveToPosition 0.5"), "GripperMoveToPosition",
-                           "GripperMoveToPosition: position 0.5000 m is outside the stroke",
-                           "Gripper at 0.0300 m")
-            assert_failure(reply(client, "GripperMoveToPosition x"), "GripperMoveToPosition",
-                           "incorrect value", "Gripper not moved")
-            assert_failure(reply(client, "GripperMoveToPosition"), "GripperMoveToPosition",
-                           "incorrect value", "Gripper not moved")
-            assert_failure(reply(client, "GripperMove"), "GripperMove", "incorrect value", "")
-            assert_failure(reply(client, "GripperMove nan"), "GripperMove", "incorrect value", "")
-            assert reply(client, "GetRobot") == ["ad850"]  # the session goes on, in step
+    with (running("ad850", dummy=True, extra_env={"ROB6_GRIPPER_OBJECT": "0.03"}) as system,
+          Client(system.port) as client):
+        assert reply(client, "HasGripper") == ["true"]
+        assert reply(client, "GripperGoHome") == [
+            "Start moving to home position", "Gripper at 0.0400 m", "true"]
+        assert reply(client, "GripperMoveToPosition 0.05") == [
+            "Start moving to position 0.0500 m", "Gripper at 0.0500 m", "true"]
+        assert reply(client, "GripperMove -1") == ["Start moving with amperage -1.000", "true"]
+        assert reply(client, "GripperMove 2.5") == ["Start moving with amperage 2.500", "true"]
+        # failures: the device's reason, where the jaws are, the same number of lines
+        assert_failure(reply(client, "GripperMoveToPosition 0.01"), "GripperMoveToPosition",
+                       "GripperMoveToPosition: ", "Gripper at 0.0300 m")
+        assert_failure(reply(client, "GripperMoveToPosition 0.5"), "GripperMoveToPosition",
+                       "GripperMoveToPosition: position 0.5000 m is outside the stroke",
+                       "Gripper at 0.0300 m")
+        assert_failure(reply(client, "GripperMoveToPosition x"), "GripperMoveToPosition",
+                       "incorrect value", "Gripper not moved")
+        assert_failure(reply(client, "GripperMoveToPosition"), "GripperMoveToPosition",
+                       "incorrect value", "Gripper not moved")
+        assert_failure(reply(client, "GripperMove"), "GripperMove", "incorrect value", "")
+        assert_failure(reply(client, "GripperMove nan"), "GripperMove", "incorrect value", "")
+        assert reply(client, "GetRobot") == ["ad850"]  # the session goes on, in step
 
 
 def test_a_silent_serial_gripper_fails_with_the_same_line_counts():
@@ -109,14 +109,14 @@ def test_a_client_reading_a_fixed_count_never_falls_behind():
               ("GripperMoveToPosition 0.06", True), ("GripperMove -1", True),
               ("GripperMoveToPosition 9", False), ("GripperMoveToPosition x", False),
               ("GripperMove x", False), ("HasGripper", True), ("GripperGoHome", True)]
-    with running("ad850", dummy=True, extra_env={"ROB6_GRIPPER_OBJECT": "0.03"}) as system:
-        with Client(system.port) as client:
-            for line, ok in script:
-                got = client.ask(line, lines=LINES[line.split()[0]], timeout=20).splitlines()
-                assert got[-1] == ("true" if ok else "false"), (line, got)
-                assert all(g not in ("true", "false") for g in got[:-1]), (line, got)
-            assert client.ask("GetRobot") == "ad850\n"
-            assert client.read_quiet(0.3) == ""
+    with (running("ad850", dummy=True, extra_env={"ROB6_GRIPPER_OBJECT": "0.03"}) as system,
+          Client(system.port) as client):
+        for line, ok in script:
+            got = client.ask(line, lines=LINES[line.split()[0]], timeout=20).splitlines()
+            assert got[-1] == ("true" if ok else "false"), (line, got)
+            assert all(g not in ("true", "false") for g in got[:-1]), (line, got)
+        assert client.ask("GetRobot") == "ad850\n"
+        assert client.read_quiet(0.3) == ""
 
 
 def test_other_robots_answer_false_in_one_line_as_the_original():

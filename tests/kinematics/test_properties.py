@@ -97,7 +97,7 @@ def test_ik_roundtrip_all_branches(robot, branch, q1, t, phi, q4, q5, q6):
 
 
 # ---------------------------------------------------------------- BackwardCalc, limits
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def joint_pool(robot, n=300000):
     """Random joints strictly inside the default limits, away from singularities,
     with their status index (computed once per robot)."""

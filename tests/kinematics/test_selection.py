@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import math
-from functools import lru_cache
+from functools import cache
 from typing import Literal, TypedDict
 
 import pytest
@@ -98,7 +98,7 @@ class _OpwKin:
         return opw.ik(self.geometry, T)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _branches(robot: str, pose: tuple[float, ...]) -> dict:
     return branches_of(_OpwKin(robot), pose)
 

@@ -140,7 +140,7 @@ class FoxgloveClient:
         self._connection.__exit__(None, None, None)
         self._thread.join(2)
 
-    def __enter__(self) -> "FoxgloveClient":
+    def __enter__(self) -> FoxgloveClient:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -140,23 +140,22 @@ def recorded_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("order, timing", [("big", "vplus"), ("little", "duration")])
 def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path, order, timing):
     motion, state = free_tcp_ports(2)
-    with adept_system(motion, state, order, log_dir=str(tmp_path)) as system:
-        with system.client() as client:
-            waiting = f"ERROR: driver: robot not connected (waiting for simple_message at 127.0.0.1:{motion}/{state})\n"
-            assert reply(client, "MovePTPJoints 10 -60 40 0 30 0") == waiting + "false\n"
-            assert reply(client, "EnableAdeptAlter") == waiting + "false\n"
-            assert reply(client, "MovePTPJoints 999 0 0 0 0 0") == "false\n"  # refused before the driver
-            with controller(motion, state, "--timing", timing, order=order) as ctl:
-                assert np.array_equal(connected(client, ctl, system), np.zeros(6))
-                session(client, ctl)
-                status = ctl.status()
-                assert status["points_refused"] == 0 and status["malformed_frames"] == 0
-                assert status["points_acknowledged"] > 100
-                link = link_status(system)
-                assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
-                assert link.packets == status["points_acknowledged"]
-                assert client.ask("Quit") == "bye!\n"
-            time.sleep(1.0)  # the recorder writes the last states
+    with adept_system(motion, state, order, log_dir=str(tmp_path)) as system, system.client() as client:
+        waiting = f"ERROR: driver: robot not connected (waiting for simple_message at 127.0.0.1:{motion}/{state})\n"
+        assert reply(client, "MovePTPJoints 10 -60 40 0 30 0") == waiting + "false\n"
+        assert reply(client, "EnableAdeptAlter") == waiting + "false\n"
+        assert reply(client, "MovePTPJoints 999 0 0 0 0 0") == "false\n"  # refused before the driver
+        with controller(motion, state, "--timing", timing, order=order) as ctl:
+            assert np.array_equal(connected(client, ctl, system), np.zeros(6))
+            session(client, ctl)
+            status = ctl.status()
+            assert status["points_refused"] == 0 and status["malformed_frames"] == 0
+            assert status["points_acknowledged"] > 100
+            link = link_status(system)
+            assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
+            assert link.packets == status["points_acknowledged"]
+            assert client.ask("Quit") == "bye!\n"
+        time.sleep(1.0)  # the recorder writes the last states
     t, q = recorded_states(tmp_path)
     # rob6's setpoints, every cycle of a motion (at rest fewer), the controller connected or not
     assert assert_within_limits(ROBOT, t, q) > 250  # the Alter part alone: 250 targets, one per cycle

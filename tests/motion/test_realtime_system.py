@@ -114,30 +114,28 @@ def test_alter_mode_stops_when_the_client_goes_away():
 
 
 def test_alter_mode_stops_when_targets_stop_coming():
-    with running("kr16rt", dummy=False) as system:
-        with system.client() as client:
-            assert client.ask("MovePTPJoints 0 -10 10 0 30 0", timeout=30) == "true\n"
-            assert client.ask("EnableAlter") == "true\n"
-            assert client.ask("MoveRTJoints 40 -10 10 0 30 0") == "true\n"
-            time.sleep(2.5)  # no new target for 0.5 s: the watchdog stops the robot
-            first = [float(x) for x in client.ask("GetPositionJoints").split()]
-            time.sleep(0.3)
-            assert [float(x) for x in client.ask("GetPositionJoints").split()] == first
-            assert 0.5 < first[0] < 30.0
+    with running("kr16rt", dummy=False) as system, system.client() as client:
+        assert client.ask("MovePTPJoints 0 -10 10 0 30 0", timeout=30) == "true\n"
+        assert client.ask("EnableAlter") == "true\n"
+        assert client.ask("MoveRTJoints 40 -10 10 0 30 0") == "true\n"
+        time.sleep(2.5)  # no new target for 0.5 s: the watchdog stops the robot
+        first = [float(x) for x in client.ask("GetPositionJoints").split()]
+        time.sleep(0.3)
+        assert [float(x) for x in client.ask("GetPositionJoints").split()] == first
+        assert 0.5 < first[0] < 30.0
 
 
 def test_robot_stops_when_the_planner_goes_away_mid_motion():
     import os
     import signal
-    with running("kr16", dummy=False) as system:
-        with system.client() as client:
-            client.send("MovePTPJoints 60 0 0 0 30 0\n")  # ~5 s of motion
-            time.sleep(1.0)
-            os.kill(system.pids()["planner"], signal.SIGKILL)
-            reply = client.read_lines(2, timeout=10)
-            assert reply.startswith("ERROR: planner") and reply.endswith("\nfalse\n"), reply
-            time.sleep(2.5)
-            first = [float(x) for x in client.ask("GetPositionJoints").split()]
-            time.sleep(0.3)
-            assert [float(x) for x in client.ask("GetPositionJoints").split()] == first  # at rest
-            assert 5.0 < first[0] < 50.0, f"A1 at {first[0]}: it did not stop short of 60"
+    with running("kr16", dummy=False) as system, system.client() as client:
+        client.send("MovePTPJoints 60 0 0 0 30 0\n")  # ~5 s of motion
+        time.sleep(1.0)
+        os.kill(system.pids()["planner"], signal.SIGKILL)
+        reply = client.read_lines(2, timeout=10)
+        assert reply.startswith("ERROR: planner") and reply.endswith("\nfalse\n"), reply
+        time.sleep(2.5)
+        first = [float(x) for x in client.ask("GetPositionJoints").split()]
+        time.sleep(0.3)
+        assert [float(x) for x in client.ask("GetPositionJoints").split()] == first  # at rest
+        assert 5.0 < first[0] < 50.0, f"A1 at {first[0]}: it did not stop short of 60"

@@ -151,7 +151,7 @@ class FakeServer:
         finally:
             writer.close()
 
-    def __enter__(self) -> "FakeServer":
+    def __enter__(self) -> FakeServer:
         self._thread.start()
         self._ready.wait(5)
         return self

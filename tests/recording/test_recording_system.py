@@ -73,14 +73,13 @@ def test_session_recorded_replayed_and_compared(tmp_path):
 
 
 def test_recorder_killed_mid_session_leaves_a_readable_file(tmp_path):
-    with running("kr16", log_dir=str(tmp_path)) as system:
-        with system.client() as client:
-            for _ in range(30):
-                assert client.ask("GetRobot") == "kr16\n"
-            time.sleep(1.5)  # over a second of records, chunks closed every 0.5 s
-            killed_at = time.time()
-            os.kill(system.pids()["recorder"], signal.SIGKILL)
-            assert client.ask("CM_PING") == "PONG\n"  # the gateway does not depend on it
+    with running("kr16", log_dir=str(tmp_path)) as system, system.client() as client:
+        for _ in range(30):
+            assert client.ask("GetRobot") == "kr16\n"
+        time.sleep(1.5)  # over a second of records, chunks closed every 0.5 s
+        killed_at = time.time()
+        os.kill(system.pids()["recorder"], signal.SIGKILL)
+        assert client.ask("CM_PING") == "PONG\n"  # the gateway does not depend on it
     for path in tmp_path.glob("*.mcap"):
         records = list(read_records(path))  # reads up to the last complete chunk
         assert records, f"{path.name} has no readable records"

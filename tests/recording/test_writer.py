@@ -178,11 +178,10 @@ def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path, caplog):
 
 def test_missed_batches_are_logged_and_recorded_on_the_status_channel(tmp_path, caplog):
     """What the bus reports as lost on the way (sample-miss detection) is in the file."""
-    with caplog.at_level(logging.WARNING, logger="rob6.recorder"):
-        with Recorder(tmp_path, "kr16", "robot1") as rec:
-            rec.report_missed("rob6/robot1/trace/gateway gw-1", 3)
-            rec.report_missed("rob6/robot1/trace/gateway gw-1", 2)
-            assert rec.stats().missed == 5
+    with caplog.at_level(logging.WARNING, logger="rob6.recorder"), Recorder(tmp_path, "kr16", "robot1") as rec:
+        rec.report_missed("rob6/robot1/trace/gateway gw-1", 3)
+        rec.report_missed("rob6/robot1/trace/gateway gw-1", 2)
+        assert rec.stats().missed == 5
     assert any("missed 3 trace batches from rob6/robot1/trace/gateway gw-1" in r.message for r in caplog.records)
     (system,) = _files(tmp_path, "system")
     status = [r.data for r in read_records(system) if r.topic == "/recorder/status"]

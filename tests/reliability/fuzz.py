@@ -20,6 +20,7 @@ RELIABILITY.md (``python -m bench.reliability``) imports them from here.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
@@ -424,10 +425,8 @@ class TcpFuzzer:
             self.check_position()
 
     def _reconnect(self):
-        try:
+        with contextlib.suppress(OSError):
             self.client.close()
-        except OSError:
-            pass
         time.sleep(0.2)
         self._client = FuzzClient(self.system.port)
         self.reconnects += 1

@@ -102,10 +102,9 @@ def test_rob6_run_enables_shutdown():
 
 @pytest.mark.parametrize("robot", ["kr16", "ad850"])
 def test_direct_adept_cmd_is_off_in_rob6_run(robot):
-    with running(robot, dummy=True) as system:
-        with Client(system.port) as client:
-            if robot == "kr16":  # not an Adept: false, as the original
-                assert client.ask("DirectAdeptCmd SPEED 100") == "false\n"
-            else:
-                reply = client.ask("DirectAdeptCmd SPEED 100", lines=2)
-                assert reply.startswith("ERROR: DirectAdeptCmd is disabled") and reply.endswith("\nfalse\n")
+    with running(robot, dummy=True) as system, Client(system.port) as client:
+        if robot == "kr16":  # not an Adept: false, as the original
+            assert client.ask("DirectAdeptCmd SPEED 100") == "false\n"
+        else:
+            reply = client.ask("DirectAdeptCmd SPEED 100", lines=2)
+            assert reply.startswith("ERROR: DirectAdeptCmd is disabled") and reply.endswith("\nfalse\n")

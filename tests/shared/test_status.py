@@ -15,7 +15,7 @@ def test_parse_status():
     assert parse_status(["righty", "down", "flip"]) == ("flip", "down", "righty")
     assert parse_status(["noflip", "up"]) == ("noflip", "up", "toggleArm")
     assert parse_status(["noflip"]) == ("noflip", "toggleElbow", "toggleArm")
-    assert parse_status("toggleArm toggleElbow toggleHand".split()) == ("toggleHand", "toggleElbow", "toggleArm")
+    assert parse_status(["toggleArm", "toggleElbow", "toggleHand"]) == ("toggleHand", "toggleElbow", "toggleArm")
     assert parse_status(["up", "noflip", "lefty", "extra"]) == ("noflip", "up", "lefty")  # a 4th word: ignored
     for bad in (["NOFLIP", "UP", "LEFTY"], ["Flip", "down", "righty"], ["foo", "up", "lefty"],
                 ["flip", "flip", "righty"], []):

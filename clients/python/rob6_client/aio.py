@@ -48,7 +48,7 @@ class AsyncRobot(AsyncRobotCommands):
         try:
             self._reader, self._writer = reader, writer = await asyncio.wait_for(
                 asyncio.open_connection(self.host, self.port), self.connect_timeout)
-        except (OSError, asyncio.TimeoutError) as exc:
+        except (TimeoutError, OSError) as exc:
             raise Rob6ConnectionError(f"cannot connect to {self.host}:{self.port}: {exc!r}") from exc
         writer.get_extra_info("socket").setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         try:
@@ -160,7 +160,7 @@ class AsyncRobot(AsyncRobotCommands):
         assert self._reader is not None  # connected: _run checked
         try:
             chunk = await asyncio.wait_for(self._reader.read(65536), timeout)
-        except asyncio.TimeoutError:
+        except TimeoutError:
             return False
         except OSError as exc:
             raise Rob6ConnectionError(f"connection lost: {exc}") from exc

@@ -19,7 +19,7 @@ import operator
 import re
 from collections.abc import Callable, Generator, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Union
+from typing import Any, NamedTuple
 
 from .errors import Rob6ConnectionError, Rob6Error, Rob6ProtocolError
 
@@ -30,10 +30,10 @@ log = logging.getLogger("rob6_client")
 Joints = tuple[float, float, float, float, float, float]
 """Six joint values (degrees, or per-joint limits), as the server printed them."""
 
-PoseLike = Union[Sequence[float], Sequence[Sequence[float]]]
+PoseLike = Sequence[float] | Sequence[Sequence[float]]
 """12 numbers row by row, 3 rows of 4, or a 4x4 homogeneous matrix (e.g. a numpy array)."""
 
-StatusLike = Union[str, Sequence[str]]
+StatusLike = str | Sequence[str]
 """``"noflip up lefty"`` or its words; 1-3 words, one per category, the rest toggle."""
 
 

@@ -306,7 +306,7 @@ class Controller:
         while len(record) < IO_BUFFER:
             try:
                 more = await asyncio.wait_for(reader.read(IO_BUFFER - len(record)), 0.001)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 break
             if not more:
                 break

@@ -6,7 +6,7 @@ import math
 import socket
 import time
 from collections import deque
-from typing import Callable
+from collections.abc import Callable
 
 
 class FaultError(ValueError):

@@ -9,7 +9,7 @@ than an axis can move; the axes follow the command at most at rated speed.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from .kinematics import Kinematics
 from .machine import Machine

@@ -7,6 +7,7 @@ clock; replies and control requests are handled as they arrive in between.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import selectors
@@ -317,10 +318,8 @@ class Simulator:
         except OSError:
             pass
         finally:
-            try:
+            with contextlib.suppress(OSError):
                 conn.setblocking(False)
-            except OSError:
-                pass
 
     def handle(self, line: bytes) -> dict:
         try:

@@ -65,18 +65,18 @@ class Limits:
 
     @classmethod
     def from_protocol(cls, turn_min, turn_max, max_speed, max_accel, max_change,
-                      jerk_ramp_s: float = JERK_RAMP_S) -> "Limits":
+                      jerk_ramp_s: float = JERK_RAMP_S) -> Limits:
         a = accel_si(max_accel)
         return cls(np.asarray(turn_min, float).copy(), np.asarray(turn_max, float).copy(),
                    np.array(speed_si(max_speed)), np.array(a), np.array(jerk_si(a, jerk_ramp_s)),
                    np.asarray(max_change, float).copy())
 
     @classmethod
-    def defaults(cls, robot: RobotModel) -> "Limits":
+    def defaults(cls, robot: RobotModel) -> Limits:
         return cls.from_protocol(robot.turn_min, robot.turn_max, robot.default_speed,
                                  robot.default_accel, robot.default_max_change)
 
-    def copy(self) -> "Limits":
+    def copy(self) -> Limits:
         return Limits(self.turn_min.copy(), self.turn_max.copy(), self.vmax.copy(),
                       self.amax.copy(), self.jmax.copy(), self.max_change.copy())
 

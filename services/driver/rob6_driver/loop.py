@@ -69,7 +69,7 @@ class CycleRunner(Generic[S]):
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
 
-    def __enter__(self) -> "CycleRunner[S]":
+    def __enter__(self) -> CycleRunner[S]:
         self.start()
         return self
 

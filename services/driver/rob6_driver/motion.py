@@ -115,13 +115,13 @@ class Motion:
         self.reason = ""
         self.error = ""
         self.final: CoreState | None = None
-        self._callbacks: list[Callable[["Motion"], None]] = []
+        self._callbacks: list[Callable[[Motion], None]] = []
         self._lock = threading.Lock()
 
     def wait(self, timeout: float | None = None) -> bool:
         return self.done.wait(timeout)
 
-    def add_done_callback(self, fn: Callable[["Motion"], None]) -> None:
+    def add_done_callback(self, fn: Callable[[Motion], None]) -> None:
         with self._lock:
             if not self.done.is_set():
                 self._callbacks.append(fn)

@@ -211,10 +211,9 @@ class DriverService:
 
     def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:
         """The planner supervises every motion: without one, the robot stops (ramped)."""
-        if service == "planner" and not alive and not self.bus.instances("planner"):
-            if self.core.state().moving:
-                log.warning("the planner went away during a motion: stopping")
-                self.core.stop("planner went away")
+        if service == "planner" and not alive and not self.bus.instances("planner") and self.core.state().moving:
+            log.warning("the planner went away during a motion: stopping")
+            self.core.stop("planner went away")
 
     def start(self) -> None:
         self.bus.on_liveliness(self._on_liveliness)

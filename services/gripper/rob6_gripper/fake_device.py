@@ -22,6 +22,7 @@ Fault switches (plain attributes, change them any time):
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
 import struct
@@ -85,10 +86,8 @@ class FakeSmpDevice:
         for name in ("_master", "_slave"):
             fd = getattr(self, name)
             if fd is not None:
-                try:
+                with contextlib.suppress(OSError):
                     os.close(fd)
-                except OSError:
-                    pass
                 setattr(self, name, None)
 
     def unplug(self) -> None:

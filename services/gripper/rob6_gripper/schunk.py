@@ -18,6 +18,7 @@ Assumptions where the public material is unclear
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections import deque
@@ -150,10 +151,8 @@ class SchunkGripper(GripperBackend):
     def _drop_port(self) -> None:
         port, self._port = self._port, None
         if port is not None:
-            try:
+            with contextlib.suppress(Exception):  # closing a dead port: whatever it raises
                 port.close()
-            except Exception:  # closing a dead port: whatever it raises
-                pass
 
     def close(self) -> None:
         with self._io:
@@ -302,10 +301,8 @@ class SchunkGripper(GripperBackend):
             self._wake.clear()
 
     def _quiet_stop(self) -> None:
-        try:
+        with contextlib.suppress(SmpError):
             self._transact(CMD_STOP)
-        except SmpError:
-            pass
 
     # ------------------------------------------------------------ interface
     def has_gripper(self) -> bool:

@@ -158,9 +158,8 @@ def _first_crossing(seg: _Seg, x: float, downward: bool) -> float | None:
     # g(tau) >= 0 means "at or beyond the barrier"
     sgn = -1.0 if downward else 1.0
     A, B, C = sgn * 0.5 * seg.a, sgn * seg.v0, sgn * (seg.w0 - x)
-    if C >= -EPS:  # starts on (or beyond) the barrier
-        if C > EPS or B > 1e-12 or (abs(B) <= 1e-12 and A > 0):
-            return 0.0
+    if C >= -EPS and (C > EPS or B > 1e-12 or (abs(B) <= 1e-12 and A > 0)):  # starts on (or beyond) the barrier
+        return 0.0
     roots: list[float] = []
     if abs(A) < 1e-15:
         if abs(B) > 1e-15:

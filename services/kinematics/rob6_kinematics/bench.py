@@ -20,10 +20,36 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
+import numpy.typing as npt
 
 from rob6.robots import DEFAULT_ROBOT
+
+from .opw import FloatArray
+
+if TYPE_CHECKING:
+    from .calc import Kinematics
+    from .model import PinModel
+
+
+class IkBench(TypedDict):
+    """What ``bench_ik`` measured."""
+
+    robot: str
+    batch_ik_poses_per_s: float
+    single_ik_poses_per_s: float
+    single_ik_numpy_poses_per_s: float
+    backward_calc_us: float
+    forward_calc_us: float
+    clik_poses_per_s: float
+    clik_success_rate: float
+    batch_solved_rate: float
+    n_batch: int
+    n_single: int
+    n_clik: int
 
 
 def _single_thread() -> None:
@@ -31,7 +57,7 @@ def _single_thread() -> None:
         os.environ.setdefault(var, "1")
 
 
-def random_poses(kin, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def random_poses(kin: Kinematics, n: int, seed: int = 0) -> tuple[FloatArray, FloatArray]:
     """n poses (N,3,4) from random joints inside the turn limits, and the joints."""
     rng = np.random.default_rng(seed)
     lo = np.maximum(kin.turn_min, -179.0)
@@ -40,7 +66,8 @@ def random_poses(kin, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return kin.fk(q), q
 
 
-def clik(pm, T_mm: np.ndarray, q0=None, eps=1e-4, it_max=1000, dt=1e-1, damp=1e-12):
+def clik(pm: PinModel, T_mm: FloatArray, q0: npt.ArrayLike | None = None, eps: float = 1e-4, it_max: int = 1000,
+         dt: float = 1e-1, damp: float = 1e-12) -> tuple[FloatArray, bool]:
     """Pinocchio example CLIK to the flange pose T (mm). Returns (q_deg, success)."""
     import pinocchio as pin
 
@@ -60,7 +87,7 @@ def clik(pm, T_mm: np.ndarray, q0=None, eps=1e-4, it_max=1000, dt=1e-1, damp=1e-
     return np.degrees(q), False
 
 
-def _best(repeat: int, fn) -> float:
+def _best(repeat: int, fn: Callable[[], object]) -> float:
     best = np.inf
     for _ in range(repeat):
         t0 = time.perf_counter()
@@ -70,7 +97,7 @@ def _best(repeat: int, fn) -> float:
 
 
 def bench_ik(robot: str = DEFAULT_ROBOT, n_batch: int = 20000, n_single: int = 2000, n_clik: int = 50,
-             repeat: int = 3, seed: int = 0) -> dict:
+             repeat: int = 3, seed: int = 0) -> IkBench:
     """Poses/s of batch IK, single-call IK and Pinocchio CLIK on the same poses."""
     _single_thread()
     from rob6.robots import get_robot

@@ -18,13 +18,19 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from functools import cached_property
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
+import numpy.typing as npt
 
+from rob6.robots import RobotModel
 from rob6.status import Status, parse_status, status_flags, status_matches, status_words
 
 from . import opw
-from .opw import BRANCH_INDEX, BRANCHES, DEG, Geometry
+from .opw import BRANCH_INDEX, BRANCHES, DEG, FloatArray, Geometry
+
+if TYPE_CHECKING:
+    from .model import PinModel
 from .selection import STATUS_ORDER
 
 #: Tie-break order of the branches (indices into BRANCHES): flip before noflip, up
@@ -42,7 +48,7 @@ class Kinematics:
 
     BRANCHES: tuple[str, ...] = BRANCHES
 
-    def __init__(self, robot, geometry: Geometry | None = None):
+    def __init__(self, robot: RobotModel, geometry: Geometry | None = None):
         self.robot = robot
         self.g = geometry or Geometry.of(robot)
         self.turn_min = np.array(robot.turn_min, dtype=float)
@@ -57,7 +63,7 @@ class Kinematics:
         self._mid = ((np.asarray(robot.hw_min, float) + np.asarray(robot.hw_max, float)) / 2).tolist()
 
     # ------------------------------------------------------------------ FK / IK
-    def fk(self, q) -> np.ndarray:
+    def fk(self, q: npt.ArrayLike) -> FloatArray:
         """Flange pose(s) of joints q (deg), (6,) or (N,6) -> (N,3,4), mm.
 
         Computed like the original (``opw.fk_compiled``): its ``%f`` text is the
@@ -66,23 +72,23 @@ class Kinematics:
         """
         return opw.fk_compiled(self.g, q)
 
-    def fk_fast(self, q) -> np.ndarray:
+    def fk_fast(self, q: npt.ArrayLike) -> FloatArray:
         """Closed-form vectorised FK (same result as ``fk`` up to rounding)."""
         return opw.fk(self.g, q)
 
-    def ik(self, T) -> np.ndarray:
+    def ik(self, T: npt.ArrayLike) -> FloatArray:
         """All 8 closed-form solutions, (N,3,4)/(N,12) -> (N,8,6) deg in (-180,180].
 
         NaN where a branch has no solution; branch order ``BRANCHES``.  No limits.
         """
         return opw.ik(self.g, T)
 
-    def ik_one(self, T) -> list[list[float] | None]:
+    def ik_one(self, T: npt.ArrayLike) -> list[list[float] | None]:
         """``ik`` of one pose without numpy's per-call overhead (``opw.ik_one``):
         8 branches, each 6 joints (deg) or None."""
         return opw.ik_one(self.g, T)
 
-    def ik_limited(self, T, turn_min=None, turn_max=None) -> np.ndarray:
+    def ik_limited(self, T: npt.ArrayLike, turn_min: npt.ArrayLike | None = None, turn_max: npt.ArrayLike | None = None) -> FloatArray:
         """``ik`` with the original's limit handling, vectorised: each joint outside
         its turn limits is shifted once by -+360 deg; a branch with a joint not
         strictly inside the limits afterwards becomes NaN."""
@@ -90,32 +96,36 @@ class Kinematics:
         hi = self.turn_max if turn_max is None else np.asarray(turn_max, float)
         return apply_limits(self.ik(T), lo, hi)
 
-    def status(self, q) -> str:
+    def status(self, q: npt.ArrayLike) -> str:
         """Status words of joints q (deg), e.g. ``"noflip up lefty"``."""
         return " ".join(self.robot_status(q))
 
-    def robot_status(self, q) -> Status:
+    def robot_status(self, q: npt.ArrayLike) -> Status:
         """Status words of joints q (deg) in this kinematics' geometry."""
-        q = _floats6(q)
-        return status_words(*status_flags(self.g, math.radians(q[1]), math.radians(q[2]), q[4]))
+        v = _floats6(q)
+        return status_words(*status_flags(self.g, math.radians(v[1]), math.radians(v[2]), v[4]))
 
-    def status_batch(self, q) -> np.ndarray:
+    def status_batch(self, q: npt.ArrayLike) -> npt.NDArray[np.int_]:
         """Vectorised status as branch indices (N,) (index into ``BRANCHES``)."""
-        q = opw.as_joints(q)
-        flip, up, lefty = status_flags(self.g, q[:, 1] * DEG, q[:, 2] * DEG, q[:, 4], sin=np.sin, cos=np.cos)
+        Q = opw.as_joints(q)
+        flags: tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_], npt.NDArray[np.bool_]] = status_flags(
+            self.g, Q[:, 1] * DEG, Q[:, 2] * DEG, Q[:, 4], sin=np.sin, cos=np.cos)
+        flip, up, lefty = flags
         return 4 * flip + 2 * ~up + ~lefty
 
     # ------------------------------------------------------------------ ForwardCalc
-    def partial_frame(self, q_deg, n: int) -> np.ndarray:
+    def partial_frame(self, q_deg: npt.ArrayLike, n: int) -> FloatArray:
         """Frame of joint n (1..6) of the original's compiled chain, (3,4).
 
         The chain (robots.md "ForwardCalc quirks"): A1..An with
         theta = [-q1, q2, q3+90, q4, q5, q6], d4 -> -d4, d6 -> -d6, a3 -> -a3, the
         same twists, and no final Ry(180); n = 6 is the flange pose.
         """
-        return opw.fk_compiled(self.g, np.asarray(q_deg, float).reshape(1, 6), n)[0]
+        # numpy's stubs type an integer index as Any: it is the first (3,4) frame
+        return cast(FloatArray, opw.fk_compiled(self.g, np.asarray(q_deg, float).reshape(1, 6), n)[0])
 
-    def forward_calc(self, numbers: Sequence[float], turn_min=None, turn_max=None):
+    def forward_calc(self, numbers: Sequence[float], turn_min: npt.ArrayLike | None = None,
+                     turn_max: npt.ArrayLike | None = None) -> tuple[list[float], str] | None:
         """``ForwardCalc``: -> (list of 12 floats, status string) or None (``false``).
 
         ``numbers`` are the leading numbers that parsed (the gateway stops at the
@@ -138,7 +148,7 @@ class Kinematics:
         return opw.fk_compiled_one(self.g, q, n), self.status(q)
 
     # ------------------------------------------------------------------ BackwardCalc
-    def resolve_pattern(self, pattern, current_q) -> list[int]:
+    def resolve_pattern(self, pattern: str | Sequence[str], current_q: npt.ArrayLike) -> list[int]:
         """Branch indices (``BRANCHES`` order) admitted by a status pattern at the
         current joints (``noToggle…`` = the current status' word)."""
         pat = parse_status(pattern.split() if isinstance(pattern, str) else pattern)
@@ -147,13 +157,13 @@ class Kinematics:
 
     def backward_calc(
         self,
-        matrix: Sequence[float],
-        pattern,
-        current_q,
-        turn_min=None,
-        turn_max=None,
-        max_change=None,
-        weights=None,
+        matrix: npt.ArrayLike,
+        pattern: str | Sequence[str],
+        current_q: npt.ArrayLike,
+        turn_min: npt.ArrayLike | None = None,
+        turn_max: npt.ArrayLike | None = None,
+        max_change: npt.ArrayLike | None = None,
+        weights: npt.ArrayLike | None = None,
     ) -> list[float] | None:
         """``BackwardCalc`` / ``GetJointsRowWise``: -> list of 6 joints (deg) or None.
 
@@ -203,19 +213,22 @@ class Kinematics:
                 best, best_cost = q, cost
         return best
 
-    def is_possible(self, matrix, pattern, current_q, turn_min=None, turn_max=None, max_change=None) -> bool:
+    def is_possible(self, matrix: npt.ArrayLike, pattern: str | Sequence[str], current_q: npt.ArrayLike,
+                    turn_min: npt.ArrayLike | None = None, turn_max: npt.ArrayLike | None = None, max_change: npt.ArrayLike | None = None) -> bool:
         """``IsPossible`` = BackwardCalc would return joints (independent of weights)."""
         cur = _floats6(current_q)
         cands = self._check_one(self.ik_one(_matrix12(matrix)), cur, turn_min, turn_max, max_change)
         return any(cands[b] is not None for b in self.resolve_pattern(pattern, cur))
 
-    def candidates(self, matrix, current_q, turn_min=None, turn_max=None, max_change=None) -> np.ndarray:
+    def candidates(self, matrix: npt.ArrayLike, current_q: npt.ArrayLike, turn_min: npt.ArrayLike | None = None,
+                   turn_max: npt.ArrayLike | None = None, max_change: npt.ArrayLike | None = None) -> FloatArray:
         """(8,6) solutions after the limit shift, limit and max-change checks, in
         ``BRANCHES`` order; NaN rows are not possible."""
         cands = self._check_one(self.ik_one(_matrix12(matrix)), _floats6(current_q), turn_min, turn_max, max_change)
         return np.array([[math.nan] * 6 if q is None else q for q in cands])
 
-    def _check_one(self, raw, cur, turn_min, turn_max, max_change) -> list[list[float] | None]:
+    def _check_one(self, raw: Sequence[list[float] | None], cur: list[float], turn_min: npt.ArrayLike | None,
+                   turn_max: npt.ArrayLike | None, max_change: npt.ArrayLike | None) -> list[list[float] | None]:
         """``_check`` on ``ik_one``'s branches in plain floats (None = not possible)."""
         lo = self._lo if turn_min is None else _floats6(turn_min)
         hi = self._hi if turn_max is None else _floats6(turn_max)
@@ -229,7 +242,8 @@ class Kinematics:
             out.append(q)
         return out
 
-    def _check(self, raw, current_q, turn_min, turn_max, max_change) -> np.ndarray:
+    def _check(self, raw: FloatArray, current_q: npt.ArrayLike, turn_min: npt.ArrayLike | None,
+               turn_max: npt.ArrayLike | None, max_change: npt.ArrayLike | None) -> FloatArray:
         lo = self.turn_min if turn_min is None else np.asarray(turn_min, float)
         hi = self.turn_max if turn_max is None else np.asarray(turn_max, float)
         mc = self.max_change if max_change is None else np.asarray(max_change, float)
@@ -242,39 +256,39 @@ class Kinematics:
 
     # ------------------------------------------------------------------ Pinocchio
     @cached_property
-    def pin(self):
+    def pin(self) -> PinModel:
         from .model import PinModel
 
         return PinModel(self.robot, self.g)
 
-    def jacobian(self, q):
+    def jacobian(self, q: npt.ArrayLike) -> FloatArray:
         """Flange Jacobian (6,6) at q (deg), LOCAL_WORLD_ALIGNED, rows (v [mm/rad], w [rad/rad])."""
         return self.pin.jacobian(q)
 
-    def manipulability(self, q) -> float:
+    def manipulability(self, q: npt.ArrayLike) -> float:
         """Yoshikawa manipulability sqrt(det(J J^T)) of the flange Jacobian (m, rad)."""
         return self.pin.manipulability(q)
 
 
-def _floats6(x) -> list[float]:
+def _floats6(x: npt.ArrayLike) -> list[float]:
     """6 plain floats from a sequence / array (numpy broadcasting rules otherwise)."""
     if isinstance(x, (list, tuple)) and len(x) == 6:
         return [float(v) for v in x]
-    return np.broadcast_to(np.asarray(x, dtype=float).reshape(-1) if np.ndim(x) > 1 else np.asarray(x, dtype=float),
-                           (6,)).tolist()
+    return cast(list[float], np.broadcast_to(
+        np.asarray(x, dtype=float).reshape(-1) if np.ndim(x) > 1 else np.asarray(x, dtype=float), (6,)).tolist())
 
 
-def _matrix12(m) -> list[float]:
+def _matrix12(m: npt.ArrayLike) -> list[float]:
     """12 row-wise floats of a pose (12 numbers or (3,4))."""
     if isinstance(m, (list, tuple)) and len(m) == 12:
         return [float(v) for v in m]
     return np.asarray(m, dtype=float).reshape(12).tolist()
 
 
-def apply_limits(Q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def apply_limits(raw: npt.ArrayLike, lo: FloatArray, hi: FloatArray) -> FloatArray:
     """Shift each joint outside (lo, hi) once by -+360, then NaN the branches that
     are still not strictly inside.  Q: (..., 6) degrees."""
-    Q = np.array(Q, dtype=float, copy=True)
+    Q = np.array(raw, dtype=float, copy=True)
     Q = np.where(Q >= hi, Q - 360.0, np.where(Q <= lo, Q + 360.0, Q))
     inside = np.all((lo < Q) & (Q < hi), axis=-1)
     Q[~inside] = np.nan

@@ -8,16 +8,19 @@ itself works in radians and metres).
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
-from .opw import DEG, Geometry
+from rob6.robots import RobotModel
+
+from .opw import DEG, FloatArray, Geometry
 from .urdf import generate
 
 
 class PinModel:
     """Pinocchio model + data of one robot; ``flange`` is the protocol's frame."""
 
-    def __init__(self, robot, geometry: Geometry | None = None):
+    def __init__(self, robot: RobotModel, geometry: Geometry | None = None):
         if geometry is not None and geometry != Geometry.of(robot):
             from dataclasses import replace
 
@@ -31,11 +34,10 @@ class PinModel:
             raise RuntimeError(f"expected 6 joints, URDF has {self.model.nq}")
 
     # ------------------------------------------------------------------
-    def _q(self, q_deg) -> np.ndarray:
-        q = np.asarray(q_deg, dtype=float).reshape(6) * DEG
-        return q
+    def _q(self, q_deg: npt.ArrayLike) -> FloatArray:
+        return np.asarray(q_deg, dtype=float).reshape(6) * DEG
 
-    def fk(self, q_deg) -> np.ndarray:
+    def fk(self, q_deg: npt.ArrayLike) -> FloatArray:
         """Flange pose (3,4), mm, of joints q (deg)."""
         pin.framesForwardKinematics(self.model, self.data, self._q(q_deg))
         M = self.data.oMf[self.flange]
@@ -44,28 +46,28 @@ class PinModel:
         T[:, 3] = M.translation * 1000.0
         return T
 
-    def fk_batch(self, q_deg) -> np.ndarray:
+    def fk_batch(self, q_deg: npt.ArrayLike) -> FloatArray:
         q = np.asarray(q_deg, float).reshape(-1, 6)
         return np.stack([self.fk(x) for x in q])
 
-    def jacobian(self, q_deg, *, si: bool = False) -> np.ndarray:
+    def jacobian(self, q_deg: npt.ArrayLike, *, si: bool = False) -> FloatArray:
         """Flange Jacobian (6,6) in LOCAL_WORLD_ALIGNED (base-aligned axes at the
         flange origin): rows (vx, vy, vz, wx, wy, wz) per rad/s of each joint.
         Linear rows in mm/rad (``si=True``: m/rad)."""
-        J = pin.computeFrameJacobian(
+        J: FloatArray = pin.computeFrameJacobian(
             self.model, self.data, self._q(q_deg), self.flange, pin.LOCAL_WORLD_ALIGNED
         ).copy()
         if not si:
             J[:3] *= 1000.0
         return J
 
-    def manipulability(self, q_deg) -> float:
+    def manipulability(self, q_deg: npt.ArrayLike) -> float:
         """Yoshikawa measure sqrt(det(J J^T)) = |det J| with J in SI units (m, rad);
         0 at a singularity (wrist: q5 = 0, elbow stretched, wrist centre on J1)."""
         J = self.jacobian(q_deg, si=True)
         return float(abs(np.linalg.det(J)))
 
-    def condition(self, q_deg) -> float:
+    def condition(self, q_deg: npt.ArrayLike) -> float:
         """Condition number of the SI Jacobian (inf at a singularity)."""
         s = np.linalg.svd(self.jacobian(q_deg, si=True), compute_uv=False)
         return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")

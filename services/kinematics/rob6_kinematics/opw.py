@@ -21,10 +21,15 @@ major::
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
+import numpy.typing as npt
 
 from rob6 import robots
+
+#: the arrays this package computes with: float64 joints (deg, rad), poses (mm)
+FloatArray = npt.NDArray[np.float64]
 
 DEG = np.pi / 180.0
 RAD = 180.0 / np.pi
@@ -62,15 +67,15 @@ class Geometry:
     d6: float
 
     @classmethod
-    def of(cls, robot) -> "Geometry":
+    def of(cls, robot: robots.RobotModel) -> Geometry:
         return cls(robot.d1, robot.a1, robot.a2, robot.a3, robot.d4, robot.d6)
 
     @property
-    def d(self) -> np.ndarray:
+    def d(self) -> FloatArray:
         return np.array([self.d1, 0.0, 0.0, self.d4, 0.0, self.d6])
 
     @property
-    def a(self) -> np.ndarray:
+    def a(self) -> FloatArray:
         return np.array([self.a1, self.a2, self.a3, 0.0, 0.0, 0.0])
 
 
@@ -81,39 +86,39 @@ class Geometry:
 WRAP_EPS_DEG = 1e-9
 
 
-def wrap180(q):
+def wrap180(q: npt.ArrayLike) -> FloatArray:
     """Map angles (deg) into (-180, 180]."""
-    q = 180.0 - np.mod(180.0 - np.asarray(q, dtype=float), 360.0)
-    return np.where(q < -180.0 + WRAP_EPS_DEG, q + 360.0, q)
+    w = 180.0 - np.mod(180.0 - np.asarray(q, dtype=float), 360.0)
+    return np.where(w < -180.0 + WRAP_EPS_DEG, w + 360.0, w)
 
 
-def as_poses(T) -> np.ndarray:
+def as_poses(T: npt.ArrayLike) -> FloatArray:
     """Accept (12,), (3,4), (4,4), (N,12), (N,3,4), (N,4,4); return (N,3,4) float."""
-    T = np.asarray(T, dtype=float)
-    if T.shape[-1] == 12:
-        T = T.reshape(T.shape[:-1] + (3, 4))
-    if T.shape[-2:] == (4, 4):
-        T = T[..., :3, :]
-    if T.shape[-2:] != (3, 4):
-        raise ValueError(f"pose shape {T.shape} is not (...,3,4)/(...,4,4)/(...,12)")
-    return T.reshape((-1, 3, 4))
+    P = np.asarray(T, dtype=float)
+    if P.shape[-1] == 12:
+        P = P.reshape(P.shape[:-1] + (3, 4))
+    if P.shape[-2:] == (4, 4):
+        P = P[..., :3, :]
+    if P.shape[-2:] != (3, 4):
+        raise ValueError(f"pose shape {P.shape} is not (...,3,4)/(...,4,4)/(...,12)")
+    return P.reshape((-1, 3, 4))
 
 
-def as_joints(q) -> np.ndarray:
-    q = np.asarray(q, dtype=float)
-    if q.shape[-1] != 6:
-        raise ValueError(f"joint shape {q.shape} is not (...,6)")
-    return q.reshape((-1, 6))
+def as_joints(q: npt.ArrayLike) -> FloatArray:
+    Q = np.asarray(q, dtype=float)
+    if Q.shape[-1] != 6:
+        raise ValueError(f"joint shape {Q.shape} is not (...,6)")
+    return Q.reshape((-1, 6))
 
 
-def dh_chain(theta, d, a, alpha) -> np.ndarray:
+def dh_chain(theta: npt.ArrayLike, d: FloatArray, a: FloatArray, alpha: FloatArray) -> FloatArray:
     """Product A1..An of standard DH matrices, vectorised.
 
     theta: (N, n) radians; d, a, alpha: (n,).  Returns (N, 4, 4).
     """
-    theta = np.asarray(theta, dtype=float)
-    N, n = theta.shape
-    ct, st = np.cos(theta), np.sin(theta)
+    th = np.asarray(theta, dtype=float)
+    N, n = th.shape
+    ct, st = np.cos(th), np.sin(th)
     ca, sa = np.cos(alpha), np.sin(alpha)
     A = np.zeros((N, n, 4, 4))
     A[..., 0, 0] = ct
@@ -135,7 +140,7 @@ def dh_chain(theta, d, a, alpha) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- FK
-def fk(g: Geometry, q_deg) -> np.ndarray:
+def fk(g: Geometry, q_deg: npt.ArrayLike) -> FloatArray:
     """Flange poses for joints q (deg), (N,6) or (6,) -> (N,3,4), mm.
 
     Closed-form product (no 4x4 loop): wrist centre from the planar arm, rotation
@@ -191,7 +196,7 @@ def fk(g: Geometry, q_deg) -> np.ndarray:
     return T
 
 
-def fk_compiled(g: Geometry, q_deg, n: int = 6) -> np.ndarray:
+def fk_compiled(g: Geometry, q_deg: npt.ArrayLike, n: int = 6) -> FloatArray:
     """FK through the original's "compiled" chain, (N,6) deg -> (N,3,4) mm.
 
     ``A1'..An'`` with theta' = [-q1, q2, q3+90, q4, q5, q6] deg, d4 -> -d4,
@@ -210,7 +215,7 @@ def fk_compiled(g: Geometry, q_deg, n: int = 6) -> np.ndarray:
     return dh_chain(theta[:, :n], d[:n], a[:n], DH_ALPHA[:n])[:, :3, :]
 
 
-def fk_dh(g: Geometry, q_deg) -> np.ndarray:
+def fk_dh(g: Geometry, q_deg: npt.ArrayLike) -> FloatArray:
     """Reference FK by the literal DH product (slower; used in tests)."""
     q = as_joints(q_deg) * DEG
     theta = DH_SIGNS * q + DH_OFFSETS
@@ -220,7 +225,7 @@ def fk_dh(g: Geometry, q_deg) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- IK
-def ik(g: Geometry, T, *, clamp_tol: float = CLAMP_TOL) -> np.ndarray:
+def ik(g: Geometry, poses: npt.ArrayLike, *, clamp_tol: float = CLAMP_TOL) -> FloatArray:
     """All 8 closed-form solutions, (N,3,4) -> (N,8,6) degrees in (-180, 180].
 
     NaN where the branch has no solution (wrist centre out of reach, zero
@@ -235,7 +240,7 @@ def ik(g: Geometry, T, *, clamp_tol: float = CLAMP_TOL) -> np.ndarray:
 
     The turn limits are *not* applied here (see ``calc.Kinematics``).
     """
-    T = as_poses(T)
+    T = as_poses(poses)
     N = T.shape[0]
     R = T[:, :, :3]
     p = T[:, :, 3]
@@ -277,7 +282,7 @@ def ik(g: Geometry, T, *, clamp_tol: float = CLAMP_TOL) -> np.ndarray:
     ca = np.cos(-np.pi / 2)
     sa = np.sin(-np.pi / 2)
 
-    def dh_rot(th, ca, sa):
+    def dh_rot(th: FloatArray, ca: float, sa: float) -> FloatArray:
         c, s = np.cos(th), np.sin(th)
         z = np.zeros_like(c)
         return np.stack(
@@ -347,7 +352,7 @@ def ik(g: Geometry, T, *, clamp_tol: float = CLAMP_TOL) -> np.ndarray:
 import ctypes  # noqa: E402
 import ctypes.util  # noqa: E402
 import math  # noqa: E402
-from collections.abc import Callable  # noqa: E402
+from collections.abc import Callable, Iterable, Sequence  # noqa: E402
 from fractions import Fraction  # noqa: E402
 
 
@@ -391,7 +396,7 @@ _SA = math.sin(-math.pi / 2)
 _NOISE = 1e-11
 
 
-def _pose12(T) -> list[float]:
+def _pose12(T: npt.ArrayLike) -> list[float]:
     if isinstance(T, (list, tuple)) and len(T) == 12:
         return [float(x) for x in T]
     P = as_poses(T)
@@ -412,19 +417,19 @@ def _fma_x(a: float, b: float, c: float) -> float:
     return _fma(a, b, c)
 
 
-def _mm3_blas(A, B) -> list[list[float]]:
+def _mm3_blas(A: Sequence[Sequence[float]], B: Sequence[Sequence[float]]) -> list[list[float]]:
     """A @ B as numpy/OpenBLAS computes it (fma accumulation, bit for bit)."""
     f = _fma_x
     return [[f(a[2], B[2][j], f(a[1], B[1][j], a[0] * B[0][j] + 0.0)) for j in range(3)] for a in A]
 
 
-def _W_exact(t1: float, t2: float, t3c: float, R) -> list[list[float]]:
+def _W_exact(t1: float, t2: float, t3c: float, R: Sequence[Sequence[float]]) -> list[list[float]]:
     """(A1 A2 A3)^T R of ``ik`` bit for bit."""
     R03 = _mm3_blas(_mm3_blas(_dh_rot(t1, _CA, _SA), _dh_rot(t2, 1.0, 0.0)), _dh_rot(t3c, _CA, _SA))
     return _mm3_blas([list(col) for col in zip(*R03, strict=True)], R)
 
 
-def _wrist(W) -> list[tuple[float, float, float]]:
+def _wrist(W: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
     """(t4, t5, t6) of hands noflip, flip from the wrist rotation W (radians)."""
     r11, r12, r13 = W[0]
     r21, r22, r23 = W[1]
@@ -447,7 +452,7 @@ def _wrap180(x: float) -> float:
     return x + 360.0 if x < -180.0 + WRAP_EPS_DEG else x
 
 
-def ik_one(g: Geometry, T, *, clamp_tol: float = CLAMP_TOL) -> list[list[float] | None]:
+def ik_one(g: Geometry, T: npt.ArrayLike, *, clamp_tol: float = CLAMP_TOL) -> list[list[float] | None]:
     """``ik`` of one pose without numpy: 12 row-wise numbers (or (3,4)/(4,4)) -> 8
     branches (``BRANCHES`` order), each a list of 6 joints (deg, (-180, 180]) or
     None where ``ik`` gives NaN.  Same numbers as ``ik(g, T)[0]`` (see above)."""
@@ -533,7 +538,7 @@ def _ik_one(g: Geometry, t: list[float], clamp_tol: float) -> list[list[float] |
     return out
 
 
-def _near_cut(W, hands, noise: float) -> bool:
+def _near_cut(W: Sequence[Sequence[float]], hands: Sequence[tuple[float, float, float]], noise: float) -> bool:
     """Whether plain-arithmetic noise in W could change a result of ``_wrist``."""
     r11, r12, r13 = W[0]
     r21, r22, r23 = W[1]
@@ -551,7 +556,7 @@ def _near_cut(W, hands, noise: float) -> bool:
     return False
 
 
-def fk_compiled_one(g: Geometry, q_deg, n: int = 6) -> list[float]:
+def fk_compiled_one(g: Geometry, q_deg: Iterable[float], n: int = 6) -> list[float]:
     """``fk_compiled`` of one joint vector without numpy: 6 joints (deg) -> the 12
     row-wise numbers of the frame of joint n (n = 6: the flange pose).
 
@@ -593,7 +598,7 @@ def fk_compiled_one(g: Geometry, q_deg, n: int = 6) -> list[float]:
 
 
 def _fk_via_numpy(g: Geometry, q: list[float], n: int) -> list[float]:
-    return fk_compiled(g, np.array(q).reshape(1, 6), n)[0].reshape(12).tolist()
+    return cast(list[float], fk_compiled(g, np.array(q).reshape(1, 6), n)[0].reshape(12).tolist())
 
 
 _ALPHA_CS = [(float(c), float(s)) for c, s in zip(np.cos(DH_ALPHA), np.sin(DH_ALPHA), strict=True)]

@@ -72,8 +72,26 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Protocol, cast
 
 from rob6.status import STATUS_WORDS, TOGGLE_ALL, Status, parse_status, status_matches
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+#: a status formula: joints (deg) -> "noflip up lefty" or its 3 words
+StatusFn = Callable[[Sequence[float]], str | Sequence[str]]
+
+
+class Solver(Protocol):
+    """What ``select`` needs of a kinematics: the raw IK branches (see ``branches_of``).
+    ``BRANCHES``, ``ik_one`` and the status formula are looked up when present."""
+
+    def ik(self, T: npt.ArrayLike, /) -> npt.ArrayLike: ...
+
+
+class _WithStatus(Protocol):
+    def status(self, q: Sequence[float], /) -> str | Sequence[str]: ...
 
 #: Tie-break order of the IK branches (earlier wins on equal cost): flip before noflip, up
 #: before down, lefty before righty (each category's explicit words in STATUS_WORDS order).
@@ -181,7 +199,7 @@ def joint_move_allowed(
     return status_matches(allowed_pattern, tuple(status_fn(target_q)), tuple(status_fn(current_q)))
 
 
-def branches_of(kin, pose12: Sequence[float]) -> dict[Status, list[float] | None]:
+def branches_of(kin: Solver, pose12: Sequence[float]) -> dict[Status, list[float] | None]:
     """The 8 IK branches of one pose keyed by status label.
 
     ``kin.ik(T)`` must return (N, 8, 6) degrees (NaN = no solution) in the order of
@@ -207,12 +225,12 @@ def branches_of(kin, pose12: Sequence[float]) -> dict[Status, list[float] | None
     return out
 
 
-def _label(label) -> Status:
+def _label(label: str | Sequence[str]) -> Status:
     hand, elbow, arm = label.split() if isinstance(label, str) else label
     return hand, elbow, arm
 
 
-def _status_tuple(fn: Callable) -> Callable[[Sequence[float]], Status]:
+def _status_tuple(fn: StatusFn) -> Callable[[Sequence[float]], Status]:
     """Wrap a status function that may answer "noflip up lefty" or a 3-tuple."""
 
     def status(q: Sequence[float]) -> Status:
@@ -224,7 +242,7 @@ def _status_tuple(fn: Callable) -> Callable[[Sequence[float]], Status]:
 
 
 def select(
-    kin,
+    kin: Solver,
     T12: Sequence[float],
     pattern: Sequence[str],
     current_q: Sequence[float],
@@ -235,7 +253,7 @@ def select(
     allowed_pattern: Sequence[str] | None = TOGGLE_ALL,
     *,
     shift_360: bool = True,
-    status_fn: Callable | None = None,
+    status_fn: StatusFn | None = None,
 ) -> list[float] | None:
     """Configuration choice of a Cartesian move (module docstring).
 
@@ -250,7 +268,8 @@ def select(
     if status_fn is None:
         status_fn = getattr(kin, "robot_status", None)  # calc.Kinematics (geometry-aware)
     if status_fn is None:
-        status_fn = getattr(getattr(kin, "robot", None), "status", None) or kin.status
+        # none of those: the docstring's last resort, kin.status (AttributeError without it)
+        status_fn = getattr(getattr(kin, "robot", None), "status", None) or cast(_WithStatus, kin).status
     try:
         pat = parse_status(pattern)
         allowed = None if allowed_pattern is None else parse_status(allowed_pattern)

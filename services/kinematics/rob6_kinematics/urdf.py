@@ -26,12 +26,15 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .opw import DH_ALPHA, DH_OFFSETS, DH_SIGNS
+from rob6.robots import RobotModel
+
+from .opw import DH_ALPHA, DH_OFFSETS, DH_SIGNS, FloatArray
 
 #: geometries that get a URDF and the robot type whose parameters they use
 GEOMETRIES = {"kr16": "kr16", "kr3": "kr3", "ad850": "ad850", "kaw_fs": "kaw_fs"}
@@ -60,7 +63,7 @@ def _f(x: float) -> str:
     return repr(x)
 
 
-def _vec(v) -> str:
+def _vec(v: Iterable[float]) -> str:
     return " ".join(_f(x) for x in v)
 
 
@@ -76,12 +79,12 @@ def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:
     return r, p, y
 
 
-def _rx(a):
+def _rx(a: float) -> FloatArray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], float)
 
 
-def _rz(a):
+def _rz(a: float) -> FloatArray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], float)
 
@@ -108,7 +111,7 @@ def _cyl_x(x0: float, x1: float, z: float, radius: float, material: str) -> str:
     )
 
 
-def _inertial(mass: float, com, length: float, radius: float) -> str:
+def _inertial(mass: float, com: Iterable[float], length: float, radius: float) -> str:
     # uniform rod about its own axis, crude but positive definite
     ixx = mass * (3 * radius**2 + max(length, radius) ** 2) / 12.0
     izz = mass * radius**2 / 2.0
@@ -120,7 +123,7 @@ def _inertial(mass: float, com, length: float, radius: float) -> str:
     )
 
 
-def generate(robot, name: str | None = None) -> str:
+def generate(robot: RobotModel, name: str | None = None) -> str:
     """URDF text of one robot (``rob6.robots.RobotModel``)."""
     name = name or robot.geometry
     mm = 1e-3

@@ -309,7 +309,7 @@ class MotionSettings:
         }
 
     @classmethod
-    def from_dict(cls, robot: RobotModel | str, data: Mapping[str, Any]) -> "MotionSettings":
+    def from_dict(cls, robot: RobotModel | str, data: Mapping[str, Any]) -> MotionSettings:
         config = cls(robot)
         config.update_from_dict(data)
         return config
@@ -329,7 +329,7 @@ class MotionSettings:
         if "rt_speed_control" in data:
             self.rt_speed_control = int(data["rt_speed_control"])
 
-    def copy(self) -> "MotionSettings":
+    def copy(self) -> MotionSettings:
         return MotionSettings.from_dict(self.robot, self.to_dict())
 
     def __eq__(self, other: object) -> bool:

@@ -74,12 +74,12 @@ class JointLimits:
 
     @classmethod
     def from_protocol(cls, speed: Sequence[float], accel: Sequence[float],
-                      jerk_ramp_s: float = JERK_RAMP_S) -> "JointLimits":
+                      jerk_ramp_s: float = JERK_RAMP_S) -> JointLimits:
         a = accel_si(accel)
         return cls(np.array(speed_si(speed)), np.array(a), np.array(jerk_si(a, jerk_ramp_s)))
 
     @classmethod
-    def from_config(cls, config: Limits) -> "JointLimits":
+    def from_config(cls, config: Limits) -> JointLimits:
         return cls.from_protocol(config.speed, config.accel)
 
 
@@ -108,7 +108,7 @@ class SampledTrajectory:
         return end
 
     @classmethod
-    def still(cls, q: ArrayLike, dt: float) -> "SampledTrajectory":
+    def still(cls, q: ArrayLike, dt: float) -> SampledTrajectory:
         q = np.asarray(q, float).reshape(1, N_JOINTS)
         z = np.zeros_like(q)
         return cls(dt, np.zeros(1), q.copy(), z, z.copy())

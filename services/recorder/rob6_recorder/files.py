@@ -40,7 +40,7 @@ SESSION_BACKLOG_S = 2.0
 
 
 def utc_stamp(ns: int) -> str:
-    return _dt.datetime.fromtimestamp(ns / 1e9, _dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    return _dt.datetime.fromtimestamp(ns / 1e9, _dt.UTC).strftime("%Y%m%dT%H%M%SZ")
 
 
 def _safe(text: str) -> str:

@@ -21,7 +21,7 @@ _SESSION_TOPIC = re.compile(r"^/session/([^/]+)/(client_in|client_out|event)$")
 
 
 def iso(ns: int) -> str:
-    return _dt.datetime.fromtimestamp(ns / 1e9, _dt.timezone.utc).isoformat(
+    return _dt.datetime.fromtimestamp(ns / 1e9, _dt.UTC).isoformat(
         timespec="microseconds").replace("+00:00", "Z")
 
 

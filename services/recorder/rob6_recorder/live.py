@@ -110,10 +110,7 @@ def command_log(topic: str, data: Any, log_time: int) -> dict[str, Any] | None:
     incoming = topic.endswith("/client_in")
     text = str(record.get("text", "")).rstrip("\r\n")
     session = record.get("session", topic.split("/")[2])
-    if not incoming and record.get("kind") == "greeting":
-        message = f"< {text}"
-    else:
-        message = f"{'>' if incoming else '<'} {text}"
+    message = f"{'>' if incoming else '<'} {text}"
     level = 4 if not incoming and text.startswith(("ERROR", "Error", "error")) else 2
     return {"timestamp": stamp(log_time), "level": level, "message": message, "name": f"session {session}",
             "file": "", "line": 0, "session": session, "cid": record.get("cid", ""),
@@ -123,7 +120,7 @@ def command_log(topic: str, data: Any, log_time: int) -> dict[str, Any] | None:
 class _Listener(ServerListener):
     """Server callbacks: re-send latched topics to a new subscriber; playback control."""
 
-    def __init__(self, view: "LiveView"):
+    def __init__(self, view: LiveView):
         self.view = view
 
     def on_subscribe(self, client: Client, channel: ChannelView) -> None:

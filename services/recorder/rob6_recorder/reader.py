@@ -11,6 +11,7 @@ publish_time, data, schema name, sequence) in the order they were written.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import struct
@@ -214,10 +215,8 @@ class RecordingReader:
                 schema = self.schemas.get(channel.schema_id)
                 data: Any = rec.data
                 if decode and channel.message_encoding == "json":
-                    try:
+                    with contextlib.suppress(msgspec.DecodeError):
                         data = _decoder.decode(rec.data)
-                    except msgspec.DecodeError:
-                        pass
                 yield Record(channel.topic, rec.log_time, rec.publish_time, data,
                              schema.name if schema else "", rec.sequence)
             elif isinstance(rec, Channel):

@@ -279,7 +279,7 @@ class _Conn(asyncio.Protocol):
         self._event.clear()
         try:
             await asyncio.wait_for(self._event.wait(), timeout)
-        except asyncio.TimeoutError:
+        except TimeoutError:
             return False
         return True
 
@@ -346,7 +346,7 @@ async def replay_script(script: Script, host: str, port: int, *,
     loop = asyncio.get_running_loop()
     try:
         _, conn = await asyncio.wait_for(loop.create_connection(_Conn, host, port), timeout)
-    except (OSError, asyncio.TimeoutError) as exc:
+    except (TimeoutError, OSError) as exc:
         result.aborted = f"{script.name}: cannot connect to {host}:{port}: {exc!r}"
         return result
     try:

@@ -154,14 +154,14 @@ class Recorder:
         self._live = live
 
     # ----------------------------------------------------------------- lifecycle
-    def start(self) -> "Recorder":
+    def start(self) -> Recorder:
         if self._thread is None:
             self._thread = threading.Thread(target=self._run, name="rob6-recorder-writer",
                                             daemon=True)
             self._thread.start()
         return self
 
-    def __enter__(self) -> "Recorder":
+    def __enter__(self) -> Recorder:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

@@ -106,14 +106,14 @@ class Calling(Liveliness):
             finally:
                 exchange.close()
 
-    def _watch(self, exchange: "_Exchange") -> None:
+    def _watch(self, exchange: _Exchange) -> None:
         if self._watcher is None:
             with self._lock:
                 if self._watcher is None:
                     self._watcher = _Watcher(self)
         self._watcher.add(exchange)
 
-    def _query(self, call: "_Request", instance: str, token: zenoh.CancellationToken,
+    def _query(self, call: _Request, instance: str, token: zenoh.CancellationToken,
                handler: Any = None) -> Any:
         """Send the query to ``instance``: its replies come through ``handler`` (a callback),
         or, without one, on a channel the caller reads (returned)."""

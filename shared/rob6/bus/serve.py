@@ -95,7 +95,7 @@ class Serving(Tracing):
         self._declared.append(self.session.liveliness().declare_token(
             self.key("alive", self.service, self.instance)))
 
-    def _serve_loop(self, queue: "SimpleQueue[zenoh.Query | None]", handlers: Mapping[str, Handler]) -> None:
+    def _serve_loop(self, queue: SimpleQueue[zenoh.Query | None], handlers: Mapping[str, Handler]) -> None:
         while (query := queue.get()) is not None:
             self._answer(query, handlers)
 

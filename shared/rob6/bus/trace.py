@@ -130,7 +130,7 @@ class Tracing(BusSession):
             self._trace_publisher.put(payload, attachment=self._attachment)
 
     def subscribe_traces(self, on_batch: Callable[[str, bytes], None],
-                         on_miss: Callable[[str, int], None]) -> "_TraceSubscription":
+                         on_miss: Callable[[str, int], None]) -> _TraceSubscription:
         """Every ``trace/<service>`` batch of every process, with what the publishers kept
         (``TRACE_CACHE_S``): ``on_batch(key, payload)`` for each batch, the ones published
         before this subscriber came (history of every publisher, also of one detected

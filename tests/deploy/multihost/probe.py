@@ -46,7 +46,7 @@ class StateRecorder:
         self.topology = topology
         self.name = f"{topology.project}-{name}"
 
-    def __enter__(self) -> "StateRecorder":
+    def __enter__(self) -> StateRecorder:
         robot_pc = self.topology.container("robot-pc")
         run(["docker", "run", "-d", "--name", self.name, "--network", f"container:{robot_pc}",
              f"rob6/router:{TAG}", "python3", "-c", SCRIPT])

@@ -402,7 +402,7 @@ class Load:
                 return
             time.sleep(self.pause)
 
-    def __enter__(self) -> "Load":
+    def __enter__(self) -> Load:
         self._thread.start()
         return self
 

@@ -93,7 +93,7 @@ class AdeptIoPort:
         sock.settimeout(self.answer_timeout_s)
         try:
             answer = sock.recv(64)
-        except socket.timeout:
+        except TimeoutError:
             ms = round(self.answer_timeout_s * 1000)
             raise IoPortError(f"no answer from the controller's I/O port {self.name} within {ms} ms") from None
         if not answer:

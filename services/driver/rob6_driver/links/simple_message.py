@@ -57,6 +57,7 @@ wire), see ``to_controller_deg`` and deploy/adept/README.md.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import queue
@@ -540,7 +541,7 @@ class AdeptLink(Link):
         while not self._closing.is_set():
             try:
                 data = sock.recv(4096)
-            except socket.timeout:
+            except TimeoutError:
                 if time.monotonic() - heard > self.state_timeout_s:
                     ms = round(self.state_timeout_s * 1000)
                     return f"no state message from the controller at {self.state_name} for {ms} ms"
@@ -753,10 +754,8 @@ class AdeptLink(Link):
         return sock
 
     def _wake(self) -> None:
-        try:
+        with contextlib.suppress(OSError):  # full (the thread will look anyway) or closed
             self._wake_w.send(b"\0")
-        except OSError:  # full (the thread will look anyway) or closed
-            pass
 
     def _drain_wake(self) -> None:
         try:
