@@ -97,6 +97,9 @@ class Ack(Struct):
     ok: bool = True
     reason: str = ""  # why ok is False, for logs and recordings
     error: str = ""  # the plant failed, not the command (robot not connected, link lost): shown to the client
+    #: the driver's state at rest, from an operation that waited for the arm to stop
+    #: (DisableAlter, stop): where the next motion starts, newer than any publication before
+    state: JointState | None = None
 
 
 # ---------------------------------------------------------------- driver

@@ -1,7 +1,9 @@
 """Replies that wait for the arm are bounded by what they wait for, not by the 200 ms
 quick-call deadline (rob6.deadlines; issue 24): DisableAlter in the middle of an Alter
 stream answers ``true`` once the arm is at rest, from a raw client and from the client
-library, and the next point-to-point move works. Real processes, real Zenoh, kr16rt."""
+library, and the next point-to-point move works, starting from where the arm came to
+rest (the reply carries that state: the gateway's published copy lags). Real processes,
+real Zenoh, kr16rt and the kr16 dummy."""
 
 from __future__ import annotations
 
@@ -68,3 +70,21 @@ def test_client_library_alter_block_ends_with_the_arm_at_rest(kr16rt):
                 time.sleep(0.004)  # a send-and-wait client streaming at up to 250 Hz
         assert robot.move_ptp_joints(START)
         assert list(robot.get_position_joints()) == START
+
+
+def test_the_move_after_an_alter_stream_starts_where_the_stream_left_the_arm():
+    """A dummy arm follows each target at once; as fast as the client sends, DisableAlter,
+    and at once the position is the last target and a PTP runs from there. Before
+    DisableAlter carried the state at rest, the gateway sent the planner its last
+    published state as the start, and the driver refused the PTP (``false``)."""
+    with running("kr16", dummy=True) as system, system.client(timeout=READ_S) as client:
+        for stream in range(5):
+            assert client.ask("MovePTPJoints " + _joints(START)) == "true\n"
+            assert client.ask("EnableAlter") == "true\n"
+            last = START
+            for k in range(1, 101):
+                last = [START[0] + 0.01 * k, *START[1:]]
+                assert client.ask("MoveRTJoints " + _joints(last)) == "true\n", (stream, k)
+            assert client.ask("DisableAlter") == "true\n"
+            assert _position(client) == last, stream
+            assert client.ask("MovePTPJoints " + _joints(START)) == "true\n", stream

@@ -171,8 +171,7 @@ class DriverService:
             except Offline as exc:
                 return Ack(ok=False, reason=str(exc), error=str(exc))
             return Ack(ok=ok, reason=reason)
-        stopped = self._at_rest(self.core.disable_alter(), ctx)  # done once the robot is at rest
-        return Ack(ok=stopped, reason="" if stopped else "the robot did not come to rest in time")
+        return self._stopped(self.core.disable_alter(), ctx)  # done once the robot is at rest
 
     def alter_target(self, req: AlterTarget, _ctx) -> Ack:
         try:
@@ -183,8 +182,14 @@ class DriverService:
 
     def stop(self, _req: Empty, ctx: Context) -> Ack:
         """Stop whatever runs (a trajectory, Alter) with the ramp; ``ok``: at rest."""
-        stopped = self._at_rest(self.core.stop("stop requested"), ctx)
-        return Ack(ok=stopped, reason="" if stopped else "the robot did not come to rest in time")
+        return self._stopped(self.core.stop("stop requested"), ctx)
+
+    def _stopped(self, stop: Motion, ctx: Context) -> Ack:
+        """The answer to an operation that stops the arm: at rest (with the state there,
+        where the next motion starts), or not in time."""
+        if not self._at_rest(stop, ctx):
+            return Ack(ok=False, reason="the robot did not come to rest in time")
+        return Ack(ok=True, state=self.joint_state(stop.final or self.core.state()))
 
     def signal(self, req: SignalRequest, ctx: Context) -> Ack:
         """Switch the Adept's digital outputs; the numbers are checked again here (rob6.vplus),

@@ -614,6 +614,8 @@ def _mode(name: str) -> Handler:
             gw.alter = True
         elif name == "DisableAlter":
             gw.alter = False
+        if reply.state is not None:  # at rest: where the next move starts (the publications lag)
+            gw.joints.update(reply.state)
         if not reply.ok and reply.error:  # the robot failed (not connected, link lost)
             return error(f"driver: {reply.error}")
         return boolean(reply.ok)
