@@ -97,6 +97,22 @@ def bare_queryable(settings: dict[str, object]) -> subprocess.Popen[str]:
     return server
 
 
+#: how long a fresh peer may take to reach the bare queryable before the benchmark fails
+REACH_S = 10.0
+
+
+def wait_answered(session: zenoh.Session, key: str = "bench/bare") -> None:
+    """Return once ``key`` answers ``session`` (peers find each other through the router or
+    their direct link a moment after they open); RuntimeError after ``REACH_S``."""
+    deadline = time.monotonic() + REACH_S
+    while time.monotonic() < deadline:
+        replies = list(session.get(key, consolidation=zenoh.ConsolidationMode.NONE, timeout=1.0))
+        if any(reply.ok is not None for reply in replies):
+            return
+        time.sleep(0.05)  # not reachable yet: ask again
+    raise RuntimeError(f"{key} did not answer within {REACH_S:.0f} s")
+
+
 def zenoh_baselines(router_port: int, count: int, warmup: int = 200) -> dict[str, list[float]]:
     """The bare Zenoh query round trip between two Python processes (peers beside the same
     router as rob6's services, linked directly to each other as they are), received two
@@ -140,7 +156,7 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200) -> dict[str
                     blocking.append(one)
                     bridged.append(other)
 
-        time.sleep(0.5)  # the peers find each other through the router
+        wait_answered(session)
         asyncio.run(run())
         return {"blocking": blocking, "asyncio": bridged}
     finally:

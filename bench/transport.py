@@ -11,7 +11,7 @@ import zenoh
 
 from tests.system import free_port
 
-from .latency import bare_queryable, open_peer, peer_config, percentiles
+from .latency import bare_queryable, open_peer, peer_config, percentiles, wait_answered
 
 #: what ``lowlatency`` needs on both ends (QoS off)
 _LOWLATENCY = {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
@@ -30,7 +30,8 @@ def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -
                 extra = _LOWLATENCY if transport == "lowlatency" else {}
                 servers.append(bare_queryable(peer_config(**{"listen/endpoints": [endpoint]}, **extra)))
                 sessions.append(open_peer(peer_config(**{"connect/endpoints": [endpoint]}, **extra)))
-            time.sleep(0.5)
+            for session in sessions:
+                wait_answered(session)
             samples: list[list[float]] = [[] for _ in variants]
             for i in range(warmup + count):  # interleaved: every variant sees the same moments
                 for k, session in enumerate(sessions):

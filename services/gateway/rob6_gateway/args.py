@@ -19,7 +19,8 @@ import re
 from rob6.status import parse_status
 
 WHITESPACE = " \t\r\n\v\f"
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?)")
+#: a number after the whitespace before it, in one match (twelve per BackwardCalc)
+_NUMBER = re.compile(r"[ \t\r\n\v\f]*([+-]?(?:\d+\.?\d*(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?))")
 _INTEGER = re.compile(r"[+-]?\d+")
 
 
@@ -52,11 +53,11 @@ class Args:
         return self.pos >= len(self.text)
 
     def double(self) -> float | None:
-        self._skip()
         match = _NUMBER.match(self.text, self.pos)
         if not match:
+            self._skip()
             return None
-        value = float(match.group())
+        value = float(match.group(1))
         if math.isinf(value):  # istream fails on overflow
             return None
         self.pos = match.end()
