@@ -432,6 +432,6 @@ IDEMPOTENT_SERVICES = frozenset({"kinematics"})
 
 #: Services a robot id has exactly one of (see rob6.ownership): callers follow that one
 #: instance, never a second one that should not be there.
-OWNER_SERVICES = frozenset({"driver", "planner", "gripper", "gateway"})
+OWNER_SERVICES = frozenset({"driver", "planner", "gripper", "gateway", "ros"})
 
-SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder")
+SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder", "ros")
