@@ -97,6 +97,8 @@ class Ack(Struct):
     ok: bool = True
     reason: str = ""  # why ok is False, for logs and recordings
     error: str = ""  # the plant failed, not the command (robot not connected, link lost): shown to the client
+    #: refused because another kind of client owns the motion (a ROS 2 goal runs): shown to the client
+    busy: str = ""
 
 
 # ---------------------------------------------------------------- driver
@@ -320,6 +322,25 @@ class MoveReply(Struct):
     reason: str = ""
     error: str = ""  # the driver's plant failed (robot not connected, link lost): the client sees it
     state: JointState | None = None  # the driver's state when the move ended
+    #: refused because another kind of client owns the motion (one robot, one motion): the
+    #: client sees it as ``ERROR: <busy>``
+    busy: str = ""
+    invalid: bool = False  # follow: the trajectory was refused before anything moved (``reason`` says why)
+
+
+class FollowRequest(Struct):
+    """A time-parameterised joint trajectory to follow (ROS 2's FollowJointTrajectory), in
+    rob6's joint order and units (degrees, seconds). The planner checks it against the
+    limits and samples it at the driver's cycle (quintic between points with velocities and
+    accelerations, cubic with velocities only, velocities estimated when absent)."""
+
+    t: list[float]  # time of each point from the start, strictly increasing, >= 0
+    q: list[Joints]
+    qd: list[Joints] | None = None  # deg/s at each point
+    qdd: list[Joints] | None = None  # deg/s^2 at each point
+    #: how far (degrees) a point at t = 0 may be from where the arm is
+    start_tolerance: float = 1.0
+    dry_run: bool = False  # check only
 
 
 class ModeRequest(Struct):
@@ -422,6 +443,8 @@ OPS: dict[tuple[str, str], Op] = {
     ("planner", "move"): Op(MoveRequest, MoveReply, timeout=ANNOUNCE_S, waits=True),
     ("planner", "mode"): Op(ModeRequest, Ack, timeout=ANNOUNCE_S, waits=True),
     ("planner", "session_end"): Op(SessionEnd, Ack, timeout=ANNOUNCE_S, waits=True),
+    ("planner", "follow"): Op(FollowRequest, MoveReply, timeout=ANNOUNCE_S, waits=True),
+    ("planner", "follow_stop"): Op(Empty, Ack, timeout=ANNOUNCE_S, waits=True),
     ("gripper", "command"): Op(GripperCommand, GripperReply, timeout=ANNOUNCE_S, waits=True),
     ("gripper", "state"): Op(Empty, GripperState),
 }

@@ -17,7 +17,8 @@ liveliness_utils.cpp, qos.cpp, attachment_helpers.cpp, rmw_publisher_data.cpp):
 * publishers are zenoh.ext advanced publishers; a transient-local one keeps the last ``depth``
   samples for late joiners and can be detected (``publisher_detection``), with sample-miss
   heartbeats when it is reliable;
-* a service is a complete queryable on its key expression.
+* a service is a complete queryable on its key expression; its reply may come later than
+  the query's callback (an action's get_result answers when the goal ends).
 
 rmw_zenoh makes the GID from an XXH3 hash of the token; here it is the first 16 bytes of
 the token's SHA-256: peers only compare GIDs, they never recompute them.
@@ -108,6 +109,12 @@ def parse_attachment(data: bytes) -> tuple[int, int, bytes]:
     return sequence, stamp, bytes(data[17:33])
 
 
+#: a reply to send (once) for a request that was answered later
+Respond = Callable[[dict[str, Any]], None]
+#: a service's handler: the response now, or None and ``respond`` called later (on any thread)
+Handler = Callable[[dict[str, Any], Respond], "dict[str, Any] | None"]
+
+
 class Node:
     """One ROS 2 node on a Zenoh session: its token and its entities' tokens and key expressions."""
 
@@ -151,8 +158,7 @@ class Node:
     def publisher(self, name: str, type_name: str, qos: Qos = TOPIC_QOS) -> Publisher:
         return Publisher(self, name, type_name, qos)
 
-    def service(self, name: str, service_type: str, handler: Callable[[dict[str, Any]], dict[str, Any]],
-                qos: Qos = SERVICE_QOS) -> Service:
+    def service(self, name: str, service_type: str, handler: Handler, qos: Qos = SERVICE_QOS) -> Service:
         return Service(self, name, service_type, handler, qos)
 
     def close(self) -> None:
@@ -201,8 +207,7 @@ class Publisher:
 class Service:
     """A ROS 2 service server: a complete queryable; the reply echoes the request's number and GID."""
 
-    def __init__(self, node: Node, name: str, service_type: str,
-                 handler: Callable[[dict[str, Any]], dict[str, Any]], qos: Qos):
+    def __init__(self, node: Node, name: str, service_type: str, handler: Handler, qos: Qos):
         self.service_type, self.handler = service_type, handler
         self.key = node.topic_key(name, service_type)
         self.gid = node._entity("SS", name, service_type, qos)
@@ -216,10 +221,31 @@ class Service:
                 raise ValueError("a ROS 2 request needs a payload and an attachment")
             sequence, _stamp, client_gid = parse_attachment(query.attachment.to_bytes())
             request = cdr.deserialize(f"{self.service_type}_Request", query.payload.to_bytes())
-            response = self.handler(request)
-        except Exception as exc:  # a malformed request: say so to the caller, as rmw_zenoh's err reply
+        except Exception as exc:  # a malformed request: say so to the caller, as an err reply
             log.warning("ROS service %s: %s", self.key, exc)
             query.reply_err(f"rob6: {exc}")
+            query.drop()
             return
-        payload = cdr.serialize(f"{self.service_type}_Response", response)
-        query.reply(query.key_expr, payload, attachment=attachment(sequence, client_gid))
+        answered = threading.Lock()
+
+        def respond(response: dict[str, Any]) -> None:
+            if not answered.acquire(blocking=False):
+                return  # answered already
+            try:
+                payload = cdr.serialize(f"{self.service_type}_Response", response)
+                query.reply(query.key_expr, payload, attachment=attachment(sequence, client_gid))
+            except Exception:  # the session closed, the caller gave up
+                log.debug("ROS service %s: the reply could not be sent", self.key, exc_info=True)
+            finally:
+                query.drop()
+
+        try:
+            response = self.handler(request, respond)
+        except Exception as exc:
+            log.exception("ROS service %s failed", self.key)
+            if answered.acquire(blocking=False):
+                query.reply_err(f"rob6: {type(exc).__name__}: {exc}")
+                query.drop()
+            return
+        if response is not None:
+            respond(response)

@@ -10,7 +10,8 @@ session, in rmw_zenoh's format (``rmw``):
 * ``robot_description`` (std_msgs/String, transient local, depth 1): the URDF rob6 already
   has, kept by the publisher for late joiners as rmw_zenoh does.
 
-It only reads the driver's state: it never commands the arm by itself.
+and serves the action ``follow_joint_trajectory`` (control_msgs/FollowJointTrajectory,
+``action``), whose goals the planner checks and the driver executes like every motion.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from rob6.bus import Bus, decode
 from rob6.messages import JointState
 from rob6.robots import RobotModel
 
+from .action import DEFAULT_START_TOLERANCE_DEG, FollowJointTrajectoryServer
 from .rmw import LATCHED_QOS, Node
 
 log = logging.getLogger("rob6.ros")
@@ -51,7 +53,9 @@ def stamp(seconds: float) -> dict[str, int]:
 
 class RosService:
     def __init__(self, bus: Bus, robot: RobotModel, *, namespace: str = "/", domain_id: int = 0,
-                 distro: str = "jazzy", node_name: str = "rob6", max_rate_hz: float = MAX_RATE_HZ):
+                 distro: str = "jazzy", node_name: str = "rob6", max_rate_hz: float = MAX_RATE_HZ,
+                 action: str = "follow_joint_trajectory",
+                 start_tolerance: float = DEFAULT_START_TOLERANCE_DEG):
         self.bus, self.robot = bus, robot
         self.urdf = (URDF_DIR / f"{robot.geometry}.urdf").read_text()
         self.joint_names = urdf_joint_names(self.urdf)
@@ -64,6 +68,8 @@ class RosService:
         self.latest: JointState | None = None
         self.joint_states = self.node.publisher("joint_states", "sensor_msgs/msg/JointState")
         self.description = self.node.publisher("robot_description", "std_msgs/msg/String", LATCHED_QOS)
+        self.action = FollowJointTrajectoryServer(self.node, bus, self.joint_names, lambda: self.latest,
+                                                  name=action, start_tolerance=start_tolerance) if action else None
 
     def start(self) -> None:
         self.description.publish({"data": self.urdf})
