@@ -10,6 +10,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import random
 from typing import Any
@@ -18,6 +20,7 @@ import numpy as np
 import pytest
 
 from rob6_ros import cdr, idl, rmw
+from tests.ros import msgdefs
 
 rosbags_typesys = pytest.importorskip("rosbags.typesys")
 
@@ -159,3 +162,47 @@ def test_cdr_refuses_what_is_not_cdr() -> None:
         cdr.deserialize("std_msgs/msg/String", cdr.HEADER + b"\xff\xff\xff\x7f")
     assert math.isclose(cdr.deserialize("builtin_interfaces/msg/Time", cdr.serialize(
         "builtin_interfaces/msg/Time", {"sec": -1, "nanosec": 5}))["nanosec"], 5)
+
+
+#: hashes in rosidl-generated C headers of control_msgs (FollowJointTrajectory) and action_msgs
+#: (CancelGoal) found in a public build: that build's generator joined the JSON with "," where
+#: rosidl_generator_type_description (and every ROS 2 distro's published hash, e.g. JointState's)
+#: uses ", ". Same separator, same description: rob6's type descriptions of the action's parts are
+#: exactly rosidl's, field for field, names and nesting included.
+GENERATED_WITH_COMMA = {
+    "control_msgs/action/FollowJointTrajectory_Goal":
+        "2c7e5ca862c004e8b4b7cc4ba7b66140c479335ee08f89cde024c4fec3516aca",
+    "control_msgs/action/FollowJointTrajectory_Result":
+        "5bafa91d6ff126027f0fcd3028f40839ad694400bb74c5777bfd1f09cb6a8e82",
+    "control_msgs/action/FollowJointTrajectory_SendGoal":
+        "4915b9909747df962256f0fe9a7dc832ba6e7ec2c5e827c5ba239b7b451d52aa",
+    "control_msgs/action/FollowJointTrajectory_GetResult":
+        "a42b878fc686578b092e626c27ba796dab419d9d5f3275920e4eca7769062539",
+    "control_msgs/action/FollowJointTrajectory_FeedbackMessage":
+        "88e16acd364ad5bc90b661a4f77fec9ab40874e8eeaaf4673e9cd78e41038b99",
+    "action_msgs/srv/CancelGoal": "6a5f062d4e445bb8f6dfeb28d8ba83845efc58238741896b43c9dc8e1cffb775",
+}
+
+
+@pytest.mark.parametrize("type_name", sorted(GENERATED_WITH_COMMA))
+def test_type_description_matches_rosidl_generated_headers(type_name: str) -> None:
+    text = json.dumps(idl.type_description(type_name), separators=(",", ": "))
+    assert hashlib.sha256(text.encode()).hexdigest() == GENERATED_WITH_COMMA[type_name]
+
+
+def test_service_hash_matches_zenoh_ros2_sdk() -> None:
+    """The SDK's own service-hash code (it knows ``pkg/srv/...`` services, not an action's parts)."""
+    utils = pytest.importorskip("zenoh_ros2_sdk.utils")
+    request, response = msgdefs.CANCEL_GOAL
+    theirs = utils.compute_service_type_hash("action_msgs/srv/CancelGoal", request_definition=request,
+                                             response_definition=response, dependencies=dict(msgdefs.MSG))
+    assert idl.type_hash("action_msgs/srv/CancelGoal") == theirs
+
+
+@pytest.mark.parametrize("type_name", ["sensor_msgs/msg/JointState", "std_msgs/msg/String",
+                                       "control_msgs/action/FollowJointTrajectory_FeedbackMessage",
+                                       "action_msgs/msg/GoalStatusArray"])
+def test_message_hash_matches_zenoh_ros2_sdk(type_name: str) -> None:
+    utils = pytest.importorskip("zenoh_ros2_sdk.utils")
+    theirs = utils.get_type_hash(type_name, msg_definition=msgdefs.MSG[type_name], dependencies=dict(msgdefs.MSG))
+    assert idl.type_hash(type_name) == theirs

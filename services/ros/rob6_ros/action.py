@@ -15,8 +15,10 @@ nothing moved, with a result code and an error string saying why:
   t = 0 further than the start tolerance from where the arm is, a last point not at rest,
   or the arm busy (an old client moves it, or Alter mode is on: one robot, one motion).
 
-An accepted goal goes to the planner's ``follow`` (sampled at the driver's cycle, checked
-again there and by the driver's limit monitor) and runs with feedback every 50 ms (actual:
+A goal goes to the planner's ``follow`` (checked and sampled at the driver's cycle there,
+and checked again by the driver's limit monitor); send_goal answers once the driver has
+taken the motion (from then on an old client's motion command is refused) or the goal has
+ended. It runs with feedback every 50 ms (actual:
 the driver's state; desired: the goal's positions interpolated linearly at the elapsed
 time). It SUCCEEDS when the driver reports the arm arrived, ABORTS with
 ``PATH_TOLERANCE_VIOLATED`` and the driver's words when the motion fails (link lost, limit
@@ -54,7 +56,10 @@ CANCEL_OK, CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL, CANCEL_TERMINATED = 0, 1, 2, 3
 #: rcl_action's status topic: reliable, transient local, depth 1
 STATUS_QOS = Qos(durability=TRANSIENT_LOCAL, depth=1)
 FEEDBACK_PERIOD_S = 0.05
-KEPT_GOALS = 32  # finished goals whose results can still be asked for
+KEPT_GOALS = 32
+#: send_goal answers at the latest after this long (the planner's checks and the driver's
+#: taking the motion take milliseconds; a planner that does not answer ends the goal anyway)
+START_WAIT_S = 5.0  # finished goals whose results can still be asked for
 DEFAULT_START_TOLERANCE_DEG = 1.0
 
 
@@ -124,23 +129,16 @@ class FollowJointTrajectoryServer:
                 self._goals.popitem(last=False)
         try:
             follow = self._follow_request(request["goal"])
-            reply: MoveReply = self.bus.request("planner", "follow", follow)  # the checks, nothing moves
-            if not reply.ok:
-                raise GoalError(INVALID_GOAL, reply.busy or reply.reason or "refused by the planner")
         except GoalError as exc:
             log.info("goal %s aborted: %s", goal_id.hex(), exc)
             self._finish(goal, ABORTED, exc.code, str(exc))
             return {"accepted": True, "stamp": now}
-        except BusError as exc:
-            self._finish(goal, ABORTED, INVALID_GOAL, f"planner: {exc.message}")
-            return {"accepted": True, "stamp": now}
         goal.t, goal.q = follow.t, follow.q
-        with self._lock:
-            goal.status = EXECUTING
-            goal.started = time.monotonic()
-        self._publish_status()
-        follow.dry_run = False
-        threading.Thread(target=self._execute, args=(goal, follow), name="ros-goal", daemon=True).start()
+        # answered once the planner has checked the goal and the driver took the motion (so an
+        # old client's command after this answer is refused), or the goal has ended (refused)
+        started = threading.Event()
+        threading.Thread(target=self._execute, args=(goal, follow, started), name="ros-goal", daemon=True).start()
+        started.wait(START_WAIT_S)
         return {"accepted": True, "stamp": now}
 
     def _on_get_result(self, request: dict[str, Any], respond: Respond) -> dict[str, Any] | None:
@@ -211,19 +209,39 @@ class FollowJointTrajectoryServer:
         if accelerations and not velocities:
             raise GoalError(INVALID_GOAL, "accelerations without velocities")
         return FollowRequest(t=t, q=q, qd=velocities or None, qdd=accelerations or None,
-                             start_tolerance=self.start_tolerance, dry_run=True)
+                             start_tolerance=self.start_tolerance)
 
-    def _execute(self, goal: Goal, follow: FollowRequest) -> None:
+    def _execute(self, goal: Goal, follow: FollowRequest, started: threading.Event) -> None:
         feeding = threading.Event()
         feeder = threading.Thread(target=self._feed, args=(goal, feeding), name="ros-feedback", daemon=True)
-        feeder.start()
+
+        def on_started(_seconds: float, _what: str) -> None:
+            """The planner's announcement: the driver took the motion."""
+            if started.is_set():
+                return
+            with self._lock:
+                goal.started = time.monotonic()
+                if goal.status == ACCEPTED:
+                    goal.status = EXECUTING
+                cancelled = goal.cancel  # asked before the motion started: stop it now
+            self._publish_status()
+            feeder.start()
+            started.set()
+            if cancelled:
+                threading.Thread(target=self._stop, name="ros-cancel", daemon=True).start()
+
         try:
-            reply: MoveReply = self.bus.request("planner", "follow", follow)
+            reply: MoveReply = self.bus.request("planner", "follow", follow, waiting=on_started)
         except BusError as exc:
             reply = MoveReply(ok=False, reason=f"planner: {exc.message}", error=exc.message)
         finally:
             feeding.set()
-            feeder.join()
+            if feeder.is_alive():
+                feeder.join()
+        self._conclude(goal, reply)
+        started.set()
+
+    def _conclude(self, goal: Goal, reply: MoveReply) -> None:
         if reply.ok:
             self._finish(goal, SUCCEEDED, SUCCESSFUL, "")
         elif goal.cancel:
