@@ -22,7 +22,7 @@ from tests.system import running
 
 from .busy import busy_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baselines
-from .links import links_table, live_realtime_table
+from .links import links_table, live_realtime_table, ros_realtime_table
 from .tables import table
 from .transport import transport_table
 
@@ -252,6 +252,7 @@ def main() -> int:
     busy_table(float(os.environ.get("ROB6_BENCH_BUSY_S", "60")), table)
     recording_table()
     live_realtime_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")) / 2, table)
+    ros_realtime_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")) / 2, table)
     if os.environ.get("ROB6_BENCH_MULTIHOST") == "1":  # needs Docker and root, ~7 min
         from .multihost import multihost_table
         multihost_table(table)

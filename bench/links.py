@@ -52,11 +52,14 @@ class ControllerSim:
         self.proc.wait(10)
 
 
-def stream(link: str, seconds: float, live: bool = False) -> dict:
+def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> dict:
     """Stream for ``seconds``; the client's round trips and what the driver and controller
-    counted. ``live``: with the live view on and a Foxglove viewer subscribed to every channel."""
+    counted. ``live``: with the live view on and a Foxglove viewer subscribed to every channel.
+    ``ros``: with the ROS 2 service on (ROB6_ROS) and a subscriber of its joint_states."""
     udp = free_port(socket.SOCK_DGRAM)
     extra = {"ROB6_LINK": link, "ROB6_RSI_LISTEN": f"127.0.0.1:{udp}"} if link == "rsi" else {}
+    extra["ROB6_ROS"] = "1" if ros else "0"
+    joint_states = [0]
     live_port = free_port() if live else 0
     extra["ROB6_LIVE_PORT"] = str(live_port)
     kuka = viewer = None
@@ -64,8 +67,13 @@ def stream(link: str, seconds: float, live: bool = False) -> dict:
             running("kr16rt", dummy=False, log_dir=logs, extra_env=extra) as system:
         bus = Bus(BusSettings(robot="kr16rt", robot_id=system.robot_id,
                               connect=(f"tcp/127.0.0.1:{system.router_port}",)), "bench")
+        ros_subscriber = None
         try:
             bus.wait_for(["driver"], 10)
+            if ros:  # a ROS 2 subscriber of joint_states (its own cost is its process's, not rob6's)
+                def count(_sample: object) -> None:
+                    joint_states[0] += 1
+                ros_subscriber = bus.session.declare_subscriber("0/joint_states/**", count)
             if link == "rsi":
                 kuka = ControllerSim("kuka_rsi_sim", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{udp}",
                                      "--start-pose", START.replace(" ", ","))
@@ -97,13 +105,15 @@ def stream(link: str, seconds: float, live: bool = False) -> dict:
                 controller = kuka.status() if kuka else None
                 client.ask("DisableAlter", timeout=10)
         finally:
+            if ros_subscriber is not None:
+                ros_subscriber.undeclare()
             bus.close()
             if kuka:
                 kuka.close()
             received = viewer.close() if viewer is not None else 0
     result = {"n": n, "rate": n / elapsed, "cycles": after.cycle - before.cycle,
               "missed": after.missed - before.missed, "rtt": percentiles(rtts), "latency_us": status.latency_us,
-              "realtime": status.realtime, "viewer_received": received}
+              "realtime": status.realtime, "viewer_received": received, "joint_states": joint_states[0]}
     if controller and controller_before:
         result.update(late=controller["late_total"] - controller_before["late_total"],
                       trips=len(controller["trips"]), controller_rtt=controller["rtt_ms"])
@@ -232,3 +242,18 @@ def live_realtime_table(seconds: float, table) -> None:
           ("live view", "late packets / RSI stops", "driver cycles / missed", "packet in -> answer out p99 / max, ms",
            "command -> target p50 / p99, ms", "messages the viewer received"),
           [("off", *row(off)), ("on, every channel watched", *row(on))])
+
+
+def ros_realtime_table(seconds: float, table) -> None:
+    """The ROS 2 service's cost on the real-time path: the RSI Alter stream with ROB6_ROS=0,
+    then with it on and a subscriber of /joint_states."""
+    off, on = stream("rsi", seconds, ros=False), stream("rsi", seconds, ros=True)
+
+    def row(r: dict) -> tuple[str, ...]:
+        lat = r["latency_us"] or [float("nan")] * 3
+        return (f"{r['late']} / {r['trips']}", f"{r['cycles']} / {r['missed']}",
+                f"{lat[1] / 1000:.3f} / {lat[2] / 1000:.3f}", "%.3f / %.3f" % r["rtt"], f"{r['joint_states']:,}")
+    table(f"ROS 2 service cost on the real-time path: MoveRTJoints at 250 Hz for {seconds:.0f} s, kr16rt over RSI",
+          ("ROB6_ROS", "late packets / RSI stops", "driver cycles / missed", "packet in -> answer out p99 / max, ms",
+           "command -> target p50 / p99, ms", "joint_states received"),
+          [("0", *row(off)), ("1, joint_states subscribed", *row(on))])

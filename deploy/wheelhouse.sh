@@ -40,7 +40,7 @@ for arg in "$@"; do
     esac
 done
 
-services="gateway kinematics planner driver gripper recorder"
+services="gateway kinematics planner driver gripper recorder ros"
 controllers="kuka-rsi-sim adept-sm-sim"  # stand-in robot controllers with an image (profiles rsi, adept)
 system_debs="libgomp1"
 start=$(date +%s)

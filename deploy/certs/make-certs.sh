@@ -4,7 +4,7 @@
 # access control (deploy/zenoh/router-secure.json5, subjects/cert_common_names).
 #
 # Usage: deploy/certs/make-certs.sh [options] [NAME...]
-#   NAME...            participants (default: router gateway kinematics planner driver gripper recorder);
+#   NAME...            participants (default: router gateway kinematics planner driver gripper recorder ros ros2);
 #                      extra names make extra certificates (e.g. a second kinematics host reuses
 #                      "kinematics": replicas of one service share its identity)
 #   --out DIR          output directory (default deploy/certs/out, gitignored)
@@ -43,7 +43,7 @@ while [ $# -gt 0 ]; do
     esac
     shift
 done
-[ ${#names[@]} -gt 0 ] || names=(router gateway kinematics planner driver gripper recorder)
+[ ${#names[@]} -gt 0 ] || names=(router gateway kinematics planner driver gripper recorder ros ros2)
 command -v openssl >/dev/null || { echo "make-certs: openssl not found" >&2; exit 1; }
 mkdir -p "$out"
 umask 077

@@ -35,16 +35,19 @@ def main() -> None:
                    "simple_message (simple_message, also called adept) [env ROB6_LINK].")
 @click.option("--service", "services", multiple=True, type=click.Choice(SERVICES),
               help="Start only these services (repeat).")
+@click.option("--ros/--no-ros", envvar="ROB6_ROS", default=True, show_default=True,
+              help="The robot as a ROS 2 node (rmw_zenoh) among the services started by default "
+                   "[env ROB6_ROS, 0 = off].")
 @click.option("--log-level", envvar="ROB6_LOG_LEVEL", default="WARNING", show_default=True,
               type=click.Choice(["DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"], case_sensitive=False))
 def run(robot: str, robot_id: str, port: int, router_port: int, log_dir: str, dummy: bool, allow_shutdown: bool,
-        restart: bool, link: str, services: tuple[str, ...], log_level: str) -> None:
+        restart: bool, link: str, services: tuple[str, ...], ros: bool, log_level: str) -> None:
     """Start everything on this machine: router, services and gateway."""
     from .launcher import run as run_system
     os.environ["ROB6_LINK"] = link  # the driver reads it
     sys.exit(run_system(robot=robot, robot_id=robot_id, port=port, router_port=router_port,
                         log_dir=log_dir, dummy=dummy, allow_shutdown=allow_shutdown, restart=restart,
-                        services=tuple(services) or SERVICES, log_level=log_level.upper()))
+                        services=tuple(services) or tuple(s for s in SERVICES if ros or s != "ros"), log_level=log_level.upper()))
 
 
 @main.command()

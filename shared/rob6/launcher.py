@@ -34,7 +34,7 @@ from .ownership import EXIT_REFUSED
 from .service import StartupError
 
 #: stop order, and how long each group may take before it is killed
-STOP_ORDER = ((("gateway",), 0.5), (("planner", "driver", "gripper", "kinematics"), 0.8),
+STOP_ORDER = ((("gateway",), 0.5), (("ros", "planner", "driver", "gripper", "kinematics"), 0.8),
               (("recorder",), 1.5), (("router",), 0.3))
 
 

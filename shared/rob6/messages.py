@@ -100,6 +100,8 @@ class Ack(Struct):
     #: the driver's state at rest, from an operation that waited for the arm to stop
     #: (DisableAlter, stop): where the next motion starts, newer than any publication before
     state: JointState | None = None
+    #: refused because another kind of client owns the motion (a ROS 2 goal runs): shown to the client
+    busy: str = ""
 
 
 # ---------------------------------------------------------------- driver
@@ -323,6 +325,25 @@ class MoveReply(Struct):
     reason: str = ""
     error: str = ""  # the driver's plant failed (robot not connected, link lost): the client sees it
     state: JointState | None = None  # the driver's state when the move ended
+    #: refused because another kind of client owns the motion (one robot, one motion): the
+    #: client sees it as ``ERROR: <busy>``
+    busy: str = ""
+    invalid: bool = False  # follow: the trajectory was refused before anything moved (``reason`` says why)
+
+
+class FollowRequest(Struct):
+    """A time-parameterised joint trajectory to follow (ROS 2's FollowJointTrajectory), in
+    rob6's joint order and units (degrees, seconds). The planner checks it against the
+    limits and samples it at the driver's cycle (quintic between points with velocities and
+    accelerations, cubic with velocities only, velocities estimated when absent)."""
+
+    t: list[float]  # time of each point from the start, strictly increasing, >= 0
+    q: list[Joints]
+    qd: list[Joints] | None = None  # deg/s at each point
+    qdd: list[Joints] | None = None  # deg/s^2 at each point
+    #: how far (degrees) a point at t = 0 may be from where the arm is
+    start_tolerance: float = 1.0
+    dry_run: bool = False  # check only
 
 
 class ModeRequest(Struct):
@@ -425,6 +446,8 @@ OPS: dict[tuple[str, str], Op] = {
     ("planner", "move"): Op(MoveRequest, MoveReply, timeout=ANNOUNCE_S, waits=True),
     ("planner", "mode"): Op(ModeRequest, Ack, timeout=ANNOUNCE_S, waits=True),
     ("planner", "session_end"): Op(SessionEnd, Ack, timeout=ANNOUNCE_S, waits=True),
+    ("planner", "follow"): Op(FollowRequest, MoveReply, timeout=ANNOUNCE_S, waits=True),
+    ("planner", "follow_stop"): Op(Empty, Ack, timeout=ANNOUNCE_S, waits=True),
     ("gripper", "command"): Op(GripperCommand, GripperReply, timeout=ANNOUNCE_S, waits=True),
     ("gripper", "state"): Op(Empty, GripperState),
 }
@@ -435,6 +458,6 @@ IDEMPOTENT_SERVICES = frozenset({"kinematics"})
 
 #: Services a robot id has exactly one of (see rob6.ownership): callers follow that one
 #: instance, never a second one that should not be there.
-OWNER_SERVICES = frozenset({"driver", "planner", "gripper", "gateway"})
+OWNER_SERVICES = frozenset({"driver", "planner", "gripper", "gateway", "ros"})
 
-SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder")
+SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder", "ros")

@@ -32,6 +32,7 @@ log = logging.getLogger("rob6.service")
 NEEDS: dict[str, tuple[str, ...]] = {
     "planner": ("driver", "kinematics"),
     "gateway": ("driver", "planner", "kinematics", "gripper"),
+    "ros": ("driver", "planner"),
 }
 NEEDS_WAIT_S = 30.0
 

@@ -41,7 +41,7 @@ pytestmark = pytest.mark.docker
 
 REPO = Path(__file__).resolve().parents[2]
 DEPLOY = REPO / "deploy"
-SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder")
+SERVICES = ("gateway", "kinematics", "planner", "driver", "gripper", "recorder", "ros")
 ROBOT = "kr16"
 FK = "ForwardCalc 10 -60 80 20 40 30"  # first record of conformance/kr16/fk.jsonl
 SUBSET = {"GetRobot", "CM_PING", "GetVersion"}  # + each session's handshake line
@@ -237,7 +237,7 @@ def test_images_offline_minimal_non_root(built):
     heavy = {"numpy", "pinocchio", "ruckig", "mcap", "serial"}
     needs = {"router": set(), "gateway": set(), "kinematics": {"numpy", "pinocchio"},
              "planner": {"numpy", "ruckig"}, "driver": {"numpy", "ruckig"},
-             "gripper": {"serial"}, "recorder": {"mcap", "zstandard"}}
+             "gripper": {"serial"}, "recorder": {"mcap", "zstandard"}, "ros": set()}
     for name, mods in needs.items():
         image = f"rob6/{name}:{TAG}"
         config = json.loads(run(["docker", "image", "inspect", "-f", "{{json .Config}}", image]).stdout)

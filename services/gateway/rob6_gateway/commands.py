@@ -526,6 +526,8 @@ def _move(gw: Gateway, session: Session, kind: MotionKind, **fields: Any) -> str
         raise ClientGone(f"the client left during {kind}: the robot stops") from None
     if reply.state is not None:
         gw.joints.update(reply.state)
+    if not reply.ok and reply.busy:  # one robot, one motion: a ROS 2 goal runs
+        return error(reply.busy)
     if not reply.ok and reply.error:  # the robot failed (not connected, link lost), not the command
         return error(f"driver: {reply.error}")
     if not reply.ok and reply.reason:
@@ -616,6 +618,8 @@ def _mode(name: str) -> Handler:
             gw.alter = False
         if reply.state is not None:  # at rest: where the next move starts (the publications lag)
             gw.joints.update(reply.state)
+        if not reply.ok and reply.busy:  # one robot, one motion: a ROS 2 goal runs
+            return error(reply.busy)
         if not reply.ok and reply.error:  # the robot failed (not connected, link lost)
             return error(f"driver: {reply.error}")
         return boolean(reply.ok)

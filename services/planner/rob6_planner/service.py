@@ -29,9 +29,11 @@ from rob6.messages import (
     ExecuteRequest,
     FkReply,
     FkRequest,
+    FollowRequest,
     IkBatchReply,
     IkBatchRequest,
     JointsReply,
+    JointState,
     LimitsUpdate,
     ModeRequest,
     MotionConfig,
@@ -46,8 +48,9 @@ from rob6.robots import RobotModel
 from rob6.status import NO_TOGGLE_ALL as KEEP_CONFIGURATION, PTP_HOM_PATTERN
 
 from .config import MotionSettings
+from .follow import FollowRefused, sample
 from .lin_planner import plan_lin
-from .trajectory import SampledTrajectory, TrajectoryPlanner
+from .trajectory import JointLimits, SampledTrajectory, TrajectoryPlanner
 
 log = logging.getLogger("rob6.planner")
 
@@ -57,6 +60,13 @@ JOINT_MOVES: frozenset[MotionKind] = frozenset({"MovePTPJoints", "MovePTPJointsS
 ALTER_MOVES: frozenset[MotionKind] = frozenset({
     "MoveRTJoints", "MoveRTHomRowWise", "MoveRTHomRowWiseStatus", "DoAlterJoint", "DoAlterCart"})
 ADEPT_SETTINGS = {"SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoarse"}
+#: one robot, one motion: who owns the motion in progress (a client of the text protocol, or
+#: a ROS 2 FollowJointTrajectory goal); the other kind is refused with these words
+CLIENT, ROS = "client", "ros"
+BUSY = {
+    ROS: "the arm is executing a ROS 2 FollowJointTrajectory goal; wait for it to end (or cancel it)",
+    CLIENT: "the arm is moving for a client of the rob6 protocol (port 5005); a ROS 2 goal waits until it ends",
+}
 LIMIT_FIELDS: tuple[Literal["speed", "accel", "turn_min", "turn_max", "max_change"], ...] = ("speed", "accel", "turn_min", "turn_max", "max_change")
 
 
@@ -89,6 +99,10 @@ class PlannerService:
         self._ended: deque[str] = deque(maxlen=64)  # the last sessions that ended
         self._handing_over = False
         self._version = 0  # of the configuration, for the gateway's mirror
+        self._owner_lock = threading.Lock()
+        self._owner: str | None = None  # CLIENT or ROS while a motion of that kind runs
+        self._owner_count = 0
+        self._follow_stopped = threading.Event()  # follow_stop asked for the running goal
         bus.on_liveliness(self._on_liveliness)
 
     # ------------------------------------------------------------------ configuration
@@ -155,6 +169,9 @@ class PlannerService:
         if command == "EnableAdeptAlter" and not self.robot.is_adept:
             return Ack(ok=False, reason="EnableAdeptAlter is for the Adept only")
         if command in ("EnableAlter", "EnableAdeptAlter"):  # waits for a stop in progress
+            with self._owner_lock:
+                if self._owner == ROS:
+                    return Ack(ok=False, reason=BUSY[ROS], busy=BUSY[ROS])
             reply: Ack = self.bus.request("driver", "alter_mode", AlterMode(
                 enable=True, synchronized=self.config.rt_speed_control == 0,
                 timeout_s=self.alter_timeout_s), cid=ctx.cid, waiting=ctx.waiting)
@@ -190,8 +207,30 @@ class PlannerService:
             self._handing_over = False
             self._handover.notify_all()
 
+    # ------------------------------------------------------------------ one robot, one motion
+    def _claim(self, who: str) -> str:
+        """Take the motion for ``who``; the reason it belongs to the other kind, or ""."""
+        with self._owner_lock:
+            if self._owner is not None and self._owner != who:
+                return BUSY[self._owner]
+            self._owner = who
+            self._owner_count += 1
+            return ""
+
+    def _release(self) -> None:
+        with self._owner_lock:
+            self._owner_count -= 1
+            if self._owner_count == 0:
+                self._owner = None
+
     # ------------------------------------------------------------------ motion
     def move(self, req: MoveRequest, ctx: Context) -> MoveReply:
+        real = not req.dry_run
+        if real:
+            busy = self._claim(CLIENT)
+            if busy:
+                log.info("%s refused: %s", req.kind, busy)
+                return MoveReply(ok=False, reason=busy, busy=busy)
         try:
             lin = req.kind == "MoveLINHomRowWise"
             ctx.waiting(PLAN_LIN_S if lin else PLAN_PTP_S, "planning the straight line" if lin else "planning")
@@ -202,6 +241,57 @@ class PlannerService:
         except MotionRefused as exc:
             log.info("%s refused: %s", req.kind, exc)
             return MoveReply(ok=False, reason=str(exc))
+        finally:
+            if real:
+                self._release()
+
+    # ------------------------------------------------------------------ ROS 2 trajectories
+    def follow(self, req: FollowRequest, ctx: Context) -> MoveReply:
+        """Follow a time-parameterised trajectory (a ROS 2 FollowJointTrajectory goal): checked
+        against every limit and sampled here, executed by the driver like any motion."""
+        busy = self._claim(ROS) if not req.dry_run else ""
+        if busy:
+            return MoveReply(ok=False, reason=busy, busy=busy, invalid=True)
+        try:
+            if self.alter:
+                return MoveReply(ok=False, reason="Alter mode is on: a client streams targets to the arm",
+                                 busy="Alter mode is on: a client streams targets to the arm", invalid=True)
+            if not self._lock.acquire(blocking=False):
+                return MoveReply(ok=False, reason=BUSY[CLIENT], busy=BUSY[CLIENT], invalid=True)
+            try:
+                state: JointState = self.bus.request("driver", "state", Empty(), cid=ctx.cid)
+                if state.moving or state.mode not in ("idle",):
+                    return MoveReply(ok=False, reason=BUSY[CLIENT], busy=BUSY[CLIENT], invalid=True)
+                c = self._planning_config()
+                limits = JointLimits.from_config(c)  # the protocol's units in deg/s, deg/s^2
+                try:
+                    trajectory = sample(req.t, req.q, req.qd, req.qdd, current=state.q, dt=self.planner.dt,
+                                        turn_min=c.turn_min, turn_max=c.turn_max, speed=limits.vmax.tolist(),
+                                        accel=limits.amax.tolist(), start_tolerance=req.start_tolerance)
+                except FollowRefused as exc:
+                    log.info("trajectory refused: %s", exc)
+                    return MoveReply(ok=False, reason=str(exc), invalid=True, state=state)
+                if req.dry_run:
+                    return MoveReply(ok=True, joints=trajectory.q[-1].tolist(), state=state)
+                self._follow_stopped.clear()
+                reply = self._execute(trajectory, "", ctx)
+                if not reply.ok and self._follow_stopped.is_set():
+                    reply.reason = "canceled: the arm stopped on its jerk-limited ramp"
+                return reply
+            finally:
+                self._lock.release()
+        finally:
+            if not req.dry_run:
+                self._release()
+
+    def follow_stop(self, _req: Empty, ctx: Context) -> Ack:
+        """Cancel the running goal: the driver stops the arm on its ramp; answered at rest."""
+        with self._owner_lock:
+            if self._owner != ROS:
+                return Ack(ok=True, reason="no ROS 2 goal is running")
+            self._follow_stopped.set()
+        reply: Ack = self.bus.request("driver", "stop", Empty(), cid=ctx.cid, waiting=ctx.waiting)
+        return reply
 
     def _current(self, req: MoveRequest) -> list[float]:
         """Where the motion starts: what the gateway sent (its copy of the driver's state,
@@ -239,7 +329,7 @@ class PlannerService:
         if req.dry_run:
             return MoveReply(ok=True, joints=target)
         assert plan.trajectory is not None  # a sampled plan that is ok has one
-        return self._execute(plan.trajectory, req, ctx)
+        return self._execute(plan.trajectory, req.session, ctx)
 
     def _select(self, pose: Sequence[float], pattern: Sequence[str], current: list[float], cid: str) -> list[float]:
         c = self.config
@@ -251,13 +341,13 @@ class PlannerService:
             raise MotionRefused("no admissible solution for that pose and status")
         return reply.joints
 
-    def _execute(self, trajectory: SampledTrajectory, req: MoveRequest, ctx: Context) -> MoveReply:
+    def _execute(self, trajectory: SampledTrajectory, session: str, ctx: Context) -> MoveReply:
         """Hand the motion to the driver and wait for its end, as long as the driver says
         (its announcement also says it took the motion: a stop sent now stops it)."""
         request = ExecuteRequest(trajectory=Trajectory(
             dt=trajectory.dt, q=trajectory.q.tolist(), qd=trajectory.qd.tolist(), qdd=trajectory.qdd.tolist()))
         with self._handover:
-            if req.session and req.session in self._ended:
+            if session and session in self._ended:
                 raise MotionRefused("the client left before the motion started")
             self._handing_over = True
 
@@ -293,7 +383,7 @@ class PlannerService:
         if not plan.ok:
             raise MotionRefused(plan.reason)
         assert plan.trajectory is not None  # a LIN plan that is ok has one
-        return self._execute(plan.trajectory, req, ctx)
+        return self._execute(plan.trajectory, req.session, ctx)
 
     def _alter_move(self, req: MoveRequest, cid: str) -> MoveReply:
         """Alter targets; the driver checks them (Alter mode, turn limits, max change), since
@@ -325,7 +415,8 @@ class PlannerService:
 
     def serve(self) -> None:
         self.bus.serve({"config": self.get_config, "config_change": self.config_change, "move": self.move,
-                        "mode": self.mode, "session_end": self.session_end}, workers=4)
+                        "mode": self.mode, "session_end": self.session_end, "follow": self.follow,
+                        "follow_stop": self.follow_stop}, workers=4)
         self.bus.publish("planner/config", self._message(), reliable=True)
         if self.bus.instances("driver"):  # otherwise the driver's token arriving triggers it
             threading.Thread(target=self._push_limits, daemon=True).start()
