@@ -377,12 +377,6 @@ class KawasakiLink(Link):
             self._cancel_pending = True
             self._wake()
 
-    def _wait_for_fault(self) -> None:
-        """A refused point or a closed connection: give the state a moment to say why."""
-        with self._cond:
-            self._cond.wait_for(lambda: self._fault() != "" and not self._fault().startswith("kawasaki"),
-                                FAULT_GRACE_S)
-
     # ------------------------------------------------------------------ the connection
     def _connection_loop(self) -> None:
         while not self._closing.is_set():
@@ -447,7 +441,7 @@ class KawasakiLink(Link):
             ack = self._await(sock, buffer, Ack, self.ack_timeout_s, "no acknowledgement", sequence)
             assert isinstance(ack, Ack)
             heard = time.monotonic()
-            self._on_ack(ack, q, is_cancel, time.perf_counter() - sent)
+            self._on_ack(sock, buffer, ack, q, is_cancel, time.perf_counter() - sent)
         return "closing"
 
     def _next_request(self):
@@ -529,7 +523,8 @@ class KawasakiLink(Link):
             self.underruns = st.underruns
             self._evaluate()
 
-    def _on_ack(self, ack: Ack, q, is_cancel: bool, latency: float) -> None:
+    def _on_ack(self, sock: socket.socket, buffer: bytearray, ack: Ack, q, is_cancel: bool,
+                latency: float) -> None:
         with self._cond:
             self._inflight = False
             self._latencies.append(latency)
@@ -547,12 +542,27 @@ class KawasakiLink(Link):
             self.refused += 1
             self._outbox.clear()
             self._open = False
-        self._wait_for_fault()
+        self._read_for_fault(sock, buffer)
         meaning = ACK_CODES.get(ack.code, "unknown code")
         with self._cond:
             self._report("refused", f"driver: the controller refused a point (code {ack.code}: {meaning})",
                          logging.WARNING)
             self._evaluate("" if is_cancel else f"robot refused a point (code {ack.code}: {meaning})")
+
+    def _read_for_fault(self, sock: socket.socket, buffer: bytearray) -> None:
+        """A refused point: read the states of the next moment, they may say why (an
+        E-stop is the better error than its consequence)."""
+        deadline = time.monotonic() + FAULT_GRACE_S
+        while (remaining := deadline - time.monotonic()) > 0:
+            with self._cond:
+                if self._fault():
+                    return
+            for message in self._messages(buffer):
+                if isinstance(message, Ack):
+                    self._garbage(f"driver: an unasked answer for point {message.sequence}")
+            readable, _, _ = select.select([sock], [], [], min(remaining, 0.05))
+            if readable:
+                self._receive(sock, buffer)
 
     def _receive(self, sock: socket.socket, buffer: bytearray) -> None:
         try:
