@@ -73,7 +73,7 @@ class Arm:
         self.capacity = capacity
         self.t = now
         self.running = False  # the robot program is executing a motion (not waiting for points)
-        self.done = 0  # sequence of the last point the path reached
+        self.done = 0  # sequence of the last point the program took from the queue
         self.executed = 0
         self.underruns = 0
         self.max_speed_ratio = 0.0  # the fastest any joint moved, as a fraction of its rated speed
@@ -143,6 +143,7 @@ class Arm:
                 seconds = max(target.seconds, *(abs(b - a) / v for a, b, v in
                                                 zip(self.ref, target.q, RATED_SPEED, strict=True)))
                 self._seg = (list(self.ref), target, start, seconds)
+                self.done = target.sequence  # the robot program has taken it (its JMOVE began)
             r0, target, ts, seconds = self._seg
             if t < ts + seconds:
                 f = (t - ts) / seconds
@@ -151,7 +152,6 @@ class Arm:
             self.ref = list(target.q)
             self._seg = None
             self.executed += 1
-            self.done = target.sequence
             start = ts + seconds
             if target.final:
                 self.running = False

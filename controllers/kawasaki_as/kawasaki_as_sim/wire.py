@@ -1,7 +1,7 @@
 """The rob6-kas protocol as the AS PC program reads and writes it: its own parser (no rob6 code).
 
 Lines of printable ASCII ended by LF (CR before it ignored), at most 120 characters,
-single spaces between fields. In: ``P seq j1..j6 ms final`` and ``C seq``. Out: ``H``
+fields separated by one or more spaces (AS's number formats pad with spaces). In: ``P seq j1..j6 ms final`` and ``C seq``. Out: ``H``
 (hello), ``A seq code queued`` (an answer to each P and C), ``S ...`` (the state).
 """
 
@@ -43,7 +43,7 @@ class CancelMsg:
 
 def sequence_of(text: str) -> int:
     """The sequence number of a line, or 0 when it has none readable (for the answer)."""
-    fields = text.split(" ")
+    fields = text.split()
     if len(fields) >= 2 and fields[1].isdigit() and len(fields[1]) <= 6:
         return int(fields[1])
     return 0
@@ -51,7 +51,9 @@ def sequence_of(text: str) -> int:
 
 def read(text: str) -> PointMsg | CancelMsg:
     """One line (no LF) -> a message, or Malformed."""
-    fields = text.split(" ")
+    fields = text.split()
+    if not fields:
+        raise Malformed("an empty line")
     kind = fields[0]
     if kind == "P":
         if len(fields) != 10:

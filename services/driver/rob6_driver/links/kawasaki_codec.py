@@ -2,8 +2,8 @@
 as the driver writes and reads it, and the FS03N's joints in the controller's convention.
 
 One message is one line of printable ASCII ended by LF (a CR before it is ignored), at
-most ``MAX_LINE`` characters, fields separated by single spaces, the first field a one-
-letter type. The driver sends ``P`` (a point) and ``C`` (cancel the queue); the
+most ``MAX_LINE`` characters, fields separated by one or more spaces (AS pads numbers),
+the first field a one-letter type. The driver sends ``P`` (a point) and ``C`` (cancel the queue); the
 controller sends ``H`` (hello, once per connection), ``A`` (the answer to every P and
 C) and ``S`` (its state, at least every 100 ms).
 """
@@ -126,7 +126,9 @@ def parse(line: bytes) -> Hello | Ack | State:
         text = line.decode("ascii").rstrip("\r")
     except UnicodeDecodeError:
         raise KasError("a line that is not ASCII") from None
-    fields = text.split(" ")
+    fields = text.split()
+    if not fields:
+        raise KasError("an empty line")
     kind, args = fields[0], fields[1:]
     if kind == "H":
         if len(args) != 3 or args[0] != PROTOCOL:
