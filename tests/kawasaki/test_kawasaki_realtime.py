@@ -259,6 +259,25 @@ def test_slow_then_missing_acknowledgements(kawasaki):
         assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
+def test_a_point_outside_the_controllers_range_is_never_sent(kawasaki):
+    """rob6 allows q3 down to -150, the controller only to -120 (JT3 +120): the link stops the
+    motion at the border with a clear error instead of sending the point."""
+    system, port = kawasaki
+    with controller(port) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+        beyond = list(START)
+        beyond[2] = -130.0
+        answer = reply(client, "MovePTPJoints " + fmt(beyond))
+        assert answer.startswith("ERROR: driver: refused to send a point outside the robot's range (joint 3 at -12")
+        assert answer.endswith(" on the controller, outside its range -150 .. 120)\nfalse\n"), answer
+        here = connected(client, ctl, system)
+        assert -120.0 <= here[2] < 40.0  # stopped on the way, inside the controller's range
+        status = ctl.status()
+        assert status["refused"] == {} and status["position_ctrl_deg"][2] <= 120.0
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+
+
 def test_the_kawasaki_link_on_another_robot_is_refused_in_one_line():
     result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "ad850", "--link", "kawasaki"],
                             capture_output=True, text=True, timeout=60)
