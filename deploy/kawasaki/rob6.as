@@ -152,7 +152,7 @@
     RETURN
   END
   ; range, and speed from the point before (the last queued, or where the arm is)
-  IF kin > kout THEN
+  IF kin > MAXVAL(kout, kflush) THEN
     kprev = (kin - 1) MOD kcap
     kfrom[1] = kq1[kprev]
     kfrom[2] = kq2[kprev]
@@ -174,7 +174,7 @@
       RETURN
     END
   END
-  IF kin - kout >= kcap THEN
+  IF kin - MAXVAL(kout, kflush) >= kcap THEN
     kcode = 5
     RETURN
   END
@@ -199,6 +199,10 @@
     TWAIT 0.05
     GOTO 10
   END
+  IF SWITCH(EMERGENCY) OR NOT SWITCH(POWER) OR NOT SWITCH(REPEAT) OR (ERROR <> 0) THEN
+    kflush = kin                  ; a stop drops the queue: nothing old runs after it
+  END
+  kq = kin - MAXVAL(kout, kflush)
   HERE #kst
   DECOMPOSE kj[1] = #kst
   kstates = (kstates + 1) MOD 1000000
@@ -206,7 +210,7 @@
   FOR kk = 1 TO 6
     $kso[1] = $kso[1] + " " + $ENCODE(/F9.3, kj[kk])
   END
-  kmoving = (kin > kout)          ; points waiting, or a joint moved since the last state
+  kmoving = (kq > 0)              ; points waiting, or a joint moved since the last state
   FOR kk = 1 TO 6
     IF ABS(kj[kk] - kjlast[kk]) > 0.0005 THEN
       kmoving = TRUE
@@ -215,7 +219,7 @@
   END
   $kso[1] = $kso[1] + " " + $ENCODE(/I1, SWITCH(POWER) AND 1) + " " + $ENCODE(/I1, SWITCH(EMERGENCY) AND 1)
   $kso[1] = $kso[1] + " " + $ENCODE(/I1, NOT SWITCH(REPEAT) AND 1) + " " + $ENCODE(/I1, kmoving AND 1)
-  $kso[1] = $kso[1] + " " + $ENCODE(/I3, kin - kout) + " " + $ENCODE(/I6, kdone) + " " + $ENCODE(/I5, ERROR)
+  $kso[1] = $kso[1] + " " + $ENCODE(/I3, kq) + " " + $ENCODE(/I6, kdone) + " " + $ENCODE(/I5, ERROR)
   $kso[1] = $kso[1] + " " + $ENCODE(/I6, kunder) + $CHR(10)
   TCP_SEND ret, ksock, $kso[1], 1, 1
   TWAIT 0.05
@@ -224,6 +228,7 @@
 
 .PROGRAM rob6_motion()
   ; executes the queue: starts a motion at two points or a final one, blends all but the final
+  kout = kin                      ; (re)started after a stop: points from before it never run
   ACCURACY kacc ALWAYS
 10
   IF kflush > kout THEN
