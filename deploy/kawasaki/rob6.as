@@ -20,6 +20,7 @@
   kcap = 64
   kport = 49200
   kacc = 50            ; ACCURACY (mm) of blended points: large, so CP blends them
+  kstart = 3           ; a motion starts at this many points (or a final one): two periods of lead
   kin = 0
   kout = 0
   kflush = 0
@@ -227,14 +228,14 @@
 .END
 
 .PROGRAM rob6_motion()
-  ; executes the queue: starts a motion at two points or a final one, blends all but the final
+  ; executes the queue: starts a motion at kstart points or a final one, blends all but the final
   kout = kin                      ; (re)started after a stop: points from before it never run
   ACCURACY kacc ALWAYS
 10
   IF kflush > kout THEN
     kout = kflush                 ; cancelled (or the client went): drop what was not taken
   END
-  IF (kin - kout >= 2) OR ((kin - kout == 1) AND (kfin[kout MOD kcap] == 1)) THEN
+  IF (kin - kout >= kstart) OR ((kin > kout) AND (kfin[(kin - 1) MOD kcap] == 1)) THEN
     GOTO 20
   END
   TWAIT 0.008

@@ -1,6 +1,6 @@
 """kawasaki-as-sim as rob6's AS program pair on a real FS03N would behave, over real TCP with
 lines written by hand here (no rob6 code): the hello and the state at 10 Hz or more, the
-queue (a motion starts at two points or a final one), a final point reached exactly and
+queue (a motion starts at three points or a final one), a final point reached exactly and
 not before its time, underruns, cancel, every refusal code, one client at a time, a
 dropped connection, E-stop / motor power / teach mode, and the control channel's errors.
 Time is only ever asserted as a lower bound (the arm is never faster than the wall clock)."""
@@ -86,27 +86,28 @@ def test_hello_and_the_state_at_ten_hertz_or_more(client):
     assert time.monotonic() - began >= 0.45
 
 
-def test_a_motion_starts_at_two_points_and_ends_exactly_on_the_final_one(sim, client):
+def test_a_motion_starts_at_three_points_and_ends_exactly_on_the_final_one(sim, client):
     assert client.send("P 1 10.000 90.000 0.000 0.000 0.000 0.000 500 0") == ["A", "1", "0", "1"]
-    time.sleep(0.3)  # one blended point alone never starts: the program waits for a second
+    assert client.send("P 2 15.000 90.000 0.000 0.000 0.000 0.000 250 0") == ["A", "2", "0", "2"]
+    time.sleep(0.3)  # two blended points never start (whatever the wait): the program waits for a third
     assert sim.status()["position_ctrl_deg"][0] == 0.0
     began = time.monotonic()
-    assert client.send("P 2 20.000 90.000 0.000 0.000 0.000 0.000 500 1") == ["A", "2", "0", "2"]
-    st = sim.wait_for(lambda s: not s["moving"] and s["done"] == 2, what="the final point")
-    assert time.monotonic() - began >= 0.95  # two points of 500 ms: never sooner
+    assert client.send("P 3 20.000 90.000 0.000 0.000 0.000 0.000 250 1") == ["A", "3", "0", "3"]
+    st = sim.wait_for(lambda s: not s["moving"] and s["done"] == 3, what="the final point")
+    assert time.monotonic() - began >= 0.95  # 500 + 250 + 250 ms: never sooner
     assert st["position_ctrl_deg"] == [20.0, 90.0, 0.0, 0.0, 0.0, 0.0]
     assert st["position_rob6_deg"] == [20.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     assert st["underruns"] == 0 and st["max_speed_ratio"] <= 1.0
 
 
 def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim, client):
-    client.send("P 1 2.000 90.000 0.000 0.000 0.000 0.000 100 0")
-    client.send("P 2 4.000 90.000 0.000 0.000 0.000 0.000 100 0")
-    st = sim.wait_for(lambda s: not s["moving"] and s["done"] == 2, what="the arm to stop at point 2")
-    assert st["underruns"] == 1 and st["position_ctrl_deg"][0] == pytest.approx(4.0, abs=1e-6)
-    client.send("P 3 5.000 90.000 0.000 0.000 0.000 0.000 100 1")  # a final point alone starts
-    st = sim.wait_for(lambda s: not s["moving"] and s["done"] == 3, what="point 3")
-    assert st["position_ctrl_deg"][0] == 5.0 and st["underruns"] == 1
+    for n in (1, 2, 3):
+        client.send(f"P {n} {2 * n}.000 90.000 0.000 0.000 0.000 0.000 100 0")
+    st = sim.wait_for(lambda s: not s["moving"] and s["done"] == 3, what="the arm to stop at point 3")
+    assert st["underruns"] == 1 and st["position_ctrl_deg"][0] == pytest.approx(6.0, abs=1e-6)
+    client.send("P 4 7.000 90.000 0.000 0.000 0.000 0.000 100 1")  # a final point alone starts
+    st = sim.wait_for(lambda s: not s["moving"] and s["done"] == 4, what="point 4")
+    assert st["position_ctrl_deg"][0] == 7.0 and st["underruns"] == 1
 
 
 def test_cancel_drops_the_queue_and_the_arm_stops_after_the_segment_under_way(sim, client):
@@ -145,15 +146,15 @@ def test_a_line_too_long_and_sequence_numbers(sim, client):
 
 
 def test_a_full_queue_refuses():
-    with KawasakiController("--capacity", "2") as sim:
+    with KawasakiController("--capacity", "3") as sim:
         c = Client(sim.port)
-        assert c.line() == "H rob6-kas 1 2"
-        # three blended points of 5 s each: the first starts moving, the queue then holds two
-        for n in (1, 2):
+        assert c.line() == "H rob6-kas 1 3"
+        # blended points of 5 s each: at three the first starts moving, the queue then holds two
+        for n in (1, 2, 3):
             assert c.send(f"P {n} {n}.000 90.000 0.000 0.000 0.000 0.000 5000 0")[2] == "0"
-        sim.wait_for(lambda s: s["queued"] == 1, what="the first point to start")
-        assert c.send("P 3 3.000 90.000 0.000 0.000 0.000 0.000 5000 0")[2] == "0"
-        assert c.send("P 4 4.000 90.000 0.000 0.000 0.000 0.000 5000 0") == ["A", "4", "5", "2"]
+        sim.wait_for(lambda s: s["queued"] == 2, what="the first point to start")
+        assert c.send("P 4 4.000 90.000 0.000 0.000 0.000 0.000 5000 0")[2] == "0"
+        assert c.send("P 5 5.000 90.000 0.000 0.000 0.000 0.000 5000 0") == ["A", "5", "5", "3"]
         c.close()
 
 

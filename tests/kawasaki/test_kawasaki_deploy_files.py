@@ -82,6 +82,7 @@ def test_the_globals_are_what_the_link_and_the_simulator_assume():
     g = _globals()
     assert g["kport"] == kawasaki.DEFAULT_PORT == 49200
     assert g["kcap"] == 64  # the simulator's default --capacity
+    assert g["kstart"] == arm.START_POINTS == 3
     for j in range(6):
         assert g[f"kmin[{j + 1}]"] == kawasaki_codec.CONTROLLER_MIN_DEG[j] == arm.RANGE_MIN[j]
         assert g[f"kmax[{j + 1}]"] == kawasaki_codec.CONTROLLER_MAX_DEG[j] == arm.RANGE_MAX[j]

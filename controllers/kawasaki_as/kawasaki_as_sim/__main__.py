@@ -44,8 +44,8 @@ def _pose(value: str) -> tuple[float, ...]:
               help="Initial joints, rob6 convention, degrees (six numbers).")
 @click.option("--state-period", default=0.05, show_default=True, type=click.FloatRange(0.01, 0.1),
               help="Seconds between state messages (the protocol asks for 10 Hz or more).")
-@click.option("--capacity", default=64, show_default=True, type=click.IntRange(2, 1000),
-              help="Points the program's queue holds.")
+@click.option("--capacity", default=64, show_default=True, type=click.IntRange(3, 1000),
+              help="Points the program's queue holds (at least the three a motion starts with).")
 def main(host: str, port: int, control: str, start_pose: str, state_period: float, capacity: int) -> None:
     """A simulated Kawasaki FS03N controller running rob6's AS program pair (the rob6-kas
     protocol over TCP), for testing rob6's kawasaki link."""

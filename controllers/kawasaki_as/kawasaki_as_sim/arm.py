@@ -1,7 +1,7 @@
 """The FS03N and its robot program: the point queue executed with JMOVE and blending, in real time.
 
-The robot program (deploy/kawasaki/rob6_motion.as) starts a motion when the queue holds
-two points or a final one, then takes point after point: each becomes a segment of the
+The robot program (``rob6_motion`` in deploy/kawasaki/rob6.as) starts a motion when the
+queue holds ``START_POINTS`` points or a final one, then takes point after point: each becomes a segment of the
 commanded path (joint-space straight line from the previous point, lasting the point's
 time, never less than the slowest axis needs at its rated speed). Blended points (CP ON,
 coarse ACCURACY) flow into the next; a final point is reached exactly (fine ACCURACY)
@@ -33,6 +33,9 @@ MAX_ACCEL = tuple(v * 4.0 for v in RATED_SPEED)
 STOP_DECEL = tuple(a * 2.0 for a in MAX_ACCEL)
 #: the program refuses a point whose slowest axis would have to exceed its rated speed by more than this
 SPEED_TOLERANCE = 1.05
+#: a motion starts when the queue holds this many points (or a final one): while the arm runs
+#: the first, the client has two periods to deliver the next before the queue runs dry
+START_POINTS = 3
 
 DT = 0.002  # integration step, s
 KP = 50.0  # 1/s: how firmly the joints close the last bit of a gap
@@ -124,7 +127,7 @@ class Arm:
             self.t += DT
 
     def _can_start(self) -> bool:
-        return len(self.queue) >= 2 or any(p.final for p in self.queue)
+        return len(self.queue) >= START_POINTS or any(p.final for p in self.queue)
 
     def _path(self, t0: float, t: float) -> list[float] | None:
         """Move the commanded path on to time t; its joint velocities, or None when it stands."""

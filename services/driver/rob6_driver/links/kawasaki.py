@@ -8,8 +8,9 @@ becomes one point ``P`` with the time since the previous point as its duration; 
 point of a motion is marked final (the arm stops exactly there; the others blend, CP ON).
 Each point waits for its answer ``A`` before the next goes out; points made meanwhile are
 merged into one (the newest position, durations summed; ``late`` counts them). The
-controller's robot program waits for two points (or a final one) before it starts a
-motion, so it runs one period behind rob6 and the next point is there in time.
+controller's robot program waits for three points (or a final one) before it starts a
+motion, so it runs two periods behind rob6 and a point may come up to two periods late
+before the arm would run dry (an underrun).
 
 Every setpoint has passed the core's limit monitor; the link also refuses to send one
 outside the controller's joint ranges (they and rob6's differ, see kawasaki_codec).
