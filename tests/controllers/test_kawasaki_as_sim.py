@@ -3,7 +3,8 @@ lines written by hand here (no rob6 code): the hello and the state at 10 Hz or m
 queue (a motion starts at three points or a final one), a final point reached exactly and
 not before its time, underruns, cancel, every refusal code, one client at a time, a
 dropped connection, E-stop / motor power / teach mode, and the control channel's errors.
-Time is only ever asserted as a lower bound (the arm is never faster than the wall clock)."""
+Time is asserted as a lower bound (the arm is never faster than the wall clock), once as a
+generous upper bound (the state's rate)."""
 
 from __future__ import annotations
 
@@ -81,9 +82,10 @@ def test_hello_and_the_state_at_ten_hertz_or_more(client):
         last = client.state()
     assert len(first) == 16 and first[2:8] == ZERO.split(" ")
     assert first[8:12] == ["1", "0", "0", "0"]  # motor on, no E-stop, not teach, at rest
-    assert int(last[1]) == int(first[1]) + 10
-    # ten states take at least 10 periods of 50 ms; a wall-clock lower bound only
-    assert time.monotonic() - began >= 0.45
+    assert int(last[1]) == int(first[1]) + 10  # numbered, none left out
+    # ten states every 50 ms take 0.5 s; 5 s leaves a loaded machine ten times that and still
+    # catches a state sent at 2 Hz or slower (the exact period is the option's, not asserted)
+    assert time.monotonic() - began < 5.0
 
 
 def test_a_motion_starts_at_three_points_and_ends_exactly_on_the_final_one(sim, client):
