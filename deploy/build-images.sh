@@ -2,7 +2,7 @@
 # Build every rob6 image offline, in one go: the base image (deploy/build-base.sh, reused
 # when present), the wheelhouse (deploy/wheelhouse.sh, offline when it is complete), then
 # `compose build` of docker-compose.yml with every profile: the router, the six services
-# and both stand-in controllers, tagged rob6/<name>:$ROB6_TAG.
+# and the three stand-in controllers, tagged rob6/<name>:$ROB6_TAG.
 #
 # Usage: deploy/build-images.sh      (or `make images`)
 # Env:   ROB6_TAG (default latest), ROB6_BASE_IMAGE (default rob6/base:bookworm), UV
@@ -35,5 +35,5 @@ done_step "wheelhouse"
 env_file="$(mktemp)"
 trap 'rm -f "$env_file"' EXIT
 ROB6_TAG="$tag" "$here/compose" -p rob6build -f docker-compose.yml --env-file "$env_file" \
-    --profile rsi --profile adept build
+    --profile rsi --profile adept --profile kawasaki build
 done_step "compose build of rob6/*:$tag (router, services, stand-in controllers)"

@@ -10,7 +10,7 @@
 #   wheelhouse/req/numeric.txt   what kinematics, planner and driver share beyond common (numpy)
 #   wheelhouse/req/<svc>-extra.txt  the rest of <svc>.txt (the service's own image layer)
 #   wheelhouse/req/<ctl>.txt     third-party requirements of a stand-in controller (controllers/*:
-#                                kuka-rsi-sim, adept-sm-sim), installed on the bare runtime,
+#                                kuka-rsi-sim, adept-sm-sim, kawasaki-as-sim), installed on the bare runtime,
 #                                without rob6-shared
 #   wheelhouse/debs/*.deb        Debian packages some wheels expect from the system (libgomp1)
 #   wheelhouse/SHA256SUMS        checksums of all wheels and debs
@@ -41,7 +41,7 @@ for arg in "$@"; do
 done
 
 services="gateway kinematics planner driver gripper recorder ros"
-controllers="kuka-rsi-sim adept-sm-sim"  # stand-in robot controllers with an image (profiles rsi, adept)
+controllers="kuka-rsi-sim adept-sm-sim kawasaki-as-sim"  # stand-in robot controllers with an image (profiles rsi, adept, kawasaki)
 system_debs="libgomp1"
 start=$(date +%s)
 [ "$clean" = 1 ] && rm -rf "$out"

@@ -31,8 +31,9 @@ def main() -> None:
 @click.option("--restart/--no-restart", default=True, show_default=True,
               help="Restart a service that died (it is reported either way).")
 @click.option("--link", envvar="ROB6_LINK", default="sim", show_default=True, type=click.Choice(LINKS),
-              help="How the driver reaches the robot: the simulation, a KUKA over RSI, or an Adept over "
-                   "simple_message (simple_message, also called adept) [env ROB6_LINK].")
+              help="How the driver reaches the robot: the simulation, a KUKA over RSI, an Adept over "
+                   "simple_message (simple_message, also called adept), or a Kawasaki running rob6's AS "
+                   "program (kawasaki) [env ROB6_LINK].")
 @click.option("--service", "services", multiple=True, type=click.Choice(SERVICES),
               help="Start only these services (repeat).")
 @click.option("--ros/--no-ros", envvar="ROB6_ROS", default=True, show_default=True,

@@ -27,7 +27,7 @@ DEFAULT_ROUTER = f"tcp/127.0.0.1:{DEFAULT_ROUTER_PORT}"
 DEFAULT_LIVE_PORT = 8765
 #: how the driver reaches the robot: the simulation, a KUKA KR C4 over RSI, or an Adept
 #: V+ controller over ROS-Industrial simple_message (``adept`` is another name for it)
-LINKS = ("sim", "rsi", "simple_message", "adept")
+LINKS = ("sim", "rsi", "simple_message", "adept", "kawasaki")
 
 
 @dataclass(frozen=True)

@@ -542,6 +542,49 @@ def test_adept_profile_drives_the_adept_container(built, entry_points):
                 "points_received", "points_acknowledged", "points_executed", "underruns", "ack_latency_ms")}}
 
 
+# ---------------------------------------------------------------------- tests: kawasaki profile
+def test_kawasaki_profile_drives_the_kawasaki_container(built, entry_points):
+    """`ROB6_ROBOT=kaw_fs ROB6_LINK=kawasaki compose --profile kawasaki up`: the driver connects
+    to the stand-in Kawasaki controller (its own container on the robot network, found by the
+    compose default ROB6_KAS_HOST=kawasaki-as-sim) and streams a PTP motion to it as
+    acknowledged points; the move answers true only once the controller's arm is at the target."""
+    with controller_stack("kawasaki", "kawasaki-as-sim", robot="kaw_fs", link="kawasaki",
+                          control_port_setting="ROB6_KAWASAKI_SIM_CONTROL_PORT") as (stack, kawasaki):
+        # the driver is the client of the program's port and retries until it answers
+        deadline = time.monotonic() + 90
+        while not (before := kawasaki())["client"]:
+            assert time.monotonic() < deadline, f"the driver never connected to the Kawasaki container: {before}"
+            time.sleep(0.5)
+        start = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # kawasaki-as-sim's default start pose (rob6's convention)
+        assert before["position_rob6_deg"] == start and not before["moving"], before
+        target = [30.0, -20.0, 50.0, 10.0, 20.0, -20.0]
+        with connect(stack.port) as client:
+            # ready once the controller has reported its position: a move to where the arm
+            # stands is then accepted (until then: ERROR: driver: robot not connected ...)
+            t = time.monotonic()
+            while (reply := client.ask("MovePTPJoints 0 0 0 0 0 0", timeout=30)) != "true\n":
+                reply += client.read_lines(1)  # ERROR: ... then false
+                assert reply.startswith("ERROR: driver: robot not connected") and reply.endswith("\nfalse\n"), reply
+                assert time.monotonic() - t < 30, f"rob6 does not follow the controller: {reply!r}"
+                time.sleep(0.2)
+            assert client.ask("GetPositionJoints") == "0.000000 " * 5 + "0.000000\n"
+            t = time.monotonic()
+            assert client.ask("MovePTPJoints " + " ".join(f"{x:g}" for x in target), timeout=60) == "true\n"
+            moved_s = time.monotonic() - t
+            assert [float(x) for x in client.ask("GetPositionJoints").split()] == target
+            status = kawasaki()
+        # the controller's own arm is at the target and at rest: true means the robot arrived
+        assert all(abs(a - b) < 1.5e-3 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
+        assert not status["moving"] and status["queued"] == 0, status
+        # the motion went over the wire as acknowledged points, none refused or malformed
+        assert status["points_accepted"] > before["points_accepted"], status
+        assert status["refused"] == before["refused"] == {} and status["malformed"] == 0, status
+        assert not status["estop"] and status["motor"] and status["client"], status
+        REPORT["kawasaki: controller after the move"] = {
+            "move_s": round(moved_s, 2), **{k: status[k] for k in (
+                "points_received", "points_accepted", "points_executed", "underruns", "ack_ms")}}
+
+
 # ---------------------------------------------------------------------- tests: secure profile
 def test_secure_profile_end_to_end(built, entry_points, certs):
     certs_dir, foreign = certs

@@ -1,7 +1,8 @@
 """rob6-driver: the robot, simulated (``--link sim``, the default), a KUKA KR C4 over
 RSI (``--link rsi``: this PC is the UDP server the controller's RSI context sends to), or
 an Adept V+ controller over ROS-Industrial simple_message (``--link simple_message``, or
-``adept``: this PC is the client of the controller's motion and state ports)."""
+``adept``: this PC is the client of the controller's motion and state ports), or a Kawasaki
+controller running rob6's AS program (``--link kawasaki``: this PC is the client of its port)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from rob6.config import LINKS, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
 
+from .links.kawasaki import DEFAULT_PERIOD_S as DEFAULT_KAS_PERIOD_S, DEFAULT_PORT as DEFAULT_KAS_PORT, KawasakiSettings
 from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, parse_address
 from .links.simple_message import (
     DEFAULT_BYTE_ORDER,
@@ -30,8 +32,9 @@ from .service import DriverService
 @click.option("--dummy/--real-time", envvar="ROB6_DUMMY", default=False, show_default=True,
               help="Instantaneous motion like the original's -d, or motion in real time [env ROB6_DUMMY=1].")
 @click.option("--link", envvar="ROB6_LINK", default="sim", show_default=True, type=click.Choice(LINKS),
-              help="The robot: the simulation, a KUKA KR C4 over RSI, or an Adept over simple_message "
-                   "(simple_message, also called adept) [env ROB6_LINK].")
+              help="The robot: the simulation, a KUKA KR C4 over RSI, an Adept over simple_message "
+                   "(simple_message, also called adept), or a Kawasaki running rob6's AS program "
+                   "(kawasaki) [env ROB6_LINK].")
 @click.option("--rsi-listen", envvar="ROB6_RSI_LISTEN", default=DEFAULT_LISTEN, show_default=True,
               help="UDP HOST:PORT the controller's RSI packets come to [env ROB6_RSI_LISTEN].")
 @click.option("--rsi-sentype", envvar="ROB6_RSI_SENTYPE", default=DEFAULT_SEN_TYPE, show_default=True,
@@ -52,8 +55,15 @@ from .service import DriverService
 @click.option("--sm-period", envvar="ROB6_SM_PERIOD", default=DEFAULT_PERIOD_S, show_default=True, type=float,
               help="simple_message: seconds between streamed points, rounded to controller cycles "
                    "[env ROB6_SM_PERIOD].")
+@click.option("--kas-host", envvar="ROB6_KAS_HOST", default="127.0.0.1", show_default=True,
+              help="kawasaki: the controller's address [env ROB6_KAS_HOST].")
+@click.option("--kas-port", envvar="ROB6_KAS_PORT", default=DEFAULT_KAS_PORT, show_default=True, type=int,
+              help="kawasaki: the port rob6's AS PC program listens on [env ROB6_KAS_PORT].")
+@click.option("--kas-period", envvar="ROB6_KAS_PERIOD", default=DEFAULT_KAS_PERIOD_S, show_default=True,
+              type=float, help="kawasaki: seconds between streamed points, rounded to controller cycles "
+                               "[env ROB6_KAS_PERIOD].")
 def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_motion_port, sm_state_port,
-         sm_io_port, sm_byte_order, sm_period):
+         sm_io_port, sm_byte_order, sm_period, kas_host, kas_port, kas_period):
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
     sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,
@@ -67,6 +77,18 @@ def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_
                          EXIT_REFUSED)
         try:
             sm.check()
+        except ValueError as exc:
+            service.fail("driver", str(exc), EXIT_REFUSED)
+    kas = KawasakiSettings(host=kas_host, port=kas_port, period_s=kas_period)
+    if link == "kawasaki":
+        if not robot.is_kawa:
+            service.fail("driver", f"--link kawasaki drives the Kawasaki FS03N (kaw_fs), not {robot.name}; "
+                         "use --link sim", EXIT_REFUSED)
+        if dummy:
+            service.fail("driver", "--link kawasaki moves a real robot in real time: --dummy is not possible",
+                         EXIT_REFUSED)
+        try:
+            kas.check()
         except ValueError as exc:
             service.fail("driver", str(exc), EXIT_REFUSED)
     if link == "rsi":
@@ -84,7 +106,7 @@ def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_
     def setup(bus):
         try:
             driver = DriverService(bus, robot, dummy, link=link, rsi_listen=rsi_listen, rsi_sen_type=rsi_sentype,
-                                   sm=sm)
+                                   sm=sm, kas=kas)
         except OSError as exc:
             raise service.StartupError(f"cannot listen for RSI on udp/{rsi_listen}: {exc.strerror or exc}; "
                                        "is another driver running? Set ROB6_RSI_LISTEN") from None

@@ -5,7 +5,7 @@ follows Alter targets with Ruckig, and checks every setpoint against the limits 
 its own, whatever the planner sent. The link (``links/``) owns the clock and reaches
 the plant: ``sim``, the simulation (default), ``rsi``, a KUKA KR C4 over RSI, or
 ``simple_message`` (also called ``adept``), an Adept V+ controller over ROS-Industrial
-simple_message. A motion's ``true`` waits for the link to confirm the robot arrived.
+simple_message, or ``kawasaki``, a Kawasaki controller running rob6's AS program. A motion's ``true`` waits for the link to confirm the robot arrived.
 
 The Adept's digital outputs (``signal``: V+ SIGNAL, DirectAdeptCmd signal 5, -6) are
 switched through the link (the simulation's own, or the V+ program's I/O port) and
@@ -43,6 +43,7 @@ from rob6.robots import RobotModel
 from rob6.vplus import check_signals
 
 from .links import Link
+from .links.kawasaki import KawasakiLink, KawasakiSettings
 from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, RsiLink
 from .links.sim import SimLink
 from .links.simple_message import AdeptLink, AdeptSettings
@@ -64,7 +65,7 @@ SIGNAL_PUBLISH_WAIT_S = 0.5
 class DriverService:
     def __init__(self, bus: Bus, robot: RobotModel, dummy: bool, alter_timeout_s: float = 0.5, *,
                  link: str = "sim", rsi_listen: str = DEFAULT_LISTEN, rsi_sen_type: str = DEFAULT_SEN_TYPE,
-                 sm: AdeptSettings | None = None):
+                 sm: AdeptSettings | None = None, kas: KawasakiSettings | None = None):
         self.bus = bus
         self.robot = robot
         self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
@@ -78,10 +79,13 @@ class DriverService:
                                 sen_type=rsi_sen_type)
         elif link in ("simple_message", "adept"):
             self.link = AdeptLink(self.core, robot, sm or AdeptSettings(), self._publish, self._publish_link_event)
+        elif link == "kawasaki":
+            self.link = KawasakiLink(self.core, robot, kas or KawasakiSettings(), self._publish,
+                                     self._publish_link_event)
         elif link == "sim":
             self.link = SimLink(self.core, self._publish)
         else:
-            raise ValueError(f"unknown link {link!r} (sim, rsi or simple_message)")
+            raise ValueError(f"unknown link {link!r} (sim, rsi, simple_message or kawasaki)")
 
     def joint_state(self, state: CoreState) -> JointState:
         link = self.link

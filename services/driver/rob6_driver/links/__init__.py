@@ -5,9 +5,10 @@ delivers the setpoint. ``sim`` takes every setpoint as reached (the default); ``
 drives a KUKA KR C4 over RSI, where every packet from the controller is one cycle
 (``rsi.py``, its codec ``rsi_codec.py``); ``simple_message`` streams the setpoints as
 ROS-Industrial simple_message points to an Adept V+ controller (``simple_message.py``,
-its codec ``simple_message_codec.py``, the V+ program's I/O port ``adept_io.py``).
-Another controller (Kawasaki) becomes one more ``Link`` beside these, without touching
-the motion core.
+its codec ``simple_message_codec.py``, the V+ program's I/O port ``adept_io.py``);
+``kawasaki`` streams them as points to rob6's own AS program on a Kawasaki controller
+(``kawasaki.py``, its codec and the FS03N's joint convention ``kawasaki_codec.py``). The two
+TCP links share ``streaming.py``; none of them touches the motion core.
 
 What the service needs from a link is small: ``start``/``stop``, the plant's state for
 each published joint state (``state``, ``late``, ``missed``, ``q_actual``, ``outputs``) and

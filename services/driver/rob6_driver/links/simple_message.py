@@ -92,6 +92,7 @@ from .simple_message_codec import (
     RobotStatus,
     SimpleMessageError,
 )
+from .streaming import endpoint_name as _name, quantile as _quantile, send_all as _send_all
 
 log = logging.getLogger("rob6.driver")
 
@@ -775,26 +776,3 @@ class AdeptLink(Link):
             t=time.time(), event=event, message=message.removeprefix("driver: "), link="simple_message",
             cycle=self.core.cycle, late=self.late, q_actual=self.q_actual)))
 
-
-def _send_all(sock: socket.socket, data: bytes, timeout: float) -> None:
-    """sendall on a non-blocking socket, within ``timeout``."""
-    deadline = time.monotonic() + timeout
-    view = memoryview(data)
-    while view:
-        try:
-            sent = sock.send(view)
-            view = view[sent:]
-        except BlockingIOError:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise OSError("the controller does not take data (send timed out)") from None
-            select.select([], [sock], [], remaining)
-
-
-def _name(addr: tuple[str, int]) -> str:
-    host, port = addr
-    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
-
-
-def _quantile(values: list[float], q: float) -> float:
-    return values[min(len(values) - 1, max(0, math.ceil(q * len(values)) - 1))]

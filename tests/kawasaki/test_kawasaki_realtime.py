@@ -1,0 +1,289 @@
+"""The whole system (``rob6 run --robot kaw_fs --link kawasaki``) driving the Kawasaki controller
+simulator (kawasaki-as-sim, a separate process speaking rob6's AS protocol over real TCP) in
+real time: PTP, LIN and Alter within every limit, final positions equal; and the faults: E-stop,
+motor power off, teach mode and a controller error mid-motion, the connection dropped, slow
+and missing acknowledgements. Each ends the motion with a clear ``ERROR: driver: ...`` and
+``false``, refuses motion meanwhile, and rob6 continues from where the robot really is.
+Assertions are about positions, limits, texts and recovery, never about how fast this
+(shared) machine is; bench/kawasaki.py measures the timing."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rob6.bus import Bus
+from rob6.config import BusSettings
+from rob6.messages import LinkQuery
+from rob6.robots import get_robot
+from rob6_recorder.reader import read_records
+from tests.controllers.kawasaki_controller import KawasakiController
+from tests.motion.link_session import joints, reply, wait_until
+from tests.motion.test_adept_realtime import free_tcp_ports
+from tests.motion.test_realtime_system import assert_within_limits
+from tests.system import running
+
+pytestmark = pytest.mark.slow
+
+ROBOT = get_robot("kaw_fs")
+START = [0.0, -30.0, 40.0, 0.0, 30.0, 0.0]
+#: the wire carries 1e-3 deg
+POSITION_TOL = 1.5e-3
+
+
+def kawasaki_system(port: int, **kwargs):
+    return running("kaw_fs", dummy=False, extra_env={
+        "ROB6_LINK": "kawasaki", "ROB6_KAS_HOST": "127.0.0.1", "ROB6_KAS_PORT": str(port)}, **kwargs)
+
+
+def controller(port: int, *args: str) -> KawasakiController:
+    return KawasakiController("--port", str(port), *args)
+
+
+def link_status(system):
+    bus = Bus(BusSettings(robot="kaw_fs", robot_id=system.robot_id,
+                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
+    try:
+        bus.wait_for(["driver"], 10)
+        return bus.request("driver", "link", LinkQuery())
+    finally:
+        bus.close()
+
+
+def robot_at(ctl) -> np.ndarray:
+    return np.array(ctl.status()["position_rob6_deg"])
+
+
+def fmt(q) -> str:
+    return " ".join(f"{x:f}" for x in q)
+
+
+def connected(client, ctl, system) -> np.ndarray:
+    """Wait until rob6 moves the robot again and follows it: a motion to where the robot stands
+    is accepted (it sends nothing) and rob6's position is the robot's."""
+    def ready():
+        here = robot_at(ctl)
+        if reply(client, "MovePTPJoints " + fmt(here)) != "true\n":
+            return None
+        q = joints(client)
+        return q if np.allclose(q, robot_at(ctl), atol=POSITION_TOL) else None
+    q = wait_until(ready, what="rob6 to follow the controller")
+    assert link_status(system).state == "connected"
+    return q
+
+
+def arrived(ctl, target) -> dict:
+    return ctl.wait_for(lambda st: not st["moving"] and np.allclose(st["position_rob6_deg"], target,
+                                                                    atol=POSITION_TOL),
+                        timeout=20, what=f"the robot at {target}")
+
+
+def session(client, ctl) -> None:
+    """PTP, LIN and Alter (EnableAlter, MoveRTJoints every 16 ms)."""
+    for ptp_target in (START, [30.0, -20.0, 50.0, 10.0, 20.0, -20.0], START):
+        assert reply(client, "MovePTPJoints " + fmt(ptp_target)) == "true\n"
+        assert np.allclose(robot_at(ctl), ptp_target, atol=POSITION_TOL)  # true: the robot is there
+    assert client.ask("GetPositionJoints") == "0.000000 -30.000000 40.000000 0.000000 30.000000 0.000000\n"
+    pose = [float(x) for x in client.ask("GetPositionHomRowWise").split()]
+    pose[7] += 60.0  # 60 mm along y, a straight line
+    assert client.ask("EnableLin") == "true\n"
+    assert reply(client, "MoveLINHomRowWise " + fmt(pose)) == "true\n"
+    assert np.allclose([float(x) for x in client.ask("GetPositionHomRowWise").split()], pose, atol=1e-3)
+    assert np.allclose(robot_at(ctl), joints(client), atol=POSITION_TOL)
+    assert client.ask("DisableLin") == "true\n"
+    assert client.ask("EnableAlter") == "true\n"
+    here = joints(client)
+    began = time.monotonic()
+    for k in range(250):
+        target = here.copy()
+        target[0] += 3.0 * np.sin(2 * np.pi * 0.5 * k * ROBOT.cycle_s)
+        assert reply(client, "MoveRTJoints " + fmt(target)) == "true\n"
+        # pace the targets at the controller cycle like an Alter client does; a late one only
+        # makes the motion slower, never changes what is asserted
+        delay = began + (k + 1) * ROBOT.cycle_s - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+    final = here.copy()
+    final[0] += 2.0
+    assert reply(client, "MoveRTJoints " + fmt(final)) == "true\n"
+    arrived(ctl, final)
+    assert np.allclose(joints(client), final, atol=1e-6)
+    assert client.ask("DisableAlter") == "true\n"
+
+
+def recorded_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
+    rows = {}
+    for path in directory.glob("*_system_*.mcap"):
+        for r in read_records(path, ["/driver/joint_state"]):
+            rows[r.data["cycle"]] = (r.data["t"], r.data["q"])
+    cycles = sorted(rows)
+    return np.array([rows[c][0] for c in cycles]), np.array([rows[c][1] for c in cycles])
+
+
+def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path):
+    (port,) = free_tcp_ports(1)
+    with kawasaki_system(port, log_dir=str(tmp_path)) as system, system.client() as client:
+        waiting = f"ERROR: driver: robot not connected (waiting for the Kawasaki AS program at 127.0.0.1:{port})\n"
+        assert reply(client, "MovePTPJoints 10 -30 40 0 30 0") == waiting + "false\n"
+        assert reply(client, "EnableAlter") == waiting + "false\n"
+        assert reply(client, "MovePTPJoints 999 0 0 0 0 0") == "false\n"  # refused before the driver
+        with controller(port) as ctl:
+            assert np.array_equal(connected(client, ctl, system), np.zeros(6))
+            session(client, ctl)
+            status = ctl.status()
+            assert status["refused"] == {} and status["malformed"] == 0
+            assert status["points_accepted"] > 100
+            assert status["max_speed_ratio"] <= 1.0  # no axis above its rated speed, ever
+            link = link_status(system)
+            assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
+            assert link.packets == status["points_accepted"]
+            assert client.ask("Quit") == "bye!\n"
+        time.sleep(1.0)  # the recorder writes the last states
+    t, q = recorded_states(tmp_path)
+    assert assert_within_limits(ROBOT, t, q) > 250  # the Alter part alone: 250 targets, one per cycle
+    events = [r.data for path in tmp_path.glob("*_system_*.mcap") for r in read_records(path, ["/driver/link"])]
+    assert [e["event"] for e in events][:2] == ["waiting", "connected"]
+    assert all(e["link"] == "kawasaki" for e in events)
+
+
+@pytest.fixture(scope="module")
+def kawasaki():
+    """One rob6 system on the kawasaki link for the fault tests; each test brings its own controller."""
+    (port,) = free_tcp_ports(1)
+    with kawasaki_system(port) as system:
+        yield system, port
+
+
+def long_move(client, ctl) -> None:
+    """Start a PTP of a few seconds (J1 0 -> 60) without waiting for its reply."""
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    target = list(START)
+    target[0] = 60.0
+    client.send("MovePTPJoints " + fmt(target) + "\n")
+    wait_until(lambda: float(robot_at(ctl)[0]) > 5.0, what="the robot to move")
+
+
+def back_home(client, ctl, system) -> None:
+    here = connected(client, ctl, system)
+    assert 5.0 < here[0] < 60.0  # where the fault caught it: rob6 continues from there
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
+
+
+def test_estop_mid_motion_then_released_and_motor_on(kawasaki):
+    system, port = kawasaki
+    with controller(port) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        long_move(client, ctl)
+        ctl.estop()
+        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports an E-stop\nfalse\n"
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports an E-stop\nfalse\n"
+        assert reply(client, "EnableAlter") == "ERROR: driver: robot reports an E-stop\nfalse\n"
+        ctl.release()  # the motor power stays off
+        wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START))
+                   == "ERROR: driver: robot reports motor power off\nfalse\n", what="motor power off")
+        refused = sum(ctl.status()["refused"].values())
+        assert refused <= 1  # at most the point that was on its way when the E-stop hit
+        ctl.motor(True)
+        back_home(client, ctl, system)
+        assert sum(ctl.status()["refused"].values()) == refused  # nothing sent while it could not move
+
+
+def test_motor_power_off_mid_motion(kawasaki):
+    system, port = kawasaki
+    with controller(port) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        long_move(client, ctl)
+        ctl.motor(False)
+        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports motor power off\nfalse\n"
+        ctl.motor(True)
+        back_home(client, ctl, system)
+
+
+def test_teach_mode_and_a_controller_error_mid_motion(kawasaki):
+    system, port = kawasaki
+    with controller(port) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        long_move(client, ctl)
+        ctl.teach(True)
+        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports teach mode\nfalse\n"
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports teach mode\nfalse\n"
+        ctl.teach(False)
+        back_home(client, ctl, system)
+        long_move(client, ctl)
+        ctl.error(1502)
+        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports controller error 1502\nfalse\n"
+        ctl.clear_error()
+        back_home(client, ctl, system)
+
+
+def test_connection_dropped_mid_motion_and_restored(kawasaki):
+    system, port = kawasaki
+    with controller(port) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        runs = link_status(system).runs
+        long_move(client, ctl)
+        assert ctl.drop_connection()
+        assert client.read_lines(2, timeout=30) == (
+            f"ERROR: driver: kawasaki link lost: the controller at 127.0.0.1:{port} closed the connection\n"
+            "false\n")
+        wait_until(lambda: ctl.status()["client"], what="rob6 to reconnect")
+        back_home(client, ctl, system)  # after the segment under way ran out: no jump back
+        assert link_status(system).runs > runs
+
+
+def test_slow_then_missing_acknowledgements(kawasaki):
+    system, port = kawasaki
+    with controller(port) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+        merged = link_status(system).late
+        ctl.slow_ack(150)  # three points' time: what rob6 makes meanwhile goes as one point
+        target = [20.0, -20.0, 50.0, 0.0, 30.0, 10.0]
+        assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
+        assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)
+        assert link_status(system).late > merged
+        ctl.slow_ack(3000)  # beyond rob6's 2 s: the controller is taken for lost
+        client.send("MovePTPJoints " + fmt(START) + "\n")
+        assert client.read_lines(2, timeout=30) == (
+            f"ERROR: driver: kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{port} "
+            "for 2000 ms\nfalse\n")
+        ctl.slow_ack(0)
+        connected(client, ctl, system)
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+        assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
+
+
+def test_a_point_outside_the_controllers_range_is_never_sent(kawasaki):
+    """rob6 allows q3 down to -150, the controller only to -120 (JT3 +120): the link stops the
+    motion at the border with a clear error instead of sending the point."""
+    system, port = kawasaki
+    with controller(port) as ctl, system.client() as client:
+        connected(client, ctl, system)
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+        beyond = list(START)
+        beyond[2] = -130.0
+        answer = reply(client, "MovePTPJoints " + fmt(beyond))
+        assert answer.startswith("ERROR: driver: refused to send a point outside the robot's range (joint 3 at -12")
+        assert answer.endswith(" on the controller, outside its range -150 .. 120)\nfalse\n"), answer
+        here = connected(client, ctl, system)
+        assert -120.0 <= here[2] < 40.0  # stopped on the way, inside the controller's range
+        status = ctl.status()
+        assert status["refused"] == {} and status["position_ctrl_deg"][2] <= 120.0
+        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+
+
+def test_the_kawasaki_link_on_another_robot_is_refused_in_one_line():
+    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "ad850", "--link", "kawasaki"],
+                            capture_output=True, text=True, timeout=60)
+    assert (result.returncode, result.stderr) == (
+        78, "rob6-driver: --link kawasaki drives the Kawasaki FS03N (kaw_fs), not ad850; use --link sim\n")
+    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kaw_fs", "--link", "kawasaki",
+                             "--kas-port", "0"], capture_output=True, text=True, timeout=60)
+    assert (result.returncode, result.stderr) == (
+        78, "rob6-driver: ROB6_KAS_PORT=0: expected a TCP port 1..65535\n")
