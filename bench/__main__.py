@@ -64,8 +64,6 @@ def gateway_latency(services: tuple[str, ...] = (), log_dir: str | None = None,
         with system.client() as client:
             pose = client.ask("ForwardCalc 10 -20 30 40 50 60", 2).replace("\n", " ")
             for command, lines, _ in COMMANDS:
-                if command == "BackwardCalc":
-                    command = f"BackwardCalc {pose}"
                 if command == "MoveRTJoints":
                     assert client.ask("EnableAlter") == "true\n"
                     results[command] = measure_alternating(
@@ -76,7 +74,8 @@ def gateway_latency(services: tuple[str, ...] = (), log_dir: str | None = None,
                     results[command] = measure_alternating(
                         client, ("MovePTPJoints 10 -60 80 20 40 30\n", "MovePTPJoints 11 -60 80 20 40 30\n"), COUNT)
                     continue
-                results[command.split()[0]] = measure(client, command, lines, COUNT)
+                request = f"BackwardCalc {pose}" if command == "BackwardCalc" else command
+                results[command.split()[0]] = measure(client, request, lines, COUNT)
     return results
 
 

@@ -96,7 +96,7 @@ class System:
     def pids(self) -> dict[str, int]:
         """Service name -> pid of the processes the launcher started."""
         out = subprocess.run(["ps", "-o", "pid=,args=", "--ppid", str(self.process.pid)],
-                             capture_output=True, text=True).stdout
+                             capture_output=True, check=False, text=True).stdout
         pids = {}
         for line in out.splitlines():
             pid, _, args = line.strip().partition(" ")

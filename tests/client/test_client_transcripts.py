@@ -24,7 +24,7 @@ MAX_MESSAGE = 1024  # the original reads at most this much per message (longer s
 
 def command_word(sent: str) -> str | None:
     """The command the original executed: the first word of the message up to a NUL."""
-    words = sent.split("\0")[0].split()
+    words = sent.split("\0", maxsplit=1)[0].split()
     return words[0] if words else None
 
 

@@ -51,7 +51,7 @@ REPORT: dict[str, object] = {}  # timings and sizes, printed at the end (pytest 
 # ---------------------------------------------------------------------- docker helpers
 def _docker_ok() -> bool:
     return bool(shutil.which("docker")) and subprocess.run(
-        ["docker", "info"], capture_output=True, timeout=30).returncode == 0
+        ["docker", "info"], capture_output=True, check=False, timeout=30).returncode == 0
 
 
 _compose = compose_cmd() if _docker_ok() else None

@@ -23,9 +23,8 @@ def analytic_time(d: float, v: float, a: float, j: float) -> float:
     if v * j >= a * a:  # the acceleration limit can be reached before the speed limit
         if d >= v * (v / a + a / j):
             return d / v + v / a + a / j  # reaches a and v (cruise)
-    else:
-        if d >= 2 * v * math.sqrt(v / j):
-            return d / v + 2 * math.sqrt(v / j)  # reaches v, not a
+    elif d >= 2 * v * math.sqrt(v / j):
+        return d / v + 2 * math.sqrt(v / j)  # reaches v, not a
     # no cruise
     tau = (d / (2 * j)) ** (1 / 3)
     if j * tau <= a:

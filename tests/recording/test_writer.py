@@ -51,9 +51,7 @@ def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
                if r.topic not in ("/tf", "/flange", "/robot_description")]
         expected = []
         for topic, t, data in submitted:
-            if topic == "/log":
-                data = to_foxglove_log(data, t)
-            expected.append((topic, t, data))
+            expected.append((topic, t, to_foxglove_log(data, t) if topic == "/log" else data))
         assert got == expected  # every record, in submission order, with its cid
 
         # the cid chain: each client line -> its bus traffic -> its reply

@@ -163,8 +163,7 @@ class Rsi:
         ak = [self.ak[n] if v is None else v for n, v in enumerate(sen.ak)]  # HOLDON per element
         for n in range(6):
             step = abs(ak[n] - self.ak[n])
-            if step > self.max_ak_step[n]:
-                self.max_ak_step[n] = step
+            self.max_ak_step[n] = max(self.max_ak_step[n], step)
         cmd = [0.0] * 6
         for n in range(6):  # AXISCORR clamps to its window, AXISCORRMON stops beyond it
             w = self.window[n]

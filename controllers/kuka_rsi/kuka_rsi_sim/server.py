@@ -263,8 +263,7 @@ class Simulator:
     def _record_rtt(self, dt: float) -> None:
         self.rtt[self.rtt_n % RTT_WINDOW] = dt
         self.rtt_n += 1
-        if dt > self.rtt_max:
-            self.rtt_max = dt
+        self.rtt_max = max(self.rtt_max, dt)
 
     def _reset_run_stats(self) -> None:
         self.rtt_n = 0

@@ -84,8 +84,7 @@ class CycleRunner(Generic[S]):
         while not self._stop.is_set():
             begin = self.clock()
             lateness = begin - deadline
-            if lateness > stats.max_lateness_s:
-                stats.max_lateness_s = lateness
+            stats.max_lateness_s = max(stats.max_lateness_s, lateness)
             if lateness > self.late_tolerance_s:
                 stats.late += 1
             try:
@@ -98,8 +97,7 @@ class CycleRunner(Generic[S]):
             stats.cycles += 1
             now = self.clock()
             work = now - begin
-            if work > stats.max_work_s:
-                stats.max_work_s = work
+            stats.max_work_s = max(stats.max_work_s, work)
             deadline += period
             if now > deadline + period:
                 # overran past the next deadline: skip the ticks we cannot keep

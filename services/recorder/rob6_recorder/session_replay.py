@@ -173,8 +173,8 @@ def load_transcript(path: str | os.PathLike[str]) -> list[Script]:
     skip_next = False
     name = Path(path).name
     with open(path, encoding="utf-8") as fh:
-        for line in fh:
-            line = line.strip()
+        for raw in fh:
+            line = raw.strip()
             if not line:
                 continue
             rec = json.loads(line)

@@ -315,8 +315,7 @@ class RsiLink(Link):
         self.sock.sendto(format_sen(self.sen_type, ak, pkt.ipoc, stop), addr)
         latency_us = max(0.0, (time.time_ns() - t_in) / 1000.0)
         self._hist[min(int(latency_us) // LATENCY_BIN_US, LATENCY_BINS - 1)] += 1
-        if latency_us > self._max_us:
-            self._max_us = latency_us
+        self._max_us = max(self._max_us, latency_us)
         self.packets += 1
         self._heard = time.monotonic()
         # after the answer: nothing here can make it late
