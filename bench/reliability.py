@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import random
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -154,7 +155,6 @@ def main(argv=None) -> int:
         crashes += 1
         parser_counts = {"error": repr(exc)[:300]}
     t1 = time.monotonic()
-    import tempfile
     log_dir = tempfile.mkdtemp(prefix="rob6-reliability-")
     with running(opts.robot, dummy=True, log_dir=log_dir, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:
         records_sent = records_session(system, 1000)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import logging
 import os
 import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -239,7 +240,6 @@ class LiveView:
 
 
 def _now() -> int:
-    import time
     return time.time_ns()
 
 
