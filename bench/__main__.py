@@ -186,7 +186,7 @@ def replica_scaling(requests: int = 40, poses: int = 2000) -> tuple[float, float
             bus.wait_for(["kinematics"], 10)
 
             def rate() -> float:
-                def worker(n):
+                def worker(n) -> None:
                     for _ in range(n):
                         bus.request("kinematics", "ik_batch", body, timeout=30)
                 start = time.perf_counter()

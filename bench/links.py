@@ -33,7 +33,7 @@ class ControllerSim:
     """A stand-in controller (``python -m <module> ... --control 127.0.0.1:0``) as a process,
     asked for its status on its JSON-lines control channel (address in its ready line)."""
 
-    def __init__(self, module: str, *args: str):
+    def __init__(self, module: str, *args: str) -> None:
         self.proc = subprocess.Popen([sys.executable, "-m", module, *args, "--control", "127.0.0.1:0"],
                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         assert self.proc.stdout is not None

@@ -108,7 +108,7 @@ def run_parser_campaign(examples: int) -> dict:
 
     @budget
     @given(st.binary(max_size=300), st.lists(st.integers(0, 300), max_size=8), st.integers(1, 40))
-    def framer(stream, cuts, max_line):
+    def framer(stream, cuts, max_line) -> None:
         n[0] += 1
         check_framer(stream, cuts, max_line)
     framer()
@@ -118,7 +118,7 @@ def run_parser_campaign(examples: int) -> dict:
 
     @budget
     @given(command_line_strategy())
-    def args(text):
+    def args(text) -> None:
         n2[0] += 1
         check_args(_split_command(text)[2])
     args()
@@ -129,7 +129,7 @@ def run_parser_campaign(examples: int) -> dict:
 
     @budget
     @given(command_line_strategy())
-    def execute(text):
+    def execute(text) -> None:
         n3[0] += 1
         check_execute(gateway, session, text)
     execute()

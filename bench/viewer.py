@@ -18,7 +18,7 @@ import sys
 class Viewer:
     """This program as a subprocess: ``Viewer(url)`` returns once it is connected."""
 
-    def __init__(self, url: str):
+    def __init__(self, url: str) -> None:
         self.process = subprocess.Popen([sys.executable, "-m", "bench.viewer", url],
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         if self._says() != "ready":

@@ -62,7 +62,7 @@ def cpu_hogs(count: int) -> Iterator[list[subprocess.Popen[bytes]]]:
 
 
 class _Mix:
-    def __init__(self, client: Client, result: MixResult):
+    def __init__(self, client: Client, result: MixResult) -> None:
         self.client = client
         self.result = result
 

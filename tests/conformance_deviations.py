@@ -134,7 +134,7 @@ class Modes:
     original answered), and position queries are not judged once the robot really
     moved where the original stayed."""
 
-    def __init__(self, robot: str):
+    def __init__(self, robot: str) -> None:
         self.robot = robot
         self.alter = self.lin = self.moved = False
 

@@ -60,7 +60,7 @@ class System:
     """A running ``rob6 run`` (router, services, gateway) on free ports."""
 
     def __init__(self, robot: str = DEFAULT_ROBOT, *, dummy: bool = True, services: tuple[str, ...] = (),
-                 restart: bool = False, log_dir: str | None = None, extra_env: dict[str, str] | None = None):
+                 restart: bool = False, log_dir: str | None = None, extra_env: dict[str, str] | None = None) -> None:
         self.robot = robot
         self.port = free_port()
         self.router_port = free_port()
@@ -134,7 +134,7 @@ def running(robot: str = DEFAULT_ROBOT, **kwargs: Any) -> Iterator[System]:
 class Client:
     """A raw TCP client of the gateway."""
 
-    def __init__(self, port: int, *, host: str = "127.0.0.1", handshake: bool = True, timeout: float = 10.0):
+    def __init__(self, port: int, *, host: str = "127.0.0.1", handshake: bool = True, timeout: float = 10.0) -> None:
         self.sock = socket.create_connection((host, port), timeout=timeout)
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.timeout = timeout

@@ -17,13 +17,13 @@ def cases():
             yield pytest.param(robot, path, id=f"{robot}-{path.stem}")
 
 
-def test_every_robot_has_transcripts():
+def test_every_robot_has_transcripts() -> None:
     """A missing or emptied transcript set is a failure, never a silently shorter suite."""
     counts = {robot: len(list((CONFORMANCE / robot).glob("*.jsonl"))) for robot in ROBOTS}
     assert all(counts.values()) and sum(counts.values()) >= 150, counts  # 150 when copied
 
 
-def test_transcripts_match_the_ground_truth():
+def test_transcripts_match_the_ground_truth() -> None:
     """The copy kept with the tests is the ground truth's (when it is beside the project)."""
     truth = SHARED / "conformance"
     if not truth.is_dir():
@@ -35,7 +35,7 @@ def test_transcripts_match_the_ground_truth():
 
 
 @pytest.mark.parametrize("robot, path", list(cases()))
-def test_transcript(robot, path):
+def test_transcript(robot, path) -> None:
     with running(robot) as system:
         result = replay(system, robot, path)
     assert result.checked > 0

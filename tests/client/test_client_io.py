@@ -14,6 +14,7 @@ import threading
 import time
 
 import pytest
+from pytest import FixtureRequest
 
 from rob6_client import AsyncRobot, Rob6ConnectionError, Rob6Error, Rob6ProtocolError, Rob6Timeout, Robot
 
@@ -28,7 +29,7 @@ class FakeOriginal:
     seconds, None is silence). Unscripted messages get the original's `ERROR: <message>`."""
 
     def __init__(self, script: dict, *, greeting: str | None = GREETING, accept: bool = True,
-                 line_gap: float = 0.03):
+                 line_gap: float = 0.03) -> None:
         self.script = script
         self.greeting, self.accept, self.line_gap = greeting, accept, line_gap
         self.messages: list[str] = []  # what each recv() brought, as the original saw it
@@ -73,7 +74,7 @@ class FakeOriginal:
 class BlockingTwin:
     """An AsyncRobot driven from blocking test code, so one scenario tests both clients."""
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args, **kwargs) -> None:
         self.loop = asyncio.new_event_loop()
         self.robot = AsyncRobot(*args, **kwargs)
         try:
@@ -93,7 +94,7 @@ class BlockingTwin:
 
 
 class _SyncAlter:
-    def __init__(self, loop, manager):
+    def __init__(self, loop, manager) -> None:
         self.loop, self.manager = loop, manager
 
     def __enter__(self):
@@ -104,7 +105,7 @@ class _SyncAlter:
 
 
 @pytest.fixture(params=["sync", "async"])
-def connect(request):
+def connect(request: FixtureRequest):
     servers, robots = [], []
 
     def connect(script=None, **kwargs):
@@ -124,7 +125,7 @@ def connect(request):
         server.close()
 
 
-def test_multi_line_replies_arriving_line_by_line(connect):
+def test_multi_line_replies_arriving_line_by_line(connect) -> None:
     robot, server = connect({"ForwardCalc 0.0 0.0 0.0 0.0 0.0 0.0": FK_LINES, "GetRobot": ["kr16"]},
                             line_gap=0.05)
     pose, status = robot.forward_calc([0, 0, 0, 0, 0, 0])
@@ -134,7 +135,7 @@ def test_multi_line_replies_arriving_line_by_line(connect):
     assert server.commands() == ["ForwardCalc 0.0 0.0 0.0 0.0 0.0 0.0\n", "GetRobot\n"]
 
 
-def test_parse_error_with_a_late_false_keeps_the_session_in_step(connect):
+def test_parse_error_with_a_late_false_keeps_the_session_in_step(connect) -> None:
     robot, _ = connect({f"MovePTPJoints {HOME}": ["ERROR: incorrect joints", 0.2, "false"],
                         "GetRobot": ["kr16"]})
     with pytest.raises(Rob6Error) as caught:
@@ -143,7 +144,7 @@ def test_parse_error_with_a_late_false_keeps_the_session_in_step(connect):
     assert robot.get_robot() == "kr16"
 
 
-def test_error_without_false_does_not_wait(connect):
+def test_error_without_false_does_not_wait(connect) -> None:
     """rob6's `ERROR: <service> unavailable` has no `false` line after it."""
     robot, _ = connect({"GetPositionJoints": ["ERROR: driver unavailable"], "GetRobot": ["kr16"]})
     began = time.monotonic()
@@ -153,7 +154,7 @@ def test_error_without_false_does_not_wait(connect):
     assert robot.get_robot() == "kr16"
 
 
-def test_gripper_reply_lines_before_true(connect):
+def test_gripper_reply_lines_before_true(connect) -> None:
     robot, _ = connect({"GripperMove -1.0": ["Start moving with amperage -1.000", "true"],
                         "GripperGoHome": ["ERROR: gripper blocked", "false"], "HasGripper": ["true"]})
     assert robot.gripper_move(-1) is True
@@ -162,7 +163,7 @@ def test_gripper_reply_lines_before_true(connect):
     assert robot.has_gripper() is True
 
 
-def test_set_allowed_status_learns_the_silent_outcome_from_a_ping(connect):
+def test_set_allowed_status_learns_the_silent_outcome_from_a_ping(connect) -> None:
     robot, server = connect({"SetAllowedStatus noflip up toggleArm": [None], "CM_PING": ["PONG"],
                              "SetAllowedStatus flip down righty": ["ERROR: incorrect status"],
                              "GetAllowedStatus": ["noflip up toggleArm"]})
@@ -175,7 +176,7 @@ def test_set_allowed_status_learns_the_silent_outcome_from_a_ping(connect):
                                  "SetAllowedStatus flip down righty\n", "CM_PING\n", "CM_PING\n"]
 
 
-def test_no_reply_times_out_and_closes_the_connection(connect):
+def test_no_reply_times_out_and_closes_the_connection(connect) -> None:
     robot, _ = connect({f"MovePTPJoints {HOME}": [None]}, timeout=5.0)
     began = time.monotonic()
     with pytest.raises(Rob6Timeout) as caught:
@@ -187,7 +188,7 @@ def test_no_reply_times_out_and_closes_the_connection(connect):
         robot.get_robot()
 
 
-def test_default_timeouts_short_for_queries_long_for_moves(connect):
+def test_default_timeouts_short_for_queries_long_for_moves(connect) -> None:
     robot, _ = connect({"GetRobot": [0.5, "kr16"], f"MovePTPJoints {HOME}": [0.5, "true"]},
                        timeout=0.3, move_timeout=2.0)
     assert robot.move_ptp_joints([0] * 6) is True  # move_timeout
@@ -195,21 +196,21 @@ def test_default_timeouts_short_for_queries_long_for_moves(connect):
         robot.get_robot()  # timeout
 
 
-def test_server_closing_mid_reply(connect):
+def test_server_closing_mid_reply(connect) -> None:
     robot, _ = connect({"ForwardCalc 0.0 0.0 0.0 0.0 0.0 0.0": [FK_LINES[0], "CLOSE"]})
     with pytest.raises(Rob6ConnectionError, match="closed the connection"):
         robot.forward_calc([0] * 6)
     assert not robot.connected
 
 
-def test_unintelligible_reply_closes_the_connection(connect):
+def test_unintelligible_reply_closes_the_connection(connect) -> None:
     robot, _ = connect({"GetPositionJoints": ["1 2 3"]})
     with pytest.raises(Rob6ProtocolError, match="unexpected reply '1 2 3'"):
         robot.get_position_joints()
     assert not robot.connected
 
 
-def test_bad_arguments_are_refused_before_anything_is_sent(connect):
+def test_bad_arguments_are_refused_before_anything_is_sent(connect) -> None:
     """The original would wait for missing arguments and swallow the next command."""
     robot, server = connect({"GetRobot": ["kr16"]})
     with pytest.raises(ValueError, match="expected 6 numbers, got 5"):
@@ -234,19 +235,19 @@ def test_bad_arguments_are_refused_before_anything_is_sent(connect):
     assert server.commands() == ["GetRobot\n"]
 
 
-def test_no_greeting_means_another_client_is_connected(connect):
+def test_no_greeting_means_another_client_is_connected(connect) -> None:
     with pytest.raises(Rob6ConnectionError, match="no greeting"):
         connect(greeting=None, connect_timeout=0.3)
 
 
-def test_busy_server_and_failed_handshake(connect):
+def test_busy_server_and_failed_handshake(connect) -> None:
     with pytest.raises(Rob6ConnectionError, match="server busy"):
         connect(greeting="ERROR: server busy, another client is connected")
     with pytest.raises(Rob6ConnectionError, match="handshake failed"):
         connect(accept=False)
 
 
-def test_quit_on_close(connect):
+def test_quit_on_close(connect) -> None:
     robot, server = connect({"Quit": ["bye!", "CLOSE"]})
     assert robot.greeting == GREETING
     robot.close()
@@ -266,7 +267,7 @@ def test_alter_is_disabled_even_when_the_block_fails(connect):
     assert server.commands()[-1] == "EnableAdeptAlter\n"
 
 
-def test_connection_refused():
+def test_connection_refused() -> None:
     port = socket.create_server(("127.0.0.1", 0))
     free = port.getsockname()[1]
     port.close()

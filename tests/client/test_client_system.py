@@ -22,7 +22,7 @@ def kr16():
         yield system
 
 
-def close_to(a, b, tol=1e-3) -> bool:
+def close_to(a, b, tol: float = 1e-3) -> bool:
     return len(a) == len(b) and all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
@@ -119,7 +119,7 @@ def test_lab_session(kr16):
     assert not robot.connected
 
 
-def test_timeout_closes_the_session_and_a_new_one_starts(kr16):
+def test_timeout_closes_the_session_and_a_new_one_starts(kr16) -> None:
     robot = Robot("127.0.0.1", kr16.port)
     with pytest.raises(Rob6Timeout):
         robot.ping_robot(40, 25, timeout=0.2)  # ~1 s of pings
@@ -136,8 +136,8 @@ def test_timeout_closes_the_session_and_a_new_one_starts(kr16):
             time.sleep(0.1)
 
 
-def test_asyncio_twin(kr16):
-    async def session():
+def test_asyncio_twin(kr16) -> None:
+    async def session() -> None:
         async with AsyncRobot("127.0.0.1", kr16.port) as robot:
             assert await robot.get_robot() == "kr16"
             fk = await robot.forward_calc(Q)
@@ -165,7 +165,7 @@ def test_asyncio_twin(kr16):
     asyncio.run(session())
 
 
-def test_ad850_gripper_and_adept_commands():
+def test_ad850_gripper_and_adept_commands() -> None:
     with running("ad850", dummy=True) as system, Robot("127.0.0.1", system.port) as robot:
         assert robot.is_adept() and robot.has_gripper() is True
         assert robot.gripper_go_home() is True

@@ -66,7 +66,7 @@ def covered_records(path):
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: f"{p.parent.name}/{p.stem}")
-def test_every_recorded_reply_parses(path):
+def test_every_recorded_reply_parses(path) -> None:
     checked: Counter[str] = Counter()
     for name, record, reply in covered_records(path):
         if name == "handshake":
@@ -90,7 +90,7 @@ def test_every_recorded_reply_parses(path):
     assert checked or path.stem in ("framing_wait",), "no reply of this file was checked"
 
 
-def test_the_transcripts_exercise_every_reply_shape():
+def test_the_transcripts_exercise_every_reply_shape() -> None:
     """The corpus is big enough to stand for the original: nearly every command, every shape."""
     commands, shapes, total = set(), set(), 0
     for path in FILES:
@@ -105,7 +105,7 @@ def test_the_transcripts_exercise_every_reply_shape():
             "tuple[Pose, Status] | None", "PingResult | None", "None"} <= shapes
 
 
-def test_set_allowed_status_normalises_like_the_original():
+def test_set_allowed_status_normalises_like_the_original() -> None:
     """After a successful SetAllowedStatus the original's GetAllowedStatus shows the pattern
     in hand/elbow/arm order with missing categories toggled: what normalize_status sends."""
     compared = 0

@@ -26,7 +26,7 @@ READY = re.compile(
 class AdeptController:
     """Starts ``python -m adept_sm_sim`` on free ports; extra CLI flags via ``args``."""
 
-    def __init__(self, *args: str, byte_order: str = "big", start_timeout: float = 20.0):
+    def __init__(self, *args: str, byte_order: str = "big", start_timeout: float = 20.0) -> None:
         self.args = ["--motion-port", "0", "--state-port", "0", "--io-port", "0", "--control", "127.0.0.1:0",
                      "--byte-order", byte_order, *args]
         self.start_timeout = start_timeout

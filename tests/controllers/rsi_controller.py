@@ -32,7 +32,7 @@ class RsiController:
     """Starts ``python -m kuka_rsi_sim`` sending to ``rob6``; more CLI flags via ``args``
     (e.g. ``"--timeout", "20"``, ``"--cycle-ms", "12"``)."""
 
-    def __init__(self, *args: str, rob6: tuple[str, int], robot: str = "kr16rt", start_timeout: float = 20.0):
+    def __init__(self, *args: str, rob6: tuple[str, int], robot: str = "kr16rt", start_timeout: float = 20.0) -> None:
         self.args = ["--robot", robot, "--rob6", f"{rob6[0]}:{rob6[1]}", "--control", "127.0.0.1:0", *args]
         self.start_timeout = start_timeout
         self.proc: subprocess.Popen | None = None

@@ -45,7 +45,7 @@ def rsi3_objects():
     return objects
 
 
-def test_ethernet_configuration(ethernet):
+def test_ethernet_configuration(ethernet) -> None:
     cfg = ethernet.find("CONFIG")
     assert cfg.findtext("PORT").strip() == "49152"
     assert cfg.findtext("SENTYPE").strip() == "ImFree"
@@ -62,7 +62,7 @@ def test_ethernet_configuration(ethernet):
 
 
 @pytest.mark.parametrize("fmt", ["rsix", "rsi3"])
-def test_signal_flow_wiring(ethernet, fmt):
+def test_signal_flow_wiring(ethernet, fmt) -> None:
     objects = rsix_objects() if fmt == "rsix" else rsi3_objects()
     base = 0 if fmt == "rsix" else 1  # RSI 4.x counts from 0, RSI 3.x from 1
     by_type = {t.upper(): (oid, tid, params, inputs) for oid, (t, tid, params, inputs) in objects.items()}
@@ -96,7 +96,7 @@ def test_signal_flow_wiring(ethernet, fmt):
     assert upper_a1 == (6 if fmt == "rsix" else 13)
 
 
-def test_krl_program():
+def test_krl_program() -> None:
     src_bytes = (KUKA / "rob6_rsi.src").read_bytes()
     dat_bytes = (KUKA / "rob6_rsi.dat").read_bytes()
     for text in (src_bytes, dat_bytes):

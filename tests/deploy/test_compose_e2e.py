@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+from pytest import TempPathFactory
 
 from tests.conformance import load, same
 from tests.deploy import zenoh_probe
@@ -71,7 +72,7 @@ class Stack:
     zenoh_port: int = field(default_factory=free_port)
     profiles: tuple[str, ...] = ()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         # an empty env file: a developer's .env must not change the test
         self.env_file = Path(os.environ.get("TMPDIR", "/tmp")) / f"{self.project}.env"
         self.env_file.write_text("")
@@ -223,7 +224,7 @@ def plain(built, entry_points):
 
 
 @pytest.fixture(scope="module")
-def certs(tmp_path_factory):
+def certs(tmp_path_factory: TempPathFactory):
     out = tmp_path_factory.mktemp("certs")
     make = DEPLOY / "certs" / "make-certs.sh"
     run(["bash", str(make), "--out", str(out), "router", *SERVICES, "intruder"])
@@ -233,7 +234,7 @@ def certs(tmp_path_factory):
 
 
 # ---------------------------------------------------------------------- tests: images
-def test_images_offline_minimal_non_root(built):
+def test_images_offline_minimal_non_root(built) -> None:
     heavy = {"numpy", "pinocchio", "ruckig", "mcap", "serial"}
     needs = {"router": set(), "gateway": set(), "kinematics": {"numpy", "pinocchio"},
              "planner": {"numpy", "ruckig"}, "driver": {"numpy", "ruckig"},
@@ -250,7 +251,7 @@ def test_images_offline_minimal_non_root(built):
         run(["docker", "run", "--rm", "--network", "none", image, "python", "-c", script], timeout=120)
 
 
-def test_router_container_tls_and_acl(built, certs):
+def test_router_container_tls_and_acl(built, certs) -> None:
     """Infrastructure on its own: the router image with the secure profile, probed from here."""
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2erouter{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
@@ -268,7 +269,7 @@ def test_router_container_tls_and_acl(built, certs):
 
 
 # ---------------------------------------------------------------------- tests: the running system
-def test_conformance_subset(plain):
+def test_conformance_subset(plain) -> None:
     checked = conformance_subset(plain.port)
     REPORT["conformance subset (management.jsonl)"] = f"{checked} replies identical"
     with connect(plain.port) as client:  # the whole chain: gateway -> planner -> driver, kinematics
@@ -277,7 +278,7 @@ def test_conformance_subset(plain):
         assert client.ask("GetPositionJoints") == "10.000000 -60.000000 80.000000 20.000000 40.000000 30.000000\n"
 
 
-def test_kinematics_killed_mid_session(plain):
+def test_kinematics_killed_mid_session(plain) -> None:
     """The client gets `ERROR: ...` at once while kinematics is gone, and the same session
     works again when it is back; then a crash (SIGKILL inside) is restarted by the policy."""
     expected = fk_expected()
@@ -317,7 +318,7 @@ def test_kinematics_killed_mid_session(plain):
         assert same(FK, client.ask(FK, lines=2), expected)
 
 
-def test_two_kinematics_replicas_both_serve(plain):
+def test_two_kinematics_replicas_both_serve(plain) -> None:
     plain.compose("up", "-d", "--no-build", "--no-recreate", "--scale", "kinematics=2", "kinematics")
     plain.wait_healthy(("kinematics",), timeout=120)
     assert len(plain.containers("kinematics")) == 2
@@ -342,7 +343,7 @@ def test_two_kinematics_replicas_both_serve(plain):
     assert len(served) == 2 and min(served.values()) >= 3, served
 
 
-def test_replicas_from_outside_the_stack(plain, tmp_path):
+def test_replicas_from_outside_the_stack(plain, tmp_path: Path) -> None:
     """What deploy/MULTI_HOST.md describes, with this machine standing in for the other host:
     a kinematics container outside the compose network (docker run, env settings) and a
     plain process (deploy/zenoh/remote-client.json5), both reaching the router through its
@@ -382,7 +383,7 @@ def test_replicas_from_outside_the_stack(plain, tmp_path):
     assert any(i.startswith(remote_container) or i.startswith(hostname) for i in served), served
 
 
-def test_second_project_for_the_same_robot_is_refused(plain, tmp_path):
+def test_second_project_for_the_same_robot_is_refused(plain, tmp_path: Path) -> None:
     """One robot, one owner, in containers: a second compose project with the same robot id
     on the first one's Zenoh network (its network joined as external) gets a one-line
     refusal and exit 78 from each owner service; the first system is not disturbed."""
@@ -414,7 +415,7 @@ def test_second_project_for_the_same_robot_is_refused(plain, tmp_path):
         second.compose("down", "-t", "5", check=False)
 
 
-def test_recordings_readable_after_down(plain):
+def test_recordings_readable_after_down(plain) -> None:
     """Stop the stack (the recorder closes its files on SIGTERM); the MCAP files stay on the
     named volume and read back completely (summary, messages, kinematics traces)."""
     plain.compose("down", "-t", "10")  # keeps the volume
@@ -475,7 +476,7 @@ def controller_stack(profile: str, controller: str, *, robot: str, link: str,
 
 
 # ---------------------------------------------------------------------- tests: rsi profile
-def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
+def test_rsi_profile_drives_the_kr_c4_container(built, entry_points) -> None:
     """`ROB6_LINK=rsi ROB6_ROBOT=kr16rt compose --profile rsi up`: the driver drives the
     stand-in KR C4 (its own container on the robot network) over RSI in real time; the
     controller's axes end where the client moved them, without a trip."""
@@ -498,7 +499,7 @@ def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
 
 
 # ---------------------------------------------------------------------- tests: adept profile
-def test_adept_profile_drives_the_adept_container(built, entry_points):
+def test_adept_profile_drives_the_adept_container(built, entry_points) -> None:
     """`ROB6_ROBOT=ad850 ROB6_LINK=simple_message compose --profile adept up`: the driver
     connects to the stand-in Adept controller (its own container on the robot network, found
     by the compose default ROB6_SM_HOST=adept-sm-sim) and streams a PTP motion to it over
@@ -543,7 +544,7 @@ def test_adept_profile_drives_the_adept_container(built, entry_points):
 
 
 # ---------------------------------------------------------------------- tests: secure profile
-def test_secure_profile_end_to_end(built, entry_points, certs):
+def test_secure_profile_end_to_end(built, entry_points, certs) -> None:
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2esec{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
                   {"ROB6_CERTS_DIR": str(certs_dir)})

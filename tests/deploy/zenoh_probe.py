@@ -139,7 +139,7 @@ def ask(session: zenoh.Session, key: str, timeout: float = WAIT_S) -> list[bytes
 class Inbox:
     """Samples received by a subscriber (``declare`` it before publishing)."""
 
-    def __init__(self, session: zenoh.Session, key: str):
+    def __init__(self, session: zenoh.Session, key: str) -> None:
         self.samples: list[tuple[str, bytes]] = []
         self._lock = threading.Lock()
         # remote samples only: a session's own puts would otherwise reach its own subscriber

@@ -30,7 +30,7 @@ from rob6_kinematics.calc import Kinematics
 ROBOT = get_robot("ad850")
 
 
-def test_the_documented_table():
+def test_the_documented_table() -> None:
     assert to_controller_deg([0.0] * 6).tolist() == [0.0, 0.0, 90.0, 0.0, 0.0, 0.0]
     assert to_controller_deg([10, 20, 30, 40, 50, 60]).tolist() == [-10.0, 20.0, 120.0, -40.0, 50.0, -60.0]
     wire = to_wire([10, 20, 30, 40, 50, 60])
@@ -41,13 +41,13 @@ def test_the_documented_table():
     assert np.allclose(from_controller_deg(to_controller_deg(q)), q, atol=1e-12)
 
 
-def test_positions_read_from_the_wire_carry_what_float32_carries():
+def test_positions_read_from_the_wire_carry_what_float32_carries() -> None:
     as_float32 = np.float32(math.radians(90.0))  # the controller's J3 at rob6's 0
     q = from_wire([0.0, 0.0, float(as_float32), 0.0, 0.0, 0.0])
     assert q.tolist() == [0.0] * 6 and not np.signbit(q).any()
 
 
-def test_the_ranges_map_onto_the_controllers():
+def test_the_ranges_map_onto_the_controllers() -> None:
     """rob6's hardware ranges of the ad850 are the controller's joint ranges (Adept's data)."""
     lo, hi = to_controller_deg(ROBOT.hw_min), to_controller_deg(ROBOT.hw_max)
     ranges = [(float(a), float(b)) for a, b in zip(np.minimum(lo, hi), np.maximum(lo, hi), strict=True)]
@@ -93,7 +93,7 @@ def invariants(flanges) -> list[float]:
     return values
 
 
-def test_forward_kinematics_agree_through_the_convention():
+def test_forward_kinematics_agree_through_the_convention() -> None:
     kin = Kinematics(ROBOT)
     rng = np.random.default_rng(15)
     lo, hi = np.array(ROBOT.turn_min), np.array(ROBOT.turn_max)
@@ -111,7 +111,7 @@ def test_forward_kinematics_agree_through_the_convention():
     ((-1, -1, 1, -1, 1, -1), (0, 0, 90, 0, 0, 0)),  # q2
     ((-1, 1, 1, -1, 1, -1), (0, 0, -90, 0, 0, 0)),  # the J3 offset the other way
 ])
-def test_the_check_would_catch_another_convention(sign, offset):
+def test_the_check_would_catch_another_convention(sign, offset) -> None:
     kin = Kinematics(ROBOT)
     rng = np.random.default_rng(1)
     qs = rng.uniform(-100, 100, (4, 6))

@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 import pytest
+from pytest import FixtureRequest
 
 from rob6.messages import LinkEvent
 from rob6.robots import get_robot
@@ -32,7 +33,7 @@ STATE_PERIOD_S = 0.02
 
 
 class Point:
-    def __init__(self, sequence, comm, joints, velocity, duration):
+    def __init__(self, sequence, comm, joints, velocity, duration) -> None:
         self.sequence, self.comm, self.velocity, self.duration = sequence, comm, velocity, duration
         self.joints = list(joints)  # ten, radians
         self.q = from_wire(self.joints)  # rob6 degrees
@@ -41,7 +42,7 @@ class Point:
 class FakeController:
     """Both ports of a simple_message controller, scripted by the test."""
 
-    def __init__(self, order: str = "big"):
+    def __init__(self, order: str = "big") -> None:
         self.e = ORDERS[order]
         self.motion_server = socket.create_server(("127.0.0.1", 0))
         self.state_server = socket.create_server(("127.0.0.1", 0))
@@ -140,7 +141,7 @@ def _exact(conn, n) -> bytes:
     return data
 
 
-def wait(predicate, timeout=15.0, what="condition"):
+def wait(predicate, timeout: float = 15.0, what: str = "condition") -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, f"timed out waiting for {what}"
@@ -156,12 +157,12 @@ def ptp(core, target, config=None):
     return core.execute(t.q, t.dt, t.qd, t.qdd), len(t.q)
 
 
-def online(core, link):
+def online(core, link) -> None:
     wait(lambda: link.state == "connected" and not core.offline_reason, what="the link to be up")
 
 
 @pytest.fixture(params=["big", "little"])
-def rig(request):
+def rig(request: FixtureRequest):
     fake = FakeController(request.param)
     core = MotionCore(ROBOT)
     events: list[LinkEvent] = []
@@ -172,7 +173,7 @@ def rig(request):
     fake.close()
 
 
-def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig):
+def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig) -> None:
     fake, core, link, events = rig
     port, state_port = fake.settings["motion_port"], fake.settings["state_port"]
     refused = core.execute([[0.0] * 6] * 2, core.dt)
@@ -204,7 +205,7 @@ def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig):
     assert [e.event for e in events][:2] == ["waiting", "connected"]
 
 
-def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig):
+def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -232,7 +233,7 @@ def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig):
     assert "fault" in kinds and kinds[-1] == "back"
 
 
-def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_words(rig):
+def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_words(rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -253,7 +254,7 @@ def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_wo
     assert "refused" in [e.event for e in events]
 
 
-def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig):
+def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -275,7 +276,7 @@ def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig):
     assert [e.event for e in events].count("back") >= 1
 
 
-def test_a_silent_state_port_is_a_lost_link(rig):
+def test_a_silent_state_port_is_a_lost_link(rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -293,7 +294,7 @@ def test_a_silent_state_port_is_a_lost_link(rig):
                m.endswith(" closed the state connection") for m in lost), lost
 
 
-def test_late_acknowledgements_merge_points_and_keep_the_timing(rig):
+def test_late_acknowledgements_merge_points_and_keep_the_timing(rig) -> None:
     fake, core, link, _ = rig
     link.start()
     online(core, link)
@@ -306,7 +307,7 @@ def test_late_acknowledgements_merge_points_and_keep_the_timing(rig):
     assert np.allclose(fake.points[-1].q, [8.0, 0.0, 4.0, 0.0, 0.0, 0.0], atol=1e-4)
 
 
-def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig):
+def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig) -> None:
     fake, core, link, _ = rig
     link.start()
     online(core, link)
@@ -320,7 +321,7 @@ def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig)
     assert core.state().q.tolist() == [0.0] * 6
 
 
-def test_a_point_beyond_the_robots_range_is_never_sent():
+def test_a_point_beyond_the_robots_range_is_never_sent() -> None:
     config = MotionSettings(ROBOT)
     fake = FakeController()
     core = MotionCore(ROBOT)
@@ -342,7 +343,7 @@ def test_a_point_beyond_the_robots_range_is_never_sent():
         fake.close()
 
 
-def test_stopping_the_link_mid_motion_sends_a_stop():
+def test_stopping_the_link_mid_motion_sends_a_stop() -> None:
     fake = FakeController()
     core = MotionCore(ROBOT)
     link = AdeptLink(core, ROBOT, AdeptSettings(**fake.settings), lambda s: None, retry_s=0.1)
@@ -357,7 +358,7 @@ def test_stopping_the_link_mid_motion_sends_a_stop():
     assert fake.points[-1].sequence == -4
 
 
-def test_only_the_adept_and_sensible_settings():
+def test_only_the_adept_and_sensible_settings() -> None:
     with pytest.raises(ValueError, match=r"drives the Adept Viper s850 \(ad850\), not kr16"):
         AdeptLink(MotionCore("kr16"), get_robot("kr16"), AdeptSettings(), lambda s: None)
     for settings, text in ((AdeptSettings(motion_port=0), "ROB6_SM_MOTION_PORT=0"),

@@ -22,7 +22,7 @@ def adept_system(ctl: AdeptController, io_port: int):
         "ROB6_SM_STATE_PORT": str(ctl.state[1]), "ROB6_SM_IO_PORT": str(io_port)})
 
 
-def test_signal_switches_the_controllers_outputs():
+def test_signal_switches_the_controllers_outputs() -> None:
     with AdeptController("--state-period", "0.02") as ctl:
         assert ctl.io is not None
         with adept_system(ctl, ctl.io[1]) as system, Client(system.port) as client:
@@ -44,7 +44,7 @@ def test_signal_switches_the_controllers_outputs():
             assert client.read_quiet(0.3) == ""
 
 
-def test_an_unreachable_io_port_fails_and_switches_nothing():
+def test_an_unreachable_io_port_fails_and_switches_nothing() -> None:
     closed = free_port()
     with (AdeptController("--state-period", "0.02") as ctl, adept_system(ctl, closed) as system,
           Client(system.port) as client):

@@ -31,7 +31,7 @@ def axes(name, q):
 class Controller:
     """Sends hand-made <Rob> packets to the link and reads its answers."""
 
-    def __init__(self, address):
+    def __init__(self, address) -> None:
         host, port = address.rsplit(":", 1)
         self.target = (host, int(port))
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -39,7 +39,7 @@ class Controller:
         self.sock.settimeout(2.0)
         self.ipoc = 1000
 
-    def send(self, aipos=HOME, aspos=HOME, delay=0, ipoc=None, raw=None):
+    def send(self, aipos=HOME, aspos=HOME, delay: int = 0, ipoc=None, raw=None):
         if ipoc is None:
             self.ipoc += 4
             ipoc = self.ipoc
@@ -48,7 +48,7 @@ class Controller:
         self.sock.sendto(data, self.target)
         return ipoc
 
-    def answer(self, timeout=2.0):
+    def answer(self, timeout: float = 2.0):
         """(AK, stop, ipoc) of the next answer, or None if none comes within timeout."""
         self.sock.settimeout(timeout)
         try:
@@ -80,7 +80,7 @@ def rig():
     controller.sock.close()
 
 
-def wait(predicate, timeout=5.0):
+def wait(predicate, timeout: float = 5.0) -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, "timed out"
@@ -94,7 +94,7 @@ def ptp(core, target):
     return core.execute(t.q, t.dt, t.qd, t.qdd)
 
 
-def test_start_steps_and_late_answers(rig):
+def test_start_steps_and_late_answers(rig) -> None:
     core, link, ctl, states, events = rig
     assert link.state == "waiting"
     assert core.execute([list(HOME)] * 2, core.dt).error.startswith("robot not connected (waiting for RSI on 127.0.0.1:")
@@ -130,7 +130,7 @@ def test_start_steps_and_late_answers(rig):
     assert ctl.cycle(delay=2)[0] == pytest.approx(20.0, abs=1e-6)
 
 
-def test_lost_and_back_in_the_same_run_continues_from_aipos(rig):
+def test_lost_and_back_in_the_same_run_continues_from_aipos(rig) -> None:
     core, link, ctl, states, events = rig
     ctl.cycle()
     motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
@@ -152,7 +152,7 @@ def test_lost_and_back_in_the_same_run_continues_from_aipos(rig):
     assert abs(first[0] - back[0]) < 0.01
 
 
-def test_a_restart_rebases_on_the_new_start_pose(rig):
+def test_a_restart_rebases_on_the_new_start_pose(rig) -> None:
     core, link, ctl, states, events = rig
     ctl.cycle()
     motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
@@ -167,7 +167,7 @@ def test_a_restart_rebases_on_the_new_start_pose(rig):
     assert np.array_equal(ctl.cycle(aipos=new_start, aspos=new_start), np.zeros(6))
 
 
-def test_stop_ends_the_correction_run():
+def test_stop_ends_the_correction_run() -> None:
     robot = get_robot("kr16rt")
     core = MotionCore(robot)
     link = RsiLink(core, robot, "127.0.0.1:0", lambda s: None)

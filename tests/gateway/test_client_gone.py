@@ -7,6 +7,7 @@ real Zenoh, the recorder writing MCAP."""
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -50,7 +51,7 @@ def _recorded_at_zero_and_closed(directory, timeout: float = 20.0) -> None:
         time.sleep(0.2)
 
 
-def test_client_gone_mid_move_frees_the_server_and_stops_the_arm(tmp_path):
+def test_client_gone_mid_move_frees_the_server_and_stops_the_arm(tmp_path: Path) -> None:
     robot = get_robot("ad850")
     with running("ad850", dummy=False, log_dir=str(tmp_path)) as system:
         with system.client(timeout=30) as client:

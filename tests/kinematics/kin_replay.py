@@ -75,15 +75,15 @@ class State:
     turn_max: np.ndarray | None = None
     max_change: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.reset_turn()
         self.reset_change()
 
-    def reset_turn(self):
+    def reset_turn(self) -> None:
         self.turn_min = self.kin.turn_min.copy()
         self.turn_max = self.kin.turn_max.copy()
 
-    def reset_change(self):
+    def reset_change(self) -> None:
         self.max_change = self.kin.max_change.copy()
 
 

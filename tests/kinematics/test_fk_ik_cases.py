@@ -44,7 +44,7 @@ def angle_diff(a, b):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_fk_cases(robot):
+def test_fk_cases(robot) -> None:
     cases = load(robot)
     g = Geometry.of(get_robot(robot))
     if robot == "kaw_fs":
@@ -61,7 +61,7 @@ def test_fk_cases(robot):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_ik_cases(robot):
+def test_ik_cases(robot) -> None:
     cases = load(robot)
     k = Kinematics(get_robot(robot))
     zero = np.zeros(6)
@@ -81,7 +81,7 @@ def test_ik_cases(robot):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_ik_batch_matches_single(robot):
+def test_ik_batch_matches_single(robot) -> None:
     """The vectorised all-branch IK (+ limits) equals the per-pose BackwardCalc."""
     cases = load(robot)
     k = Kinematics(get_robot(robot))
@@ -96,7 +96,7 @@ def test_ik_batch_matches_single(robot):
                 assert np.all(angle_diff(Q[i, b], rec) <= JOINT_TOL)
 
 
-def test_kaw_fs_rob6_fk_is_self_consistent():
+def test_kaw_fs_rob6_fk_is_self_consistent() -> None:
     """rob6's kaw_fs (a2 = +250): FK at zero as in robots.md, BackwardCalc(FK(q)) = q."""
     k = Kinematics(get_robot("kaw_fs"))
     T = k.fk(np.zeros(6))[0]

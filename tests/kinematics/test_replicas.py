@@ -24,7 +24,7 @@ def _replica(system) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "rob6_kinematics"], env=env)
 
 
-def test_requests_spread_over_replicas_and_survive_a_killed_one():
+def test_requests_spread_over_replicas_and_survive_a_killed_one() -> None:
     with running("kr16", services=("kinematics",)) as system:
         settings = BusSettings(robot="kr16", robot_id=system.robot_id,
                                connect=(f"tcp/127.0.0.1:{system.router_port}",))
@@ -42,7 +42,7 @@ def test_requests_spread_over_replicas_and_survive_a_killed_one():
             request = IkBatchRequest(poses=poses)
             answers, errors = [], []
 
-            def client():
+            def client() -> None:
                 for _ in range(150):
                     try:
                         answers.append(bus.request("kinematics", "ik_batch", request, timeout=5.0))

@@ -43,7 +43,7 @@ def all_poses(k: Kinematics, seed: int) -> np.ndarray:
     return np.concatenate([T, np.round(T, 6), far])
 
 
-def assert_same(one, ref, ctx):
+def assert_same(one, ref, ctx) -> None:
     assert len(one) == 8
     for b in range(8):
         r = ref[b]
@@ -55,7 +55,7 @@ def assert_same(one, ref, ctx):
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_ik_one_equals_ik(robot):
+def test_ik_one_equals_ik(robot) -> None:
     k = Kinematics(get_robot(robot))
     T = all_poses(k, seed=sum(map(ord, robot)))
     Q = opw.ik(k.g, T)
@@ -64,7 +64,7 @@ def test_ik_one_equals_ik(robot):
     assert len(T) > 4000
 
 
-def test_ik_one_needs_the_exact_wrist_at_180():
+def test_ik_one_needs_the_exact_wrist_at_180() -> None:
     """Without the exact (fma) wrist rotation some J4/J6 come out at -180 where
     numpy says +180 (or the reverse): the case the exact recomputation is for."""
     k = Kinematics(get_robot("kr16"))
@@ -77,7 +77,7 @@ def test_ik_one_needs_the_exact_wrist_at_180():
     assert hits > 0
 
 
-def test_ik_one_degenerate_input():
+def test_ik_one_degenerate_input() -> None:
     g = opw.Geometry.of(get_robot("kr16"))
     assert opw.ik_one(g, [0.0] * 12) == [None] * 8  # zero rotation
     t = k16_pose = Kinematics(get_robot("kr16")).fk([10, -60, 80, 20, 40, 30])[0]
@@ -98,7 +98,7 @@ def test_ik_one_degenerate_input():
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_fk_compiled_one_equals_fk_compiled(robot):
+def test_fk_compiled_one_equals_fk_compiled(robot) -> None:
     k = Kinematics(get_robot(robot))
     q = poses_joints(k, seed=7 + len(robot), n=200)
     q = np.concatenate([q, np.round(q, 3)])
@@ -127,7 +127,7 @@ def backward_reference(k, T, words, cur, lo, hi, mc, w):
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_commands_equal_vectorised(robot):
+def test_commands_equal_vectorised(robot) -> None:
     k = Kinematics(get_robot(robot))
     rng = np.random.default_rng(99)
     qs = poses_joints(k, seed=3, n=40)
@@ -160,7 +160,7 @@ BRANCH_WORDS = list(opw.BRANCHES)
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_forward_calc_text_equals_vectorised(robot):
+def test_forward_calc_text_equals_vectorised(robot) -> None:
     k = Kinematics(get_robot(robot))
     qs = poses_joints(k, seed=5, n=30)
     mid = (np.asarray(k.robot.hw_min, float) + np.asarray(k.robot.hw_max, float)) / 2
@@ -181,7 +181,7 @@ def test_forward_calc_text_equals_vectorised(robot):
 class _VectorisedOnly:
     """A kin without ik_one: selection.branches_of takes the vectorised path."""
 
-    def __init__(self, k):
+    def __init__(self, k) -> None:
         self.k = k
         self.BRANCHES = k.BRANCHES
         self.robot_status = k.robot_status
@@ -191,7 +191,7 @@ class _VectorisedOnly:
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_select_single_pose_equals_vectorised(robot):
+def test_select_single_pose_equals_vectorised(robot) -> None:
     from rob6_kinematics import selection
 
     k = Kinematics(get_robot(robot))

@@ -20,7 +20,7 @@ SUBPROTOCOLS = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.
 
 
 class FoxgloveClient:
-    def __init__(self, url: str, timeout: float = 10.0):
+    def __init__(self, url: str, timeout: float = 10.0) -> None:
         self._connection = connect(url, subprotocols=SUBPROTOCOLS, open_timeout=timeout, max_size=None)
         self.ws = self._connection.__enter__()  # websockets wants it used as a context manager
         self.server_info: dict[str, Any] = {}

@@ -138,7 +138,7 @@ def recorded_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize("order, timing", [("big", "vplus"), ("little", "duration")])
-def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path, order, timing):
+def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path: Path, order, timing) -> None:
     motion, state = free_tcp_ports(2)
     with adept_system(motion, state, order, log_dir=str(tmp_path)) as system, system.client() as client:
         waiting = f"ERROR: driver: robot not connected (waiting for simple_message at 127.0.0.1:{motion}/{state})\n"
@@ -188,7 +188,7 @@ def back_home(client, ctl, system) -> None:
     assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
-def test_estop_mid_motion_then_released_and_drives_on(adept):
+def test_estop_mid_motion_then_released_and_drives_on(adept) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -209,7 +209,7 @@ def test_estop_mid_motion_then_released_and_drives_on(adept):
         assert ctl.status()["points_refused"] == refused_at_fault  # nothing sent while it could not move
 
 
-def test_drives_off_mid_motion(adept):
+def test_drives_off_mid_motion(adept) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -220,7 +220,7 @@ def test_drives_off_mid_motion(adept):
         back_home(client, ctl, system)
 
 
-def test_controller_error_mid_motion(adept):
+def test_controller_error_mid_motion(adept) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -233,7 +233,7 @@ def test_controller_error_mid_motion(adept):
         back_home(client, ctl, system)
 
 
-def test_motion_connection_dropped_mid_motion_and_restored(adept):
+def test_motion_connection_dropped_mid_motion_and_restored(adept) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -247,7 +247,7 @@ def test_motion_connection_dropped_mid_motion_and_restored(adept):
         assert link_status(system).runs >= 2
 
 
-def test_state_connection_dropped_mid_motion_and_restored(adept):
+def test_state_connection_dropped_mid_motion_and_restored(adept) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -259,7 +259,7 @@ def test_state_connection_dropped_mid_motion_and_restored(adept):
         back_home(client, ctl, system)
 
 
-def test_slow_then_missing_acknowledgements(adept):
+def test_slow_then_missing_acknowledgements(adept) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -281,7 +281,7 @@ def test_slow_then_missing_acknowledgements(adept):
         assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
-def test_simple_message_on_a_robot_other_than_the_adept_is_refused_in_one_line():
+def test_simple_message_on_a_robot_other_than_the_adept_is_refused_in_one_line() -> None:
     result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kr16", "--link", "simple_message"],
                             capture_output=True, check=False, text=True, timeout=60)
     assert result.returncode == 78

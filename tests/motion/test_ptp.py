@@ -50,7 +50,7 @@ def run_ptp_in_sim(robot, q1, config=None):
     return sim, motion, cycles, tr
 
 
-def test_30deg_a1_kr16_takes_the_analytic_time():
+def test_30deg_a1_kr16_takes_the_analytic_time() -> None:
     c = MotionSettings("kr16")
     v = c.speed[0] / UNIT_CYCLE_S  # 15.6 deg/s
     a = c.accel[0] / UNIT_CYCLE_S**2  # 34.72 deg/s^2
@@ -70,7 +70,7 @@ def test_30deg_a1_kr16_takes_the_analytic_time():
 
 @pytest.mark.parametrize("d", [0.01, 0.3, 1.0, 2.0, 5.0, 30.0, 120.0])
 @pytest.mark.parametrize("robot", ["kr16", "kr3rt", "ad850"])
-def test_single_axis_duration_matches_analytic(robot, d):
+def test_single_axis_duration_matches_analytic(robot, d) -> None:
     c = MotionSettings(robot)
     p = TrajectoryPlanner(robot)
     for joint in (0, 5):
@@ -85,7 +85,7 @@ def test_single_axis_duration_matches_analytic(robot, d):
         assert T - 1e-9 <= dur <= T + p.dt + 1e-9  # rounded up to whole cycles
 
 
-def test_sampling_matches_ruckig_and_respects_limits():
+def test_sampling_matches_ruckig_and_respects_limits() -> None:
     rng = np.random.default_rng(3)
     for robot in ROBOT_TYPES:
         c = MotionSettings(robot)
@@ -111,7 +111,7 @@ def test_sampling_matches_ruckig_and_respects_limits():
             assert np.all(np.abs(tr.q[-2, moving] - q1[moving]) > 0)
 
 
-def test_target_validation():
+def test_target_validation() -> None:
     c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     zero = np.zeros(6)
@@ -140,7 +140,7 @@ def test_target_validation():
     assert res.ok and res.trajectory is not None and res.trajectory.n == 1
 
 
-def test_from_outside_changed_turn_limits_back_inside():
+def test_from_outside_changed_turn_limits_back_inside() -> None:
     """Limits narrowed while the robot is outside: a move back inside is allowed."""
     c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
@@ -149,7 +149,7 @@ def test_from_outside_changed_turn_limits_back_inside():
     assert res.ok
 
 
-def test_lower_limits_take_longer():
+def test_lower_limits_take_longer() -> None:
     c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     t_default = p.ptp_duration(np.zeros(6), [30, 0, 0, 0, 0, 0], c)
@@ -158,7 +158,7 @@ def test_lower_limits_take_longer():
     assert t_half > 1.7 * t_default
 
 
-def test_allowed_status_and_pattern():
+def test_allowed_status_and_pattern() -> None:
     c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     zero = np.zeros(6)  # noflip up lefty

@@ -5,6 +5,7 @@ reach their targets; a 30 deg PTP of A1 takes the time the limits imply."""
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -48,7 +49,7 @@ def assert_within_limits(robot, t, q, speed=None, accel=None) -> int:
     return int(np.any(v != 0, axis=1).sum())
 
 
-def test_ptp_lin_and_alter_sessions_stay_within_limits(tmp_path):
+def test_ptp_lin_and_alter_sessions_stay_within_limits(tmp_path: Path) -> None:
     robot = get_robot("kr16")
     start = [0.0, -80.0, 100.0, 0.0, 30.0, 0.0]
     with running("kr16", dummy=False, log_dir=str(tmp_path)) as system:
@@ -95,7 +96,7 @@ def test_ptp_lin_and_alter_sessions_stay_within_limits(tmp_path):
     assert ptp_wall >= expected - 2 * robot.cycle_s  # answered only after the robot arrived
 
 
-def test_alter_mode_stops_when_the_client_goes_away():
+def test_alter_mode_stops_when_the_client_goes_away() -> None:
     with running("kr16rt", dummy=False) as system:
         with system.client() as client:
             assert client.ask("MovePTPJoints 0 -10 10 0 30 0", timeout=30) == "true\n"
@@ -113,7 +114,7 @@ def test_alter_mode_stops_when_the_client_goes_away():
             assert client.ask("MoveRTJoints 10 -10 10 0 30 0") == "false\n"  # Alter mode ended with it
 
 
-def test_alter_mode_stops_when_targets_stop_coming():
+def test_alter_mode_stops_when_targets_stop_coming() -> None:
     with running("kr16rt", dummy=False) as system, system.client() as client:
         assert client.ask("MovePTPJoints 0 -10 10 0 30 0", timeout=30) == "true\n"
         assert client.ask("EnableAlter") == "true\n"
@@ -125,7 +126,7 @@ def test_alter_mode_stops_when_targets_stop_coming():
         assert 0.5 < first[0] < 30.0
 
 
-def test_robot_stops_when_the_planner_goes_away_mid_motion():
+def test_robot_stops_when_the_planner_goes_away_mid_motion() -> None:
     import os
     import signal
     with running("kr16", dummy=False) as system, system.client() as client:

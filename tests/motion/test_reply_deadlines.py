@@ -39,7 +39,7 @@ def _sine(k: int) -> list[float]:
     return target
 
 
-def test_disable_alter_mid_stream_answers_true_at_rest_and_the_next_ptp_works(kr16rt):
+def test_disable_alter_mid_stream_answers_true_at_rest_and_the_next_ptp_works(kr16rt) -> None:
     with kr16rt.client(timeout=READ_S) as client:
         assert client.ask("MovePTPJoints " + _joints(START)) == "true\n"
         assert client.ask("EnableAlter") == "true\n"
@@ -55,7 +55,7 @@ def test_disable_alter_mid_stream_answers_true_at_rest_and_the_next_ptp_works(kr
         assert _position(client) == START
 
 
-def test_client_library_alter_block_ends_with_the_arm_at_rest(kr16rt):
+def test_client_library_alter_block_ends_with_the_arm_at_rest(kr16rt) -> None:
     with Robot("127.0.0.1", kr16rt.port, timeout=READ_S) as robot:
         assert robot.move_ptp_joints(START)
         with robot.alter():  # DisableAlter on exit: raised Rob6Error before the fix

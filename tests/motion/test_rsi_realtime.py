@@ -111,7 +111,7 @@ def session(client) -> None:
     assert client.ask("DisableAlter") == "true\n"
 
 
-def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp_path):
+def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp_path: Path) -> None:
     port = free_port(socket.SOCK_DGRAM)
     # the controller starts where the simulation does, so that the replay below is exact
     zero = "--start-pose", "0,0,0,0,0,0"
@@ -171,7 +171,7 @@ def long_move(client, kuka) -> None:
     wait_until(lambda: kuka.status()["aipos"][0] > 5.0, timeout=10.0, what="the robot to move")
 
 
-def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi):
+def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -189,7 +189,7 @@ def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi):
         assert_no_jump(kuka.status())
 
 
-def test_every_50th_packet_dropped_the_motion_completes(rsi):
+def test_every_50th_packet_dropped_the_motion_completes(rsi) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -208,7 +208,7 @@ def test_every_50th_packet_dropped_the_motion_completes(rsi):
         assert np.allclose(joints(client), status["aipos"], atol=POSITION_TOL)
 
 
-def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi):
+def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -227,7 +227,7 @@ def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi):
         assert_no_jump(status)
 
 
-def test_controller_vanishes_and_returns(rsi):
+def test_controller_vanishes_and_returns(rsi) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -247,7 +247,7 @@ def test_controller_vanishes_and_returns(rsi):
         assert_no_jump(status)
 
 
-def test_rsi_on_a_robot_without_rsi_is_refused_in_one_line():
+def test_rsi_on_a_robot_without_rsi_is_refused_in_one_line() -> None:
     result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "ad850", "--link", "rsi"],
                             capture_output=True, check=False, text=True, timeout=60)
     assert result.returncode == 78

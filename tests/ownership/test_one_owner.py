@@ -50,7 +50,7 @@ def _moves_undisturbed(client, stop: threading.Event, seen: list) -> None:
         k += 1
 
 
-def test_second_owner_of_each_kind_is_refused_with_one_line():
+def test_second_owner_of_each_kind_is_refused_with_one_line() -> None:
     with running("kr16", dummy=True) as system, system.client() as client:
         stop = threading.Event()
         seen: list[bool | tuple[str, str]] = []
@@ -81,7 +81,7 @@ def test_second_owner_of_each_kind_is_refused_with_one_line():
         assert client.ask("MovePTPJoints 1 -60 80 0 40 0") == "true\n"
 
 
-def test_a_second_rob6_run_is_refused_at_once():
+def test_a_second_rob6_run_is_refused_at_once() -> None:
     with running("kr16", dummy=True) as system:
         started = time.monotonic()
         second = subprocess.run([sys.executable, "-m", "rob6.cli", "run", "--robot-id", system.robot_id,
@@ -98,7 +98,7 @@ def test_a_second_rob6_run_is_refused_at_once():
 
 
 @pytest.mark.parametrize("service", ["driver", "gateway"])
-def test_two_started_at_the_same_moment_exactly_one_wins(service):
+def test_two_started_at_the_same_moment_exactly_one_wins(service) -> None:
     # only a router and kinematics: both newcomers race for an empty role
     with running("kr16", dummy=True, services=("kinematics",)) as system:
         for _ in range(3):
@@ -121,7 +121,7 @@ def test_two_started_at_the_same_moment_exactly_one_wins(service):
                     process.wait(10)
 
 
-def test_a_foreign_state_on_the_robot_key_is_ignored_and_logged():
+def test_a_foreign_state_on_the_robot_key_is_ignored_and_logged() -> None:
     with running("kr16", dummy=True) as system, system.client() as client:
         assert client.ask("MovePTPJoints 20 -60 80 0 40 0") == "true\n"
         config = zenoh.Config()

@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -30,7 +31,7 @@ def _one_line(result: subprocess.CompletedProcess) -> str:
 
 
 @pytest.mark.parametrize("taken", ["client", "router"])
-def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken):
+def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken) -> None:
     port, router_port = free_port(), free_port()
     with socket.socket() as squatter:
         squatter.bind(("127.0.0.1" if taken == "router" else "0.0.0.0", port if taken == "client" else router_port))
@@ -47,13 +48,13 @@ def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken):
         assert "ROB6_ROUTER_PORT" in line
 
 
-def test_an_unknown_setting_is_refused_before_anything_starts():
+def test_an_unknown_setting_is_refused_before_anything_starts() -> None:
     result = _rob6_run("--port", str(free_port()), ROB6_LINK="serial")
     assert result.returncode != 0
     assert "Invalid value for '--link'" in result.stderr and "Traceback" not in result.stderr
 
 
-def test_a_router_that_cannot_bind_says_so_in_one_line():
+def test_a_router_that_cannot_bind_says_so_in_one_line() -> None:
     with socket.socket() as squatter:
         squatter.bind(("127.0.0.1", 0))
         squatter.listen()
@@ -64,7 +65,7 @@ def test_a_router_that_cannot_bind_says_so_in_one_line():
     assert _one_line(result).startswith(f"rob6-router: cannot listen on tcp/127.0.0.1:{port}: address already in use")
 
 
-def test_a_client_connecting_the_instant_the_port_opens_gets_real_answers():
+def test_a_client_connecting_the_instant_the_port_opens_gets_real_answers() -> None:
     """20 cold starts in a row: the first motion command of a client that connected as
     soon as the port accepted is executed, never 'planner unavailable'."""
     for attempt in range(20):
@@ -86,7 +87,7 @@ def test_a_client_connecting_the_instant_the_port_opens_gets_real_answers():
             system.stop()
 
 
-def test_ctrl_c_after_a_session_loses_no_record(tmp_path):
+def test_ctrl_c_after_a_session_loses_no_record(tmp_path: Path) -> None:
     system = System("kr16", dummy=False, log_dir=str(tmp_path))
     try:
         system.wait_ready()

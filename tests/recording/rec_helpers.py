@@ -99,7 +99,7 @@ class FakeServer:
     """
 
     def __init__(self, handler: Callable[[int, bytes], tuple[bytes, bool]],
-                 greeting: str = GREETING, per_line: bool = True):
+                 greeting: str = GREETING, per_line: bool = True) -> None:
         self.handler = handler
         self.greeting = greeting
         self.per_line = per_line

@@ -37,7 +37,7 @@ def _recorder_restarted(system, killed: int, timeout: float = 30.0) -> None:
         time.sleep(0.05)
 
 
-def test_recorder_killed_and_restarted_mid_session_loses_no_client_record(tmp_path):
+def test_recorder_killed_and_restarted_mid_session_loses_no_client_record(tmp_path: Path) -> None:
     with running("kr16", log_dir=str(tmp_path), restart=True) as system:
         with system.client() as client:
             exchanges = 1  # the handshake line

@@ -45,7 +45,7 @@ def _replay(path: Path, port: int) -> subprocess.CompletedProcess:
                           timeout=120)
 
 
-def test_session_recorded_replayed_and_compared(tmp_path):
+def test_session_recorded_replayed_and_compared(tmp_path: Path) -> None:
     with running("kr16", log_dir=str(tmp_path)) as system:
         _session(system)
         time.sleep(1.5)  # the session file is finished shortly after the client left
@@ -72,7 +72,7 @@ def test_session_recorded_replayed_and_compared(tmp_path):
         assert "kr16" in changed.stdout and "ad850" in changed.stdout
 
 
-def test_recorder_killed_mid_session_leaves_a_readable_file(tmp_path):
+def test_recorder_killed_mid_session_leaves_a_readable_file(tmp_path: Path) -> None:
     with running("kr16", log_dir=str(tmp_path)) as system, system.client() as client:
         for _ in range(30):
             assert client.ask("GetRobot") == "kr16\n"

@@ -6,9 +6,11 @@ import logging
 import math
 import re
 import time
+from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
+from pytest import LogCaptureFixture
 
 from rob6_recorder.reader import RecordingReader, is_complete, read_records
 from rob6_recorder.schemas import schema_for, to_foxglove_log
@@ -34,7 +36,7 @@ def _checked_summary(path):
         return summary, messages
 
 
-def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
+def test_scripted_session_every_record_in_order_with_cid(tmp_path: Path, urdf) -> None:
     def fk(q):
         return [1, 0, 0, 1000.0, 0, 1, 0, 0, 0, 0, 1, 500.0]
 
@@ -94,7 +96,7 @@ def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
     assert log.data["level"] == 3 and log.data["name"] == "gateway/rob6.gateway"
 
 
-def test_records_outside_sessions_go_to_system_only(tmp_path):
+def test_records_outside_sessions_go_to_system_only(tmp_path: Path) -> None:
     with Recorder(tmp_path, "kr16", "robot1") as rec:
         t = time.time_ns()
         rec.submit("/driver/joint_state", t, {"q": [0] * 6})
@@ -111,7 +113,7 @@ def test_records_outside_sessions_go_to_system_only(tmp_path):
     assert [r.log_time - t for r in read_records(system)] == [0, 1, 2, 3, 4, 5]
 
 
-def test_a_trace_arriving_before_its_sessions_open_event_lands_in_the_session(tmp_path):
+def test_a_trace_arriving_before_its_sessions_open_event_lands_in_the_session(tmp_path: Path) -> None:
     """Two services' trace batches reach the recorder in either order: the kinematics trace of
     a session's first command may come before the gateway's open event (seen in a full test
     run on a busy machine). It belongs to the session by its time, not by its arrival."""
@@ -127,7 +129,7 @@ def test_a_trace_arriving_before_its_sessions_open_event_lands_in_the_session(tm
     assert sorted(r.log_time - t for r in read_records(system)) == [0, 1, 2, 3, 4]
 
 
-def test_rotation_by_size_and_time(tmp_path):
+def test_rotation_by_size_and_time(tmp_path: Path) -> None:
     with Recorder(tmp_path / "size", "kr16", "robot1", rotate_bytes=20_000, rotate_seconds=0,
                   chunk_interval=0.05, fsync=False) as rec:
         t = time.time_ns()
@@ -152,7 +154,7 @@ def test_rotation_by_size_and_time(tmp_path):
     assert [r.data["message"] for p in files for r in read_records(p)] == [str(i) for i in range(8)]
 
 
-def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path, caplog):
+def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path: Path, caplog: LogCaptureFixture) -> None:
     rec = Recorder(tmp_path, "kr16", "robot1", max_backlog=100, warn_backlog=50)
     t = time.time_ns()
     with caplog.at_level(logging.WARNING, logger="rob6.recorder"):
@@ -174,7 +176,7 @@ def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path, caplog):
     assert rec.stats().written == 100
 
 
-def test_missed_batches_are_logged_and_recorded_on_the_status_channel(tmp_path, caplog):
+def test_missed_batches_are_logged_and_recorded_on_the_status_channel(tmp_path: Path, caplog: LogCaptureFixture) -> None:
     """What the bus reports as lost on the way (sample-miss detection) is in the file."""
     with caplog.at_level(logging.WARNING, logger="rob6.recorder"), Recorder(tmp_path, "kr16", "robot1") as rec:
         rec.report_missed("rob6/robot1/trace/gateway gw-1", 3)
@@ -187,14 +189,14 @@ def test_missed_batches_are_logged_and_recorded_on_the_status_channel(tmp_path, 
                       {"missed": 2, "missed_source": "rob6/robot1/trace/gateway gw-1", "missed_total": 5}]
 
 
-def test_submit_after_close_is_refused_and_counted(tmp_path):
+def test_submit_after_close_is_refused_and_counted(tmp_path: Path) -> None:
     rec = Recorder(tmp_path, "kr16", "robot1").start()
     rec.close()
     assert rec.submit("/log", 1, {"message": "late"}) is False
     assert rec.stats().dropped == 1
 
 
-def test_bytes_and_structs_and_unserialisable(tmp_path):
+def test_bytes_and_structs_and_unserialisable(tmp_path: Path) -> None:
     import msgspec
 
     class JS(msgspec.Struct):
@@ -212,7 +214,7 @@ def test_bytes_and_structs_and_unserialisable(tmp_path):
     assert recs[2].schema == "rob6.Record" and recs[2].data["obj"].startswith("<object")
 
 
-def test_fk_without_urdf_gives_tf_and_flange(tmp_path):
+def test_fk_without_urdf_gives_tf_and_flange(tmp_path: Path) -> None:
     def fk(q):
         return None if q[0] > 100 else [1, 0, 0, q[0], 0, 1, 0, 0, 0, 0, 1, 0]
 
@@ -228,7 +230,7 @@ def test_fk_without_urdf_gives_tf_and_flange(tmp_path):
     assert tf[0]["parent_frame_id"] == "base" and tf[0]["translation"]["x"] == 0.05
 
 
-def test_schema_mapping():
+def test_schema_mapping() -> None:
     assert schema_for("/session/12/client_in").name == "rob6.ClientLine"
     assert schema_for("/bus/kinematics/fk/request").name == "rob6.BusRequest"
     assert schema_for("/bus/kinematics/fk/reply").name == "rob6.BusReply"
@@ -236,7 +238,7 @@ def test_schema_mapping():
     assert schema_for("/whatever").name == "rob6.Record"
 
 
-def test_log_mapping_levels():
+def test_log_mapping_levels() -> None:
     assert to_foxglove_log({"level": "ERROR", "name": "n", "message": "m", "service": "driver",
                             "time": 12.5}, 0) == {
         "timestamp": {"sec": 12, "nsec": 500_000_000}, "level": 4, "message": "m",
@@ -245,7 +247,7 @@ def test_log_mapping_levels():
     assert to_foxglove_log({"level": "DEBUG", "message": "x"}, 7)["timestamp"] == {"sec": 0, "nsec": 7}
 
 
-def test_tf_from_urdf(urdf):
+def test_tf_from_urdf(urdf) -> None:
     tf = TfDeriver(urdf)
     msg = tf.transforms([90.0, 0.0, 0, 0, 0, 0], 1_500_000_000)
     frames = [(t["parent_frame_id"], t["child_frame_id"]) for t in msg["transforms"]]
@@ -261,7 +263,7 @@ def test_tf_from_urdf(urdf):
     assert math.isclose(flipped["transforms"][1]["rotation"]["y"], math.sqrt(0.5))
 
 
-def test_pose_from_fk_forms():
+def test_pose_from_fk_forms() -> None:
     pose = pose_from_fk([0, -0.173648, -0.984808, 1741.140107, 0, -0.984808, 0.173648,
                          -307.009978, -1, 0, 0, 640])
     assert pose is not None
@@ -273,7 +275,7 @@ def test_pose_from_fk_forms():
     assert pose is not None and pose[0] == (0, 0, 1.0)
 
 
-def test_bus_trace_adapter():
+def test_bus_trace_adapter() -> None:
     from rob6_recorder.adapters import bus_trace_records
 
     payload = (b'{"t":1700000000.5,"dt":0.002,"instance":"k-1","request":{"v":1,"cid":"abc",'
@@ -287,7 +289,7 @@ def test_bus_trace_adapter():
     assert rep[3]["ok"] is False and rep[3]["error"]["code"] == "invalid" and rep[3]["cid"] == "abc"
 
 
-def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk():
+def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk() -> None:
     """Composing /tf from the shipped URDF gives the protocol's flange pose."""
     import pathlib
 
@@ -321,7 +323,7 @@ def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk():
         assert np.allclose(T[:3, :3], P[:, :3], atol=1e-9)
 
 
-def test_schemas_of_bus_messages_are_generated_from_their_structs():
+def test_schemas_of_bus_messages_are_generated_from_their_structs() -> None:
     """The joint state, link event and gripper state are recorded as the bus carries them:
     their schemas come from the Structs and name every field (the hand-written one had
     lost ``missed``)."""

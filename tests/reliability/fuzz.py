@@ -204,17 +204,17 @@ class _DeadBus:
     #: the gateway names its sessions with its own instance id (a move carries it)
     instance = "fuzz-gateway"
 
-    def __init__(self):
+    def __init__(self) -> None:
         from rob6.bus import BusError
         self._error = BusError
 
-    def subscribe(self, *a, **k):
+    def subscribe(self, *a, **k) -> None:
         pass
 
-    def on_liveliness(self, *a, **k):
+    def on_liveliness(self, *a, **k) -> None:
         pass
 
-    def publish(self, *a, **k):
+    def publish(self, *a, **k) -> None:
         pass
 
     def instances(self, *a, **k):
@@ -247,7 +247,7 @@ def check_execute(gateway, session, text: str) -> None:
 
 # ============================================================== through TCP
 class FuzzClient:
-    def __init__(self, port: int, timeout: float = 15.0):
+    def __init__(self, port: int, timeout: float = 15.0) -> None:
         self.port, self.timeout = port, timeout
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -279,7 +279,7 @@ class FuzzClient:
                     return lines
             lines.append(line)
 
-    def close(self):
+    def close(self) -> None:
         self.sock.close()
 
 
@@ -328,7 +328,7 @@ class TcpFuzzer:
         assert self._client is not None, "start() first"
         return self._client
 
-    def start(self):
+    def start(self) -> None:
         self.gateway_pid = self.system.pids()["gateway"]
         self._client = FuzzClient(self.system.port)
         self._update_envelope()
@@ -342,12 +342,12 @@ class TcpFuzzer:
         lines = self.client.until_pong()
         return [float(x) for x in lines[0].split()]
 
-    def _update_envelope(self):
+    def _update_envelope(self) -> None:
         lo, hi = self._numbers("GetJointsMaxTurnMin"), self._numbers("GetJointsMaxTurnMax")
         self.turn_lo = lo if not self.turn_lo else [min(a, b) for a, b in zip(self.turn_lo, lo, strict=True)]
         self.turn_hi = hi if not self.turn_hi else [max(a, b) for a, b in zip(self.turn_hi, hi, strict=True)]
 
-    def check_position(self):
+    def check_position(self) -> None:
         q = self._numbers("GetPositionJoints")
         if not all(lo - 1e-6 <= x <= hi + 1e-6 for lo, x, hi in zip(self.turn_lo, q, self.turn_hi, strict=True)):
             self.limit_violations += 1
@@ -424,7 +424,7 @@ class TcpFuzzer:
             self.moves_ok += 1
             self.check_position()
 
-    def _reconnect(self):
+    def _reconnect(self) -> None:
         with contextlib.suppress(OSError):
             self.client.close()
         time.sleep(0.2)

@@ -24,20 +24,20 @@ def session():
 
 @pytest.mark.parametrize("fault", FAULTS)
 @pytest.mark.parametrize("service", SERVICES)
-def test_fault_is_survived_and_recovered(session, service, fault):
+def test_fault_is_survived_and_recovered(session, service, fault) -> None:
     system, client, gateway = session
     problems: list[tuple] = []
     assert inject(system, client, service, fault, problems), problems
     assert system.pids()["gateway"] == gateway
 
 
-def test_router_stopped_and_continued(session):
+def test_router_stopped_and_continued(session) -> None:
     system, client, gateway = session
     problems: list[tuple] = []
     assert inject(system, client, "router", "stop", problems), problems
 
 
-def test_stopped_service_is_named_in_the_error(session):
+def test_stopped_service_is_named_in_the_error(session) -> None:
     system, client, _ = session
     pid = system.pids()["planner"]
     os.kill(pid, signal.SIGSTOP)
@@ -49,7 +49,7 @@ def test_stopped_service_is_named_in_the_error(session):
     assert took < 10
 
 
-def test_everything_works_again_in_the_same_session(session):
+def test_everything_works_again_in_the_same_session(session) -> None:
     system, client, gateway = session
     deadline = time.monotonic() + 30
     for service, (command, ok) in PROBES.items():
@@ -59,7 +59,7 @@ def test_everything_works_again_in_the_same_session(session):
     assert system.pids()["gateway"] == gateway
 
 
-def test_killed_router_is_restarted_and_the_session_goes_on():
+def test_killed_router_is_restarted_and_the_session_goes_on() -> None:
     """The launcher restarts a killed router and every Zenoh session reconnects to it: the
     same client session works again, with the same gateway."""
     with running("kr16", dummy=True, restart=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:

@@ -23,7 +23,7 @@ class AsyncRobot(AsyncRobotCommands):
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *, timeout: float = 10.0,
-                 move_timeout: float = 300.0, connect_timeout: float = 5.0):
+                 move_timeout: float = 300.0, connect_timeout: float = 5.0) -> None:
         self.host, self.port = host, port
         self.timeout = timeout
         self.move_timeout = move_timeout

@@ -70,7 +70,7 @@ def _pose(value: str) -> tuple[float, ...]:
               help="full: report errors and motion_possible; vplus: exactly what the V+ "
                    "program sends (no errors, motion_possible = not in motion).")
 def main(host, motion_port, state_port, io_port, control, byte_order, start_pose,
-         state_period, timing, monitor_speed, queue_depth, status_fields):
+         state_period, timing, monitor_speed, queue_depth, status_fields) -> None:
     """A simulated Adept Viper s850 controller running the ROS-Industrial V+ server
     (simple_message over TCP), for testing rob6's simple_message link."""
     control_host, control_port = _host_port(control)
@@ -90,7 +90,7 @@ def main(host, motion_port, state_port, io_port, control, byte_order, start_pose
 
 
 async def _main(cfg: Config) -> None:
-    def ready(addr, ctl):
+    def ready(addr, ctl) -> None:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, ctl.done.set)

@@ -33,7 +33,7 @@ class Point:
 
 
 class Arm:
-    def __init__(self, q0, now: float, *, timing: str = "vplus", monitor_speed: float = 100.0):
+    def __init__(self, q0, now: float, *, timing: str = "vplus", monitor_speed: float = 100.0) -> None:
         if timing not in ("vplus", "duration"):
             raise ValueError(f"timing must be 'vplus' or 'duration', not {timing!r}")
         self.timing = timing

@@ -56,7 +56,7 @@ class TrajPoint:
 
 
 class Codec:
-    def __init__(self, byte_order: str = "big"):
+    def __init__(self, byte_order: str = "big") -> None:
         if byte_order not in BYTE_ORDERS:
             raise ValueError(f"byte order must be one of {sorted(BYTE_ORDERS)}, not {byte_order!r}")
         e = BYTE_ORDERS[byte_order]

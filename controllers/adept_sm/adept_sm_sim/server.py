@@ -59,7 +59,7 @@ class Config:
 
 
 class Controller:
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config) -> None:
         self.cfg = cfg
         self.codec = sm.Codec(cfg.byte_order)
         self.arm = Arm(cfg.start_pose_ctrl, time.monotonic(), timing=cfg.timing,
@@ -191,7 +191,7 @@ class Controller:
             self.advance()
             w.write(self.status_frame())
 
-    async def serve_state(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+    async def serve_state(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         if not self._claim("state", writer):
             return
         watcher = asyncio.ensure_future(_until_eof(reader))
@@ -212,7 +212,7 @@ class Controller:
             self._release("state", writer)
 
     # ---- wire: motion port ------------------------------------------------------
-    async def serve_motion(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+    async def serve_motion(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         if not self._claim("motion", writer):
             return
         try:
@@ -269,7 +269,7 @@ class Controller:
             self.acknowledged += 1
 
     # ---- wire: I/O port ------------------------------------------------------------
-    async def serve_io(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+    async def serve_io(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         """The program's own I/O protocol (``ros.io``): two V+ READs per request, each
         taking what has arrived as one record, and a big-endian int32 (LNGB) from the first
         four bytes of each: the mode (1 read, anything else write), then the signal
@@ -449,7 +449,7 @@ class Controller:
             )
         return {"ok": True}
 
-    async def serve_control(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+    async def serve_control(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         try:
             while line := await reader.readline():
                 if not line.strip():
@@ -495,7 +495,7 @@ def _handler(serve):
     """A connection handler that ends quietly when shutdown cancels it (Python 3.11's
     streams would otherwise print the cancellation as an error)."""
 
-    async def handle(reader, writer):
+    async def handle(reader, writer) -> None:
         try:
             await serve(reader, writer)
         except asyncio.CancelledError:

@@ -31,7 +31,7 @@ _RAD = 180.0 / math.pi
 class Kinematics:
     """FK of one robot; the DH constants are precomputed once."""
 
-    def __init__(self, machine: Machine):
+    def __init__(self, machine: Machine) -> None:
         m = machine
         self._d = (m.d1, 0.0, 0.0, m.d4, 0.0, m.d6)
         self._a = (m.a1, m.a2, m.a3, 0.0, 0.0, 0.0)

@@ -17,7 +17,7 @@ class Link:
     """Puts the controller's packets on the wire, or loses, drops, delays, duplicates and
     reorders them. Periodic faults count the packets the controller offers."""
 
-    def __init__(self, sock: socket.socket, on_sent: Callable[[int, float], None], log: Callable[[str], None]):
+    def __init__(self, sock: socket.socket, on_sent: Callable[[int, float], None], log: Callable[[str], None]) -> None:
         self._sock = sock
         self._on_sent = on_sent
         self._log = log

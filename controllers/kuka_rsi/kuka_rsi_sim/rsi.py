@@ -36,7 +36,7 @@ class Rsi:
         start_pose: tuple[float, ...],
         writer: RobWriter,
         log: Callable[[str], None],
-    ):
+    ) -> None:
         self.machine = machine
         self.cycle_ms = cycle_ms
         self.sentype = sentype

@@ -56,7 +56,7 @@ def log(msg: str) -> None:
 
 
 class Simulator:
-    def __init__(self, opts: Options):
+    def __init__(self, opts: Options) -> None:
         self.opts = opts
         self.period = opts.cycle_ms / 1000.0
         self.rsi = Rsi(

@@ -23,7 +23,7 @@ AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 class RobWriter:
     """Formats the controller's packet; the template is built once, each cycle is one `%`."""
 
-    def __init__(self, precision: int = 4, eipos: bool = False):
+    def __init__(self, precision: int = 4, eipos: bool = False) -> None:
         f = f"%.{precision}f"
         cart = " ".join(f'{k}="{f}"' for k in "XYZABC")
         axes = " ".join(f'{k}="{f}"' for k in AXES)

@@ -53,7 +53,7 @@ from .service import DriverService
               help="simple_message: seconds between streamed points, rounded to controller cycles "
                    "[env ROB6_SM_PERIOD].")
 def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_motion_port, sm_state_port,
-         sm_io_port, sm_byte_order, sm_period):
+         sm_io_port, sm_byte_order, sm_period) -> None:
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
     sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,

@@ -96,7 +96,7 @@ class LimitMonitor:
     Not thread-safe on its own: the motion core calls it under its lock.
     """
 
-    def __init__(self, limits: Limits, dt: float):
+    def __init__(self, limits: Limits, dt: float) -> None:
         self.dt = float(dt)
         self.enforced = limits.copy()
         # 0: speed/acceleration enforced as set; -1: wider, waiting for the state to get

@@ -39,7 +39,7 @@ class CycleRunner(Generic[S]):
     def __init__(self, step: Callable[[], S], period_s: float,
                  publish: Callable[[S], None] | None = None, *,
                  clock: Callable[[], float] = time.monotonic,
-                 name: str = "rob6-cycle", late_tolerance_s: float | None = None):
+                 name: str = "rob6-cycle", late_tolerance_s: float | None = None) -> None:
         if period_s <= 0:
             raise ValueError("period must be > 0")
         self.step = step

@@ -64,7 +64,7 @@ SIGNAL_PUBLISH_WAIT_S = 0.5
 class DriverService:
     def __init__(self, bus: Bus, robot: RobotModel, dummy: bool, alter_timeout_s: float = 0.5, *,
                  link: str = "sim", rsi_listen: str = DEFAULT_LISTEN, rsi_sen_type: str = DEFAULT_SEN_TYPE,
-                 sm: AdeptSettings | None = None):
+                 sm: AdeptSettings | None = None) -> None:
         self.bus = bus
         self.robot = robot
         self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)

@@ -42,7 +42,7 @@ class Sample:
 
 
 class StateRecorder:
-    def __init__(self, topology: Topology, name: str):
+    def __init__(self, topology: Topology, name: str) -> None:
         self.topology = topology
         self.name = f"{topology.project}-{name}"
 

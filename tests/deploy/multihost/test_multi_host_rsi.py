@@ -69,7 +69,7 @@ def _networks(topology: Topology, service: str) -> set[str]:
     return {name.removeprefix(f"{topology.project}_") for name in json.loads(names)}
 
 
-def test_the_controller_is_on_the_robot_network_only(topology):
+def test_the_controller_is_on_the_robot_network_only(topology) -> None:
     assert _networks(topology, "kuka-rsi-sim") == {"robot"}
     assert _networks(topology, "robot-pc") == {"lab", "robot"}
     for host in ("compute1", "compute2", "storage"):
@@ -82,7 +82,7 @@ def test_the_controller_is_on_the_robot_network_only(topology):
                check=False).returncode == 0
 
 
-def test_rsi_motion_unchanged_when_every_remote_host_is_partitioned(topology, client):
+def test_rsi_motion_unchanged_when_every_remote_host_is_partitioned(topology, client) -> None:
     """A PTP and an Alter session over RSI, first without faults, then with compute1,
     compute2 and storage cut off from the robot PC: each time the KR C4 runs through without
     a trip and its axes end where the client moved them (the late packets it counted are

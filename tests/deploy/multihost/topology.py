@@ -387,7 +387,7 @@ def calls(client: Client, line: str, count: int, timeout: float = 10.0) -> list[
 class Load:
     """A client calling ``line`` in a loop on its own thread until stopped."""
 
-    def __init__(self, client: Client, line: str, pause: float = 0.01, timeout: float = 10.0):
+    def __init__(self, client: Client, line: str, pause: float = 0.01, timeout: float = 10.0) -> None:
         self.client, self.line, self.pause, self.timeout = client, line, pause, timeout
         self.calls: list[Call] = []
         self._stop = threading.Event()

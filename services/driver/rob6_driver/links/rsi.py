@@ -99,7 +99,7 @@ class RsiLink(Link):
 
     def __init__(self, core: MotionCore, robot: RobotModel, listen: str, publish: Publish,
                  on_event: Callable[[LinkEvent], None] | None = None, *,
-                 sen_type: str = DEFAULT_SEN_TYPE, lost_after_s: float | None = None):
+                 sen_type: str = DEFAULT_SEN_TYPE, lost_after_s: float | None = None) -> None:
         if not robot.is_kuka:
             raise ValueError(f"RSI drives KUKA robots (kr3, kr16, kr3rt, kr16rt), not {robot.name}")
         self.core = core

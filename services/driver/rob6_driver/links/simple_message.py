@@ -204,7 +204,7 @@ class AdeptLink(Link):
                  on_event: Callable[[LinkEvent], None] | None = None, *,
                  ack_timeout_s: float = ACK_TIMEOUT_S, state_timeout_s: float = STATE_TIMEOUT_S,
                  retry_s: float = RETRY_S, no_progress_s: float = NO_PROGRESS_S,
-                 settle_max_s: float = SETTLE_MAX_S):
+                 settle_max_s: float = SETTLE_MAX_S) -> None:
         if not robot.is_adept:
             raise ValueError(f"the simple_message link drives the Adept Viper s850 (ad850), not {robot.name}")
         settings.check()
