@@ -59,6 +59,7 @@ import numpy as np
 import ruckig
 
 from rob6.deadlines import stop_s
+from rob6.errors import RefusedError
 from rob6.robots import RobotModel, get_robot
 from rob6.units import accel_si, jerk_si, speed_si
 
@@ -108,7 +109,7 @@ class Motion:
     ``loop.call_soon_threadsafe`` to hand over to asyncio).
     """
 
-    def __init__(self, kind: str):
+    def __init__(self, kind: str) -> None:
         self.kind = kind
         self.done = threading.Event()
         self.ok: bool | None = None
@@ -143,7 +144,7 @@ class Motion:
         return f"Motion({self.kind}, done={self.done.is_set()}, ok={self.ok}, reason={self.reason!r})"
 
 
-class Offline(Exception):
+class Offline(RefusedError):
     """A motion command while the plant cannot be reached (the message says why)."""
 
 
@@ -154,7 +155,7 @@ class MotionCore:
     def __init__(self, robot: RobotModel | str, dt: float | None = None, *, dummy: bool = False,
                  q0: Sequence[float] | None = None, limits: Limits | None = None,
                  alter_timeout_s: float = 0.5, offline: str = "",
-                 on_event: Callable[[dict], None] | None = None, max_violations: int = 1000):
+                 on_event: Callable[[dict], None] | None = None, max_violations: int = 1000) -> None:
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
         self._offline = offline  # why the plant cannot be reached ("": it can)
         self.dt = float(dt if dt is not None else self.robot.cycle_s)

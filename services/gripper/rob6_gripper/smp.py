@@ -60,6 +60,8 @@ import struct
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from rob6.errors import LinkError
+
 # ---------------------------------------------------------------- constants
 GROUP_TO_MODULE = 0x05
 GROUP_FROM_MODULE = 0x07
@@ -372,7 +374,7 @@ def state_payload(state: ModuleState, mode: int = 0x07) -> bytes:
 
 
 # ---------------------------------------------------------------- errors
-class SmpError(Exception):
+class SmpError(LinkError):
     """Any failure talking to the module; the text is the user-facing reason."""
 
 

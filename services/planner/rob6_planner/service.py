@@ -18,6 +18,7 @@ import numpy as np
 
 from rob6.bus import Bus, BusError, Context
 from rob6.deadlines import PLAN_LIN_S, PLAN_PTP_S, QUICK_S
+from rob6.errors import RefusedError
 from rob6.messages import (
     Ack,
     AlterMode,
@@ -60,7 +61,7 @@ ADEPT_SETTINGS = {"SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoa
 LIMIT_FIELDS: tuple[Literal["speed", "accel", "turn_min", "turn_max", "max_change"], ...] = ("speed", "accel", "turn_min", "turn_max", "max_change")
 
 
-class MotionRefused(Exception):
+class MotionRefused(RefusedError):
     """A motion refused before it started (the client gets ``false``)."""
 
 

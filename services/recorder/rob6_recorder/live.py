@@ -44,6 +44,7 @@ from foxglove.websocket import (
 )
 
 from rob6.config import DEFAULT_LIVE_PORT, BusSettings
+from rob6.errors import RefusedError
 from rob6.messages import JointState
 
 from .mcapfile import ROBOT_DESCRIPTION_TOPIC, as_dict, encode
@@ -72,7 +73,7 @@ def _complete_joint_state(payload: bytes) -> bytes:
         return payload
 
 
-class LiveRefused(Exception):
+class LiveRefused(RefusedError):
     """The live view may not run with these settings (one line for the user)."""
 
 

@@ -31,6 +31,8 @@ from __future__ import annotations
 import math
 import re
 
+from rob6.errors import LinkError
+
 AXES = (b"A1", b"A2", b"A3", b"A4", b"A5", b"A6")
 
 _ROB = re.compile(rb"<\s*Rob\b([^>]*)>")
@@ -42,7 +44,7 @@ _ATTR = re.compile(rb"""([A-Za-z_][\w.-]*)\s*=\s*(?:"([^"]*)"|'([^']*)')""")
 _PREVIEW = 60
 
 
-class RsiParseError(ValueError):
+class RsiParseError(LinkError, ValueError):
     """A packet that is not a usable RSI ``<Rob>`` packet (the message says why)."""
 
 
@@ -52,7 +54,7 @@ class RobPacket:
     __slots__ = ("ipoc", "stamp", "delay", "aipos", "aspos", "robot_type")
 
     def __init__(self, ipoc: bytes, delay: int, aipos: tuple[float, ...], aspos: tuple[float, ...],
-                 robot_type: str = ""):
+                 robot_type: str = "") -> None:
         self.ipoc = ipoc
         self.stamp = int(ipoc)
         self.delay = delay

@@ -33,6 +33,8 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
+from rob6.errors import LinkError
+
 # message types
 JOINT_POSITION = 10
 JOINT_TRAJ_PT = 11
@@ -67,7 +69,7 @@ MESSAGE_NAMES = {JOINT_POSITION: "JOINT_POSITION", JOINT_TRAJ_PT: "JOINT_TRAJ_PT
 BYTE_ORDERS = ("big", "little")
 
 
-class SimpleMessageError(ValueError):
+class SimpleMessageError(LinkError, ValueError):
     """A frame that cannot be read (the connection's framing is lost)."""
 
 
@@ -115,7 +117,7 @@ class Message:
 class Codec:
     """Packs and unpacks frames in one byte order (``big`` or ``little``)."""
 
-    def __init__(self, byte_order: str = "big"):
+    def __init__(self, byte_order: str = "big") -> None:
         if byte_order not in BYTE_ORDERS:
             raise ValueError(f"byte order {byte_order!r}: expected big or little")
         self.byte_order = byte_order
