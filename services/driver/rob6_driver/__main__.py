@@ -5,10 +5,13 @@ an Adept V+ controller over ROS-Industrial simple_message (``--link simple_messa
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import click
 
 from rob6 import service
-from rob6.config import LINKS, bus_options
+from rob6.bus import Bus
+from rob6.config import LINKS, BusSettings, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
 
@@ -52,8 +55,9 @@ from .service import DriverService
 @click.option("--sm-period", envvar="ROB6_SM_PERIOD", default=DEFAULT_PERIOD_S, show_default=True, type=float,
               help="simple_message: seconds between streamed points, rounded to controller cycles "
                    "[env ROB6_SM_PERIOD].")
-def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_motion_port, sm_state_port,
-         sm_io_port, sm_byte_order, sm_period) -> None:
+def main(settings: BusSettings, log_level: str, dummy: bool, link: str, rsi_listen: str, rsi_sentype: str,
+         sm_host: str, sm_motion_port: int, sm_state_port: int, sm_io_port: int, sm_byte_order: str,
+         sm_period: float) -> None:
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
     sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,
@@ -81,7 +85,7 @@ def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_
         except ValueError as exc:
             service.fail("driver", str(exc), EXIT_REFUSED)
 
-    def setup(bus):
+    def setup(bus: Bus) -> Callable[[], None]:
         try:
             driver = DriverService(bus, robot, dummy, link=link, rsi_listen=rsi_listen, rsi_sen_type=rsi_sentype,
                                    sm=sm)

@@ -73,7 +73,7 @@ class CycleRunner(Generic[S]):
         self.start()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     # ------------------------------------------------------------------ the loop

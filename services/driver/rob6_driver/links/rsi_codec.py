@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 
 from rob6.errors import LinkError
 
@@ -73,7 +74,7 @@ def _attributes(text: bytes) -> dict[bytes, bytes]:
             for m in _ATTR.finditer(text)}
 
 
-def _axes(match: re.Match | None, element: str, data: bytes) -> tuple[float, ...]:
+def _axes(match: re.Match[bytes] | None, element: str, data: bytes) -> tuple[float, ...]:
     if match is None:
         raise RsiParseError(f"no <{element}> element in {_preview(data)}")
     attrs = _attributes(match.group(1))
@@ -130,6 +131,6 @@ _SEN = (b'<Sen Type="%s"><AK A1="%.6f" A2="%.6f" A3="%.6f" A4="%.6f" A5="%.6f" A
 _STOP = b"<Stop>1</Stop>"
 
 
-def format_sen(sen_type: bytes, ak, ipoc: bytes, stop: bool = False) -> bytes:
+def format_sen(sen_type: bytes, ak: Sequence[float], ipoc: bytes, stop: bool = False) -> bytes:
     """The answer: absolute axis correction ``ak`` (6 values, deg) for the packet ``ipoc``."""
     return _SEN % (sen_type, ak[0], ak[1], ak[2], ak[3], ak[4], ak[5], _STOP if stop else b"", ipoc)
