@@ -18,7 +18,7 @@ import numpy as np
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import IkBatchRequest
-from tests.system import running
+from tests.system import Client, running
 
 from .busy import busy_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baselines
@@ -79,7 +79,7 @@ def gateway_latency(services: tuple[str, ...] = (), log_dir: str | None = None,
     return results
 
 
-def measure_alternating(client, lines: tuple[str, str], count: int, warmup: int = 200) -> list[float]:
+def measure_alternating(client: Client, lines: tuple[str, str], count: int, warmup: int = 200) -> list[float]:
     """A command that must answer ``true``, sent with two arguments in turn (a target 0.01 deg
     from the last for MoveRTJoints, between two poses for MovePTPJoints on the dummy kr16,
     whose motion takes no time)."""
@@ -186,7 +186,7 @@ def replica_scaling(requests: int = 40, poses: int = 2000) -> tuple[float, float
             bus.wait_for(["kinematics"], 10)
 
             def rate() -> float:
-                def worker(n) -> None:
+                def worker(n: int) -> None:
                     for _ in range(n):
                         bus.request("kinematics", "ik_batch", body, timeout=30)
                 start = time.perf_counter()

@@ -15,6 +15,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -24,6 +26,7 @@ from rob6.messages import Empty, LinkQuery
 from tests.system import free_port, running
 
 from .latency import percentiles
+from .tables import Row, Table
 from .viewer import Viewer
 
 START = "0 -80 100 0 30 0"
@@ -41,10 +44,11 @@ class ControllerSim:
         host, port = ready.split("control ", 1)[1].split(",", 1)[0].strip().rsplit(":", 1)
         self.control = socket.create_connection((host, int(port)), timeout=10).makefile("rwb")
 
-    def status(self) -> dict:
+    def status(self) -> dict[str, Any]:
         self.control.write(b'{"cmd": "status"}\n')
         self.control.flush()
-        return json.loads(self.control.readline())
+        reply: dict[str, Any] = json.loads(self.control.readline())
+        return reply
 
     def close(self) -> None:
         self.control.close()
@@ -52,7 +56,7 @@ class ControllerSim:
         self.proc.wait(10)
 
 
-def stream(link: str, seconds: float, live: bool = False) -> dict:
+def stream(link: str, seconds: float, live: bool = False) -> dict[str, Any]:
     """Stream for ``seconds``; the client's round trips and what the driver and controller
     counted. ``live``: with the live view on and a Foxglove viewer subscribed to every channel."""
     udp = free_port(socket.SOCK_DGRAM)
@@ -114,7 +118,7 @@ ADEPT_START = [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]
 ADEPT_PTP = ([30.0, -50.0, 50.0, 10.0, 20.0, -20.0], [-20.0, -70.0, 60.0, -10.0, 40.0, 20.0], ADEPT_START)
 
 
-def adept_stream(timing: str, seconds: float) -> dict:
+def adept_stream(timing: str, seconds: float) -> dict[str, Any]:
     """PTP moves, then MoveRTJoints every 16 ms for ``seconds``, on ad850 over simple_message."""
     motion, state = free_port(), free_port()
     extra = {"ROB6_LINK": "simple_message", "ROB6_SM_MOTION_PORT": str(motion), "ROB6_SM_STATE_PORT": str(state)}
@@ -168,10 +172,10 @@ def adept_stream(timing: str, seconds: float) -> dict:
             "packets": link.packets, "moves": moves}
 
 
-def adept_table(seconds: float, table) -> None:
+def adept_table(seconds: float, table: Table) -> None:
     runs = {timing: adept_stream(timing, seconds) for timing in ("duration", "vplus")}
 
-    def each(fmt):
+    def each(fmt: Callable[[dict[str, Any]], object]) -> Row:
         return tuple(fmt(runs[t]) for t in ("duration", "vplus"))
 
     table(f"The Adept over simple_message: 3 PTP moves, then MoveRTJoints every 16 ms for {seconds:.0f} s "
@@ -194,7 +198,7 @@ def adept_table(seconds: float, table) -> None:
           ])
 
 
-def links_table(seconds: float, table) -> None:
+def links_table(seconds: float, table: Table) -> None:
     sim, rsi = stream("sim", seconds), stream("rsi", seconds)
     p50s, p99s = sim["rtt"]
     p50r, p99r = rsi["rtt"]
@@ -218,12 +222,12 @@ def links_table(seconds: float, table) -> None:
     adept_table(max(5.0, seconds / 3), table)
 
 
-def live_realtime_table(seconds: float, table) -> None:
+def live_realtime_table(seconds: float, table: Table) -> None:
     """The live view's cost on the real-time path: the RSI Alter stream with it off, then on
     with a Foxglove viewer (a process of its own) subscribed to every channel."""
     off, on = stream("rsi", seconds), stream("rsi", seconds, live=True)
 
-    def row(r: dict) -> tuple[str, ...]:
+    def row(r: dict[str, Any]) -> tuple[str, ...]:
         lat = r["latency_us"] or [float("nan")] * 3
         return (f"{r['late']} / {r['trips']}", f"{r['cycles']} / {r['missed']}",
                 f"{lat[1] / 1000:.3f} / {lat[2] / 1000:.3f}", "%.3f / %.3f" % r["rtt"],

@@ -91,7 +91,7 @@ def _args_strategy():
     return st.lists(st.tuples(sep, token), max_size=16).map(lambda ts: "".join(s + t for s, t in ts))
 
 
-def command_line_strategy():
+def command_line_strategy() -> st.SearchStrategy[str]:
     """A text line (latin-1, no newline): mostly a known command with random arguments."""
     name = st.one_of(st.sampled_from(COMMAND_NAMES),
                      st.sampled_from(COMMAND_NAMES).map(str.lower),
