@@ -150,30 +150,29 @@ class Client:
     def read_lines(self, count: int, timeout: float | None = None) -> str:
         """Exactly ``count`` lines (or what came before EOF/timeout)."""
         self.sock.settimeout(timeout or self.timeout)
-        while self.buffer.count(b"\n") < count:
-            try:
-                chunk = self.sock.recv(65536)
-            except TimeoutError:
-                break
-            if not chunk:
-                break
-            self.buffer += chunk
+        while self.buffer.count(b"\n") < count and self._receive():
+            pass
         lines = self.buffer.split(b"\n")
         taken = b"".join(line + b"\n" for line in lines[:count]) if len(lines) > count else self.buffer
         self.buffer = self.buffer[len(taken):]
         return taken.decode("latin-1")
 
+    def _receive(self) -> bool:
+        """One chunk into the buffer; False at the socket's timeout or at EOF."""
+        try:
+            chunk = self.sock.recv(65536)
+        except TimeoutError:
+            return False
+        if not chunk:
+            return False
+        self.buffer += chunk
+        return True
+
     def read_quiet(self, quiet: float = 0.15) -> str:
         """Whatever arrives until nothing more comes for ``quiet`` seconds."""
         self.sock.settimeout(quiet)
-        while True:
-            try:
-                chunk = self.sock.recv(65536)
-            except TimeoutError:
-                break
-            if not chunk:
-                break
-            self.buffer += chunk
+        while self._receive():
+            pass
         data, self.buffer = self.buffer, b""
         return data.decode("latin-1")
 
