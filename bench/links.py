@@ -1,4 +1,6 @@
-"""Alter streaming through the whole system on each robot link: MoveRTJoints at 250 Hz on
+"""Benchmark of Alter streaming through the whole system on each robot link (sim, RSI, simple_message).
+
+Alter streaming through the whole system on each robot link: MoveRTJoints at 250 Hz on
 kr16rt (4 ms cycle) with the recorder on, once on the simulation (``--link sim``) and
 once on RSI against the KR C4 simulator (kuka-rsi-sim, a separate process speaking
 RSI over real UDP), so the RSI figures stand beside the simulation's in the same run.

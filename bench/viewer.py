@@ -1,4 +1,6 @@
-"""A Foxglove viewer in a process of its own, for the live-view benchmark: a real viewer
+"""A Foxglove viewer in a process of its own, the subscriber of the live-view benchmark.
+
+A Foxglove viewer in a process of its own, for the live-view benchmark: a real viewer
 (Foxglove Studio) is a separate program, usually on another machine, and decoding every
 message in the measuring process would charge its cost to the gateway round trips.
 

@@ -1,4 +1,6 @@
-"""The controller's main loop: its own IPO clock, the RSI UDP client, the KRL program's
+"""The simulated KR C4's main loop: IPO clock, RSI UDP client, KRL run loop, control channel.
+
+The controller's main loop: its own IPO clock, the RSI UDP client, the KRL program's
 run loop, and a TCP control channel for tests and operators.
 
 One thread: every tick sleeps (in select) until the absolute deadline on the monotonic

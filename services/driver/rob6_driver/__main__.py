@@ -1,4 +1,6 @@
-"""rob6-driver: the robot, simulated (``--link sim``, the default), a KUKA KR C4 over
+"""rob6-driver command line: check the link options and run the driver service.
+
+rob6-driver: the robot, simulated (``--link sim``, the default), a KUKA KR C4 over
 RSI (``--link rsi``: this PC is the UDP server the controller's RSI context sends to), or
 an Adept V+ controller over ROS-Industrial simple_message (``--link simple_message``, or
 ``adept``: this PC is the client of the controller's motion and state ports)."""

@@ -1,4 +1,6 @@
-"""The motion core of the driver, independent of the robot it drives: state at the
+"""The driver's motion core: trajectories, Alter, stops and brakes, every setpoint through the limit monitor.
+
+The motion core of the driver, independent of the robot it drives: state at the
 controller cycle, trajectory execution, Alter (real-time target) mode with Ruckig
 online generation, watchdog and stops; every setpoint passes the independent limit
 monitor of ``limits.py`` (defence in depth) before it is applied.

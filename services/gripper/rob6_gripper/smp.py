@@ -1,4 +1,6 @@
-"""Schunk Motion Protocol (SMP) over RS232: constants, CRC, frames (encoder and an
+"""Schunk Motion Protocol (SMP) without I/O: constants, CRC, frames, decoder, payloads, errors.
+
+Schunk Motion Protocol (SMP) over RS232: constants, CRC, frames (encoder and an
 incremental decoder), payloads and errors. No I/O here: the serial client that speaks it
 to a real module is :class:`rob6_gripper.schunk.SchunkGripper`, the fake module of the
 tests is :mod:`rob6_gripper.fake_device`.

@@ -1,4 +1,6 @@
-"""The motion planner service: owns the motion configuration, validates and plans every
+"""The planner service: owns the motion configuration, plans every motion and hands it to the driver.
+
+The motion planner service: owns the motion configuration, validates and plans every
 motion with Ruckig, and hands sampled trajectories (or Alter targets) to the driver.
 
 Configuration choice for Cartesian targets is the kinematics service's ``select``

@@ -1,4 +1,6 @@
-"""The simple_message link: drives an Adept Viper s850 (``ad850``) through the V+ server
+"""The simple_message link: drives an Adept Viper s850 (ad850) through the ROS-Industrial V+ server.
+
+The simple_message link: drives an Adept Viper s850 (``ad850``) through the V+ server
 program of the ROS-Industrial Adept packages, over ROS-Industrial simple_message.
 
 The controller is the TCP server, rob6 the client on its ports (``ROB6_SM_HOST``):
