@@ -31,9 +31,10 @@ class AdeptController:
                      "--byte-order", byte_order, *args]
         self.start_timeout = start_timeout
         self.proc: subprocess.Popen | None = None
-        self.motion: tuple[str, int] | None = None
-        self.state: tuple[str, int] | None = None
-        self.control: tuple[str, int] | None = None
+        # (host, port) of the simple_message ports and the control channel: set by start()
+        self.motion: tuple[str, int]
+        self.state: tuple[str, int]
+        self.control: tuple[str, int]
         self.io: tuple[str, int] | None = None
         self.stderr_lines: list[str] = []
         self._ctl: socket.socket | None = None

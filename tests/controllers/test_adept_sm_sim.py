@@ -14,6 +14,7 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
 from pytest import FixtureRequest
@@ -151,7 +152,7 @@ def close_to(a, b, tol):
 
 
 @pytest.fixture
-def sim(request: FixtureRequest):
+def sim(request: FixtureRequest) -> Iterator[AdeptController]:
     args = getattr(request, "param", ())
     with AdeptController("--state-period", "0.02", *args) as ctl:
         yield ctl
@@ -248,7 +249,7 @@ def test_stop_decelerates_and_clears_the_queue() -> None:
         ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
 
 
-def test_point_outside_a_joint_limit_is_refused_and_does_not_move(sim) -> None:
+def test_point_outside_a_joint_limit_is_refused_and_does_not_move(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     # rob6 q3 = 180 is 270 deg on the controller's J3 (range -29..259)
     assert motion.point(0, (0, 0, 180, 0, 0, 0)) == (FAILURE, 0)
@@ -291,7 +292,7 @@ def test_estop_mid_motion_stops_the_arm_and_refuses_points_until_released() -> N
         ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
 
 
-def test_drives_cannot_come_on_during_an_estop(sim) -> None:
+def test_drives_cannot_come_on_during_an_estop(sim: AdeptController) -> None:
     sim.estop()
     reply = sim.request({"cmd": "drives", "on": True})
     assert not reply["ok"] and "e-stop" in reply["error"]
@@ -324,7 +325,7 @@ def test_status_is_sent_at_once_on_a_fault_not_only_every_period() -> None:
         state.wait("status", lambda s: s["e_stopped"] == 1, since=mark, timeout=10)
 
 
-def test_injected_error_is_reported_and_refuses_points(sim) -> None:
+def test_injected_error_is_reported_and_refuses_points(sim: AdeptController) -> None:
     state = State(sim.state, ">")
     motion = Motion(sim.motion, ">")
     sim.error(-1021)
@@ -350,7 +351,7 @@ def test_vplus_status_fields_send_what_the_v_plus_program_sends() -> None:
         assert ctl.status()["error_code"] == -1021
 
 
-def test_a_dropped_connection_is_accepted_again(sim) -> None:
+def test_a_dropped_connection_is_accepted_again(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     state = State(sim.state, ">")
     state.wait("joints", lambda j: True)
@@ -367,7 +368,7 @@ def test_a_dropped_connection_is_accepted_again(sim) -> None:
     assert sim.status()["clients"] == {"motion": True, "state": True, "io": 0}
 
 
-def test_a_second_client_is_refused_and_the_first_keeps_working(sim) -> None:
+def test_a_second_client_is_refused_and_the_first_keeps_working(sim: AdeptController) -> None:
     first = Motion(sim.motion, ">")
     assert first.point(0, (1, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
     second = socket.create_connection(sim.motion, timeout=10)
@@ -387,7 +388,7 @@ def test_a_second_client_is_refused_and_the_first_keeps_working(sim) -> None:
     s3.wait("joints", lambda j: True)
 
 
-def test_slow_ack_delays_every_acknowledgement(sim) -> None:
+def test_slow_ack_delays_every_acknowledgement(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     sim.slow_ack(300)
     t0 = time.monotonic()
@@ -398,7 +399,7 @@ def test_slow_ack_delays_every_acknowledgement(sim) -> None:
     assert sim.status()["slow_ack_ms"] == 0
 
 
-def test_malformed_frames_close_the_connection_or_fail_and_never_crash(sim) -> None:
+def test_malformed_frames_close_the_connection_or_fail_and_never_crash(sim: AdeptController) -> None:
     e = ">"
     # a request of the right size but another message type: failure reply, still connected
     motion = Motion(sim.motion, e)
@@ -422,11 +423,11 @@ def test_malformed_frames_close_the_connection_or_fail_and_never_crash(sim) -> N
     st = sim.wait_for(lambda s: not s["clients"]["motion"], what="the half-frame client gone")
     assert st["malformed_frames"] == 6
     assert st["points_received"] == 1 and st["points_executed"] <= 1
-    assert sim.proc.poll() is None
+    assert sim.proc is not None and sim.proc.poll() is None
     assert Motion(sim.motion, e).point(1, (2, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
 
 
-def test_underrun_counted_when_the_stream_runs_dry_but_not_after_the_end(sim) -> None:
+def test_underrun_counted_when_the_stream_runs_dry_but_not_after_the_end(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     assert motion.point(0, (5, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
     sim.wait_for(lambda s: s["points_executed"] == 1, what="first point")
@@ -439,7 +440,7 @@ def test_underrun_counted_when_the_stream_runs_dry_but_not_after_the_end(sim) ->
     assert sim.status()["underruns"] == st["underruns"]  # the -3 ended the trajectory
 
 
-def test_topic_points_are_executed_without_a_reply(sim) -> None:
+def test_topic_points_are_executed_without_a_reply(sim: AdeptController) -> None:
     e = ">"
     motion = Motion(sim.motion, e)
     motion.send(traj_pt(e, -1, (5, 0, 0, 0, 0, 0), comm=TOPIC))
@@ -474,7 +475,7 @@ def test_duration_is_ignored_like_v_plus_unless_asked_for() -> None:
         assert motion.point(2, (0, 0, 0, 0, 0, 0), dur=float("inf")) == (FAILURE, 0)
 
 
-def test_control_channel_rejects_bad_requests_and_stays_up(sim) -> None:
+def test_control_channel_rejects_bad_requests_and_stays_up(sim: AdeptController) -> None:
     reply = sim.request("this is not json")
     assert reply["ok"] is False and "JSON" in reply["error"]
     assert sim.request("[1, 2]")["ok"] is False
@@ -486,7 +487,7 @@ def test_control_channel_rejects_bad_requests_and_stays_up(sim) -> None:
     assert sim.request({"cmd": "slow_ack", "ms": -1})["ok"] is False
     assert sim.status()["ok"] is True
     assert sim.request({"cmd": "quit"}) == {"ok": True}
-    assert sim.proc.wait(10) == 0
+    assert sim.proc is not None and sim.proc.wait(10) == 0
 
 
 def io_ask(io: socket.socket, mode: int, number: int) -> str:
@@ -498,7 +499,7 @@ def io_ask(io: socket.socket, mode: int, number: int) -> str:
     return io.recv(64).decode()
 
 
-def test_io_port_reads_and_writes_signals(sim) -> None:
+def test_io_port_reads_and_writes_signals(sim: AdeptController) -> None:
     assert sim.io is not None
     io = socket.create_connection(sim.io, timeout=10)
     assert io_ask(io, 1, 5) == "0"
@@ -515,7 +516,7 @@ def test_io_port_reads_and_writes_signals(sim) -> None:
     io.close()
 
 
-def test_io_port_reads_one_record_per_number_like_v_plus(sim) -> None:
+def test_io_port_reads_one_record_per_number_like_v_plus(sim: AdeptController) -> None:
     """Both numbers in one write are one record: the program takes the mode from its first
     four bytes, loses the rest and reads the number from the next record."""
     assert sim.io is not None

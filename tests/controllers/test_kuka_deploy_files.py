@@ -19,7 +19,7 @@ NS = {"c": "RsiContext", "d": "RsiDriver"}
 
 
 @pytest.fixture(scope="module")
-def ethernet():
+def ethernet() -> ET.Element:
     return ET.parse(KUKA / "rob6_rsi_ethernet.xml").getroot()
 
 
@@ -45,16 +45,26 @@ def rsi3_objects():
     return objects
 
 
-def test_ethernet_configuration(ethernet) -> None:
-    cfg = ethernet.find("CONFIG")
-    assert cfg.findtext("PORT").strip() == "49152"
-    assert cfg.findtext("SENTYPE").strip() == "ImFree"
-    assert cfg.findtext("ONLYSEND").strip().upper() == "FALSE"
-    assert re.fullmatch(r"\d+\.\d+\.\d+\.\d+", cfg.findtext("IP_NUMBER").strip())
-    sent = [e.get("TAG") for e in ethernet.find("SEND").iter("ELEMENT")]
+def _child(parent: ET.Element, tag: str) -> ET.Element:
+    found = parent.find(tag)
+    assert found is not None, f"no <{tag}> in <{parent.tag}>"
+    return found
+
+
+def _text(parent: ET.Element, tag: str) -> str:
+    return (_child(parent, tag).text or "").strip()
+
+
+def test_ethernet_configuration(ethernet: ET.Element) -> None:
+    cfg = _child(ethernet, "CONFIG")
+    assert _text(cfg, "PORT") == "49152"
+    assert _text(cfg, "SENTYPE") == "ImFree"
+    assert _text(cfg, "ONLYSEND").upper() == "FALSE"
+    assert re.fullmatch(r"\d+\.\d+\.\d+\.\d+", _text(cfg, "IP_NUMBER"))
+    sent = [e.get("TAG") for e in _child(ethernet, "SEND").iter("ELEMENT")]
     # the order of the simulator's packet (and of a KR C4's: the SEND order), IPOC appended
     assert sent == ["DEF_RIst", "DEF_RSol", "DEF_AIPos", "DEF_ASPos", "DEF_Delay"]
-    received = {e.get("TAG"): e for e in ethernet.find("RECEIVE").iter("ELEMENT")}
+    received = {e.get("TAG"): e for e in _child(ethernet, "RECEIVE").iter("ELEMENT")}
     assert received["Stop"].get("TYPE") == "BOOL" and received["Stop"].get("HOLDON") == "0"
     for n in range(1, 7):
         e = received[f"AK.A{n}"]
@@ -62,7 +72,7 @@ def test_ethernet_configuration(ethernet) -> None:
 
 
 @pytest.mark.parametrize("fmt", ["rsix", "rsi3"])
-def test_signal_flow_wiring(ethernet, fmt) -> None:
+def test_signal_flow_wiring(ethernet: ET.Element, fmt) -> None:
     objects = rsix_objects() if fmt == "rsix" else rsi3_objects()
     base = 0 if fmt == "rsix" else 1  # RSI 4.x counts from 0, RSI 3.x from 1
     by_type = {t.upper(): (oid, tid, params, inputs) for oid, (t, tid, params, inputs) in objects.items()}
@@ -72,7 +82,7 @@ def test_signal_flow_wiring(ethernet, fmt) -> None:
     assert params["ConfigFile"].get("IsRuntime") == "false"
     assert params["Timeout"].get("ParamValue") == "100" and params["Precision"].get("ParamValue") == "4"
     # ETHERNET output k carries the RECEIVE element with INDX k (RSI 3.x) / k + 1 (RSI 4.x)
-    indx = {int(e.get("INDX")): e.get("TAG") for e in ethernet.find("RECEIVE").iter("ELEMENT")}
+    indx = {int(e.attrib["INDX"]): e.get("TAG") for e in _child(ethernet, "RECEIVE").iter("ELEMENT")}
     out_tag = {k - 1 + base: tag for k, tag in indx.items()}
     _, tid, params, inputs = by_type["STOP"]
     assert tid == 18 and params["Mode"].get("ParamValue") == "4"  # leave RSI_MOVECORR

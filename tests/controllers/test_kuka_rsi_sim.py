@@ -16,6 +16,7 @@ import signal
 import socket
 import threading
 import time
+from collections.abc import Iterator
 from itertools import pairwise
 from typing import Any
 
@@ -140,7 +141,7 @@ class Responder:
 
 
 @pytest.fixture
-def pc():
+def pc() -> Iterator[Responder]:
     r = Responder()
     yield r
     r.close()
@@ -155,7 +156,7 @@ def close(a, b, tol: float = 1e-4):
 
 
 # ---------------------------------------------------------------------------- start-up
-def test_first_packets_zero_correction(pc) -> None:
+def test_first_packets_zero_correction(pc: Responder) -> None:
     with sim(pc, robot="kr16") as kuka:
         assert kuka.cycle_ms == 12  # kr16: RSI_ON(#ABSOLUTE, #IPO)
         pkts = pc.wait(lambda p: len(p) >= 20)
@@ -174,7 +175,7 @@ def test_first_packets_zero_correction(pc) -> None:
         assert st["rtt_ms"]["n"] >= 19 and st["rtt_ms"]["p50"] > 0
 
 
-def test_fast_variant_cycle_and_options(pc) -> None:
+def test_fast_variant_cycle_and_options(pc: Responder) -> None:
     with sim(pc, "--start-pose", "0,-90,90,0,90,0", "--eipos", robot="kr3rt") as kuka:
         assert kuka.cycle_ms == 4  # #IPO_FAST
         first = pc.wait(lambda p: len(p) >= 3)[0]
@@ -183,13 +184,13 @@ def test_fast_variant_cycle_and_options(pc) -> None:
         assert close(first["rist"], [100 + 270, 0, 350 + 265 - 75, 0, 90, 0])
 
 
-def test_start_pose_outside_limits_refused(pc) -> None:
+def test_start_pose_outside_limits_refused(pc: Responder) -> None:
     with pytest.raises(RsiControllerError, match="A3 = 160 is outside"):
         sim(pc, "--start-pose", "0,-90,160,0,0,0", robot="kr3").start()
 
 
 # ---------------------------------------------------------------------------- corrections
-def test_smooth_ramp_moves_aipos_and_rist(pc) -> None:
+def test_smooth_ramp_moves_aipos_and_rist(pc: Responder) -> None:
     pc.policy = Follow(target=[10, 0, 0, 0, 0, 0], step=0.5)
     with sim(pc, *SLOW) as kuka:
         pc.wait(lambda p: p[-1]["aipos"][0] == 10.0, what="A1 at 10")
@@ -206,7 +207,7 @@ def test_smooth_ramp_moves_aipos_and_rist(pc) -> None:
         assert all(0 <= b - a <= 0.5 + 1e-9 for a, b in pairwise(a1))
 
 
-def test_rated_speed_step_accepted(pc) -> None:
+def test_rated_speed_step_accepted(pc: Responder) -> None:
     # kr16: 156 deg/s = 1.872 deg per 12 ms cycle; 98 % of it on every axis A1-A3
     pc.policy = Follow(target=[20, 20, 20, 0, 0, 0], step=0.98 * 1.872)
     with sim(pc) as kuka:
@@ -216,7 +217,7 @@ def test_rated_speed_step_accepted(pc) -> None:
         assert st["max_ak_step"][0] == pytest.approx(0.98 * 1.872, abs=1e-4)
 
 
-def test_too_fast_step_trips_command_velocity(pc) -> None:
+def test_too_fast_step_trips_command_velocity(pc: Responder) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"], [3.0, 0, 0, 0, 0, 0])  # 3 deg in 12 ms: 250 deg/s
     with sim(pc, "--restart-delay", "0.05") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
@@ -229,7 +230,7 @@ def test_too_fast_step_trips_command_velocity(pc) -> None:
         assert any("TRIP Command velocity A1" in line for line in kuka.stderr_lines)
 
 
-def test_software_limit_switch(pc) -> None:
+def test_software_limit_switch(pc: Responder) -> None:
     pc.policy = Follow(target=[5, 0, 0, 0, 0, 0], step=0.5)
     with sim(pc, "--start-pose", "183,-90,90,0,0,0") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
@@ -237,7 +238,7 @@ def test_software_limit_switch(pc) -> None:
         assert max(p["aipos"][0] for p in pc.packets) <= 185.0
 
 
-def test_correction_window(pc) -> None:
+def test_correction_window(pc: Responder) -> None:
     pc.policy = Follow(target=[0, 0, 0, 0, 0, -3], step=0.5)
     with sim(pc, "--corr-window", "1.5") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
@@ -245,7 +246,7 @@ def test_correction_window(pc) -> None:
         assert min(p["aipos"][5] for p in pc.packets) >= -1.5
 
 
-def test_stop_ends_run_and_next_run_starts_where_the_robot_stands(pc) -> None:
+def test_stop_ends_run_and_next_run_starts_where_the_robot_stands(pc: Responder) -> None:
     follow = Follow(target=[2, 0, 0, 0, 0, 0], step=0.5)
     pc.policy = follow
     with sim(pc, *SLOW, "--restart-delay", "0.2") as kuka:
@@ -262,7 +263,7 @@ def test_stop_ends_run_and_next_run_starts_where_the_robot_stands(pc) -> None:
 
 
 # ---------------------------------------------------------------------------- late packets
-def test_no_answer_counts_delay_and_stops_after_timeout(pc) -> None:
+def test_no_answer_counts_delay_and_stops_after_timeout(pc: Responder) -> None:
     pc.policy = silent
     with sim(pc, "--timeout", "5", "--restart-delay", "0.05") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
@@ -278,7 +279,7 @@ def test_no_answer_counts_delay_and_stops_after_timeout(pc) -> None:
 
 
 @pytest.mark.parametrize("offset", [1, -12], ids=["wrong", "stale"])
-def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc, offset) -> None:
+def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, offset) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"] + offset, [1.0, 0, 0, 0, 0, 0])
     with sim(pc, "--timeout", "6") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
@@ -290,7 +291,7 @@ def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc, offset) -> None:
             assert replies["stale_replies"] >= 4
 
 
-def test_timeout_counts_consecutive_late_packets(pc) -> None:
+def test_timeout_counts_consecutive_late_packets(pc: Responder) -> None:
     # every other answer missing: Delay grows past Timeout, but never 3 in a row
     answered = [0]
 
@@ -304,7 +305,7 @@ def test_timeout_counts_consecutive_late_packets(pc) -> None:
         assert st["state"] == "running" and st["trips"] == [] and st["late_consecutive"] < 3
 
 
-def test_timeout_counts_total_when_asked(pc) -> None:
+def test_timeout_counts_total_when_asked(pc: Responder) -> None:
     answered = [0]
 
     def every_other(pkt):
@@ -319,7 +320,7 @@ def test_timeout_counts_total_when_asked(pc) -> None:
 
 
 # ---------------------------------------------------------------------------- Sen answers
-def test_wrong_sen_type_stops_rsi(pc) -> None:
+def test_wrong_sen_type_stops_rsi(pc: Responder) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"], sen_type="Other")
     with sim(pc) as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
@@ -327,14 +328,14 @@ def test_wrong_sen_type_stops_rsi(pc) -> None:
         assert st["replies_ok"] == 0 and all(p["aipos"] == HOME for p in pc.packets)
 
 
-def test_own_sentype(pc) -> None:
+def test_own_sentype(pc: Responder) -> None:
     pc.policy = Follow(target=[0, 1, 0, 0, 0, 0], sen_type="Rob6PC")
     with sim(pc, "--sentype", "Rob6PC") as kuka:
         pc.wait(lambda p: p[-1]["aipos"][1] == -89.0, what="A2 moved")
         assert kuka.status()["trips"] == []
 
 
-def test_answers_read_tolerantly(pc) -> None:
+def test_answers_read_tolerantly(pc: Responder) -> None:
     variants = [
         '<Sen TYPE="ImFree"><AK A6="0" A5="0" A4="0" A3="0" A2="0.5" A1="-0.25" /><IPOC>{ipoc}</IPOC></Sen>',
         '<Sen  Type = "ImFree" >\n  <IPOC> {ipoc} </IPOC>\n  <EStr>rob6</EStr><Tech T21="1"/>\n'
@@ -349,7 +350,7 @@ def test_answers_read_tolerantly(pc) -> None:
         assert st["delay"] == 0 and st["trips"] == [] and st["replies"]["bad_replies"] == 0
 
 
-def test_unreadable_answer_counts_late(pc) -> None:
+def test_unreadable_answer_counts_late(pc: Responder) -> None:
     pc.policy = lambda pkt: b'<Sen Type="ImFree"><AK A1="x"/><IPOC>%d</IPOC></Sen>' % pkt["IPOC"]
     with sim(pc, "--timeout", "4") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
@@ -362,7 +363,7 @@ def ipoc_steps(pkts, cycle):
     return [(b["IPOC"] - a["IPOC"]) // cycle for a, b in pairwise(pkts)]
 
 
-def test_fault_drop_every(pc) -> None:
+def test_fault_drop_every(pc: Responder) -> None:
     with sim(pc, "--drop-every", "5") as kuka:
         pc.wait(lambda p: len(p) >= 20)
         st = kuka.status()
@@ -371,7 +372,7 @@ def test_fault_drop_every(pc) -> None:
         assert st["delay"] >= 3 and st["state"] == "running"  # unanswered, but never 100 in a row
 
 
-def test_fault_duplicate_every(pc) -> None:
+def test_fault_duplicate_every(pc: Responder) -> None:
     with sim(pc) as kuka:
         kuka.fault(duplicate_every=3)
         pc.wait(lambda p: len(p) >= 15)
@@ -381,7 +382,7 @@ def test_fault_duplicate_every(pc) -> None:
         assert st["replies"]["duplicate_replies"] >= 1  # the PC answered both; one counted
 
 
-def test_fault_reorder_every(pc) -> None:
+def test_fault_reorder_every(pc: Responder) -> None:
     with sim(pc) as kuka:
         kuka.fault(reorder_every=4)
         pc.wait(lambda p: len(p) >= 20)
@@ -391,7 +392,7 @@ def test_fault_reorder_every(pc) -> None:
         assert st["delay"] >= 1  # the held packet's answer comes after its cycle
 
 
-def test_fault_delay_for_a_while(pc) -> None:
+def test_fault_delay_for_a_while(pc: Responder) -> None:
     with sim(pc, *SLOW, "--timeout", "1000") as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.fault(delay_ms=100, for_s=0.6)  # 100 ms > 40 ms cycle: every answer late
@@ -404,7 +405,7 @@ def test_fault_delay_for_a_while(pc) -> None:
         assert st["state"] == "running" and st["delay"] - late <= 1  # on time again
 
 
-def test_fault_lose_both_directions(pc) -> None:
+def test_fault_lose_both_directions(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.fault(lose_s=0.3)  # 25 cycles of 12 ms: fewer than Timeout 100
@@ -415,14 +416,14 @@ def test_fault_lose_both_directions(pc) -> None:
         assert max(gaps) >= 0.2
 
 
-def test_fault_lose_longer_than_timeout_trips(pc) -> None:
+def test_fault_lose_longer_than_timeout_trips(pc: Responder) -> None:
     with sim(pc, "--lose-s", "5", "--timeout", "10") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
         assert st["stop_reason"].startswith("RSI timeout") and pc.packets == []
         assert st["fault_stats"]["lost_out"] == 10
 
 
-def test_vanish_for_a_while_then_new_run(pc) -> None:
+def test_vanish_for_a_while_then_new_run(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.vanish(0.5)
@@ -436,7 +437,7 @@ def test_vanish_for_a_while_then_new_run(pc) -> None:
         assert first["D"] == 0 and first["aspos"] == first["aipos"] == HOME
 
 
-def test_vanish_until_restart_with_new_start_pose(pc) -> None:
+def test_vanish_until_restart_with_new_start_pose(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.vanish(None)
@@ -453,7 +454,7 @@ def test_vanish_until_restart_with_new_start_pose(pc) -> None:
         assert first["aspos"] == first["aipos"] == pose  # the PTP happened while RSI was off
 
 
-def test_restart_mid_run_with_new_start_pose(pc) -> None:
+def test_restart_mid_run_with_new_start_pose(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.restart(start=[-30, -100, 100, 10, 20, 30])
@@ -462,7 +463,7 @@ def test_restart_mid_run_with_new_start_pose(pc) -> None:
         assert any("ended: restart requested" in line for line in kuka.stderr_lines)
 
 
-def test_clear_and_auto_ack(pc) -> None:
+def test_clear_and_auto_ack(pc: Responder) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"], [5.0, 0, 0, 0, 0, 0])
     with sim(pc, "--auto-ack", "0.1", "--drop-every", "7", "--delay-ms", "1") as kuka:
         st = kuka.wait_for(lambda s: len(s["trips"]) >= 2, what="auto acknowledge")
@@ -473,7 +474,7 @@ def test_clear_and_auto_ack(pc) -> None:
 
 
 # ---------------------------------------------------------------------------- control channel
-def test_control_channel_refuses_bad_requests_and_stays_up(pc) -> None:
+def test_control_channel_refuses_bad_requests_and_stays_up(pc: Responder) -> None:
     with sim(pc) as kuka:
         bad = [
             b"{not json",
@@ -500,7 +501,7 @@ def test_control_channel_refuses_bad_requests_and_stays_up(pc) -> None:
         assert kuka.status()["faults"]["lose_s"] == 0  # nothing half-applied
 
 
-def test_sigterm_exits_cleanly(pc) -> None:
+def test_sigterm_exits_cleanly(pc: Responder) -> None:
     kuka = sim(pc).start()
     assert kuka.proc is not None
     pc.wait(lambda p: len(p) >= 3)

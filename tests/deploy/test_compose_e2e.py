@@ -33,7 +33,7 @@ import pytest
 from pytest import TempPathFactory
 
 from tests.conformance import load, same
-from tests.deploy import zenoh_probe
+from tests.deploy import images, zenoh_probe
 from tests.deploy.compose import compose_cmd, project_containers, run
 from tests.deploy.images import BASE_IMAGE, TAG
 from tests.system import CONFORMANCE, Client, free_port
@@ -192,7 +192,7 @@ def image_report() -> dict[str, str]:
 
 # ---------------------------------------------------------------------- fixtures
 @pytest.fixture(scope="module")
-def built(rob6_images):
+def built(rob6_images: images.Outcome) -> Iterator[None]:
     """The images (built once per run by tests/conftest.py); their build times and sizes."""
     REPORT["build (deploy/build-images.sh)"] = [*rob6_images.steps, f"{rob6_images.seconds:.0f} s in all"]
     REPORT["images"] = image_report()
@@ -201,7 +201,7 @@ def built(rob6_images):
 
 
 @pytest.fixture(scope="module")
-def entry_points(built) -> None:
+def entry_points(built: None) -> None:
     """Every image imports its entry point, with everything it imports in turn: a module
     the image lacks (rob6-shared importing numpy, which the router, gateway, gripper and
     recorder images do not carry) fails here, before any stack is started."""
@@ -212,7 +212,7 @@ def entry_points(built) -> None:
 
 
 @pytest.fixture(scope="module")
-def plain(built, entry_points):
+def plain(built: None, entry_points: None) -> Iterator[Stack]:
     stack = Stack(f"rob6e2e{os.getpid()}")
     try:
         t = time.monotonic()
@@ -234,7 +234,7 @@ def certs(tmp_path_factory: TempPathFactory):
 
 
 # ---------------------------------------------------------------------- tests: images
-def test_images_offline_minimal_non_root(built) -> None:
+def test_images_offline_minimal_non_root(built: None) -> None:
     heavy = {"numpy", "pinocchio", "ruckig", "mcap", "serial"}
     needs = {"router": set(), "gateway": set(), "kinematics": {"numpy", "pinocchio"},
              "planner": {"numpy", "ruckig"}, "driver": {"numpy", "ruckig"},
@@ -251,7 +251,7 @@ def test_images_offline_minimal_non_root(built) -> None:
         run(["docker", "run", "--rm", "--network", "none", image, "python", "-c", script], timeout=120)
 
 
-def test_router_container_tls_and_acl(built, certs) -> None:
+def test_router_container_tls_and_acl(built: None, certs) -> None:
     """Infrastructure on its own: the router image with the secure profile, probed from here."""
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2erouter{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
@@ -269,7 +269,7 @@ def test_router_container_tls_and_acl(built, certs) -> None:
 
 
 # ---------------------------------------------------------------------- tests: the running system
-def test_conformance_subset(plain) -> None:
+def test_conformance_subset(plain: Stack) -> None:
     checked = conformance_subset(plain.port)
     REPORT["conformance subset (management.jsonl)"] = f"{checked} replies identical"
     with connect(plain.port) as client:  # the whole chain: gateway -> planner -> driver, kinematics
@@ -278,7 +278,7 @@ def test_conformance_subset(plain) -> None:
         assert client.ask("GetPositionJoints") == "10.000000 -60.000000 80.000000 20.000000 40.000000 30.000000\n"
 
 
-def test_kinematics_killed_mid_session(plain) -> None:
+def test_kinematics_killed_mid_session(plain: Stack) -> None:
     """The client gets `ERROR: ...` at once while kinematics is gone, and the same session
     works again when it is back; then a crash (SIGKILL inside) is restarted by the policy."""
     expected = fk_expected()
@@ -318,7 +318,7 @@ def test_kinematics_killed_mid_session(plain) -> None:
         assert same(FK, client.ask(FK, lines=2), expected)
 
 
-def test_two_kinematics_replicas_both_serve(plain) -> None:
+def test_two_kinematics_replicas_both_serve(plain: Stack) -> None:
     plain.compose("up", "-d", "--no-build", "--no-recreate", "--scale", "kinematics=2", "kinematics")
     plain.wait_healthy(("kinematics",), timeout=120)
     assert len(plain.containers("kinematics")) == 2
@@ -343,7 +343,7 @@ def test_two_kinematics_replicas_both_serve(plain) -> None:
     assert len(served) == 2 and min(served.values()) >= 3, served
 
 
-def test_replicas_from_outside_the_stack(plain, tmp_path: Path) -> None:
+def test_replicas_from_outside_the_stack(plain: Stack, tmp_path: Path) -> None:
     """What deploy/MULTI_HOST.md describes, with this machine standing in for the other host:
     a kinematics container outside the compose network (docker run, env settings) and a
     plain process (deploy/zenoh/remote-client.json5), both reaching the router through its
@@ -383,7 +383,7 @@ def test_replicas_from_outside_the_stack(plain, tmp_path: Path) -> None:
     assert any(i.startswith(remote_container) or i.startswith(hostname) for i in served), served
 
 
-def test_second_project_for_the_same_robot_is_refused(plain, tmp_path: Path) -> None:
+def test_second_project_for_the_same_robot_is_refused(plain: Stack, tmp_path: Path) -> None:
     """One robot, one owner, in containers: a second compose project with the same robot id
     on the first one's Zenoh network (its network joined as external) gets a one-line
     refusal and exit 78 from each owner service; the first system is not disturbed."""
@@ -415,7 +415,7 @@ def test_second_project_for_the_same_robot_is_refused(plain, tmp_path: Path) -> 
         second.compose("down", "-t", "5", check=False)
 
 
-def test_recordings_readable_after_down(plain) -> None:
+def test_recordings_readable_after_down(plain: Stack) -> None:
     """Stop the stack (the recorder closes its files on SIGTERM); the MCAP files stay on the
     named volume and read back completely (summary, messages, kinematics traces)."""
     plain.compose("down", "-t", "10")  # keeps the volume
@@ -476,7 +476,7 @@ def controller_stack(profile: str, controller: str, *, robot: str, link: str,
 
 
 # ---------------------------------------------------------------------- tests: rsi profile
-def test_rsi_profile_drives_the_kr_c4_container(built, entry_points) -> None:
+def test_rsi_profile_drives_the_kr_c4_container(built: None, entry_points: None) -> None:
     """`ROB6_LINK=rsi ROB6_ROBOT=kr16rt compose --profile rsi up`: the driver drives the
     stand-in KR C4 (its own container on the robot network) over RSI in real time; the
     controller's axes end where the client moved them, without a trip."""
@@ -499,7 +499,7 @@ def test_rsi_profile_drives_the_kr_c4_container(built, entry_points) -> None:
 
 
 # ---------------------------------------------------------------------- tests: adept profile
-def test_adept_profile_drives_the_adept_container(built, entry_points) -> None:
+def test_adept_profile_drives_the_adept_container(built: None, entry_points: None) -> None:
     """`ROB6_ROBOT=ad850 ROB6_LINK=simple_message compose --profile adept up`: the driver
     connects to the stand-in Adept controller (its own container on the robot network, found
     by the compose default ROB6_SM_HOST=adept-sm-sim) and streams a PTP motion to it over
@@ -544,7 +544,7 @@ def test_adept_profile_drives_the_adept_container(built, entry_points) -> None:
 
 
 # ---------------------------------------------------------------------- tests: secure profile
-def test_secure_profile_end_to_end(built, entry_points, certs) -> None:
+def test_secure_profile_end_to_end(built: None, entry_points: None, certs) -> None:
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2esec{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
                   {"ROB6_CERTS_DIR": str(certs_dir)})

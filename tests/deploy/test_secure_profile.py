@@ -52,7 +52,7 @@ def test_zenoh_configs_parse(path) -> None:
         assert config.get_json("transport/link/protocols") == '["tls"]'
 
 
-def test_make_certs_is_idempotent_and_verifiable(certs, tmp_path: Path) -> None:
+def test_make_certs_is_idempotent_and_verifiable(certs: Path, tmp_path: Path) -> None:
     before = (certs / "gateway.crt").read_bytes()
     make_certs(certs, "gateway")  # re-run: keeps what exists
     assert (certs / "gateway.crt").read_bytes() == before
@@ -66,7 +66,7 @@ def test_make_certs_is_idempotent_and_verifiable(certs, tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_tls_and_acl_probes(certs, foreign_certs) -> None:
+def test_tls_and_acl_probes(certs: Path, foreign_certs: Path) -> None:
     with local_router(ZENOH_DIR / "router-secure.json5", certs) as endpoint:
         checks = secure_profile_checks(endpoint, certs, foreign_certs=foreign_certs)
     failed = [str(c) for c in checks if not c.ok]
@@ -74,7 +74,7 @@ def test_tls_and_acl_probes(certs, foreign_certs) -> None:
 
 
 @pytest.mark.slow
-def test_rob6_processes_through_the_secure_router(certs, tmp_path: Path) -> None:
+def test_rob6_processes_through_the_secure_router(certs: Path, tmp_path: Path) -> None:
     """The real rob6 code paths (router CLI, Bus.serve/request, liveliness, rob6 health)
     with the files the containers use: the ACL must let the system work, and stop the rest."""
     from rob6.bus import Bus, BusError

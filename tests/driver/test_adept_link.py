@@ -15,6 +15,7 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -161,8 +162,12 @@ def online(core, link) -> None:
     wait(lambda: link.state == "connected" and not core.offline_reason, what="the link to be up")
 
 
+#: the fixture: the fake controller, core, link and the link's events
+Rig = tuple[FakeController, MotionCore, AdeptLink, list[LinkEvent]]
+
+
 @pytest.fixture(params=["big", "little"])
-def rig(request: FixtureRequest):
+def rig(request: FixtureRequest) -> Iterator[Rig]:
     fake = FakeController(request.param)
     core = MotionCore(ROBOT)
     events: list[LinkEvent] = []
@@ -173,7 +178,7 @@ def rig(request: FixtureRequest):
     fake.close()
 
 
-def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig) -> None:
+def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig: Rig) -> None:
     fake, core, link, events = rig
     port, state_port = fake.settings["motion_port"], fake.settings["state_port"]
     refused = core.execute([[0.0] * 6] * 2, core.dt)
@@ -205,7 +210,7 @@ def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig) -
     assert [e.event for e in events][:2] == ["waiting", "connected"]
 
 
-def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig) -> None:
+def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -233,7 +238,7 @@ def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig) ->
     assert "fault" in kinds and kinds[-1] == "back"
 
 
-def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_words(rig) -> None:
+def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_words(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -254,7 +259,7 @@ def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_wo
     assert "refused" in [e.event for e in events]
 
 
-def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig) -> None:
+def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -276,7 +281,7 @@ def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig) -> None:
     assert [e.event for e in events].count("back") >= 1
 
 
-def test_a_silent_state_port_is_a_lost_link(rig) -> None:
+def test_a_silent_state_port_is_a_lost_link(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -294,7 +299,7 @@ def test_a_silent_state_port_is_a_lost_link(rig) -> None:
                m.endswith(" closed the state connection") for m in lost), lost
 
 
-def test_late_acknowledgements_merge_points_and_keep_the_timing(rig) -> None:
+def test_late_acknowledgements_merge_points_and_keep_the_timing(rig: Rig) -> None:
     fake, core, link, _ = rig
     link.start()
     online(core, link)
@@ -307,7 +312,7 @@ def test_late_acknowledgements_merge_points_and_keep_the_timing(rig) -> None:
     assert np.allclose(fake.points[-1].q, [8.0, 0.0, 4.0, 0.0, 0.0, 0.0], atol=1e-4)
 
 
-def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig) -> None:
+def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig: Rig) -> None:
     fake, core, link, _ = rig
     link.start()
     online(core, link)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import re
 import socket
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -66,8 +67,12 @@ class Controller:
         return ak
 
 
+#: the fixture: core, link, the fake controller, the states published, the link's events
+Rig = tuple[MotionCore, RsiLink, Controller, list[CoreState], list[LinkEvent]]
+
+
 @pytest.fixture
-def rig():
+def rig() -> Iterator[Rig]:
     robot = get_robot("kr16rt")
     core = MotionCore(robot)
     states: list[CoreState] = []
@@ -94,7 +99,7 @@ def ptp(core, target):
     return core.execute(t.q, t.dt, t.qd, t.qdd)
 
 
-def test_start_steps_and_late_answers(rig) -> None:
+def test_start_steps_and_late_answers(rig: Rig) -> None:
     core, link, ctl, states, events = rig
     assert link.state == "waiting"
     assert core.execute([list(HOME)] * 2, core.dt).error.startswith("robot not connected (waiting for RSI on 127.0.0.1:")
@@ -130,7 +135,7 @@ def test_start_steps_and_late_answers(rig) -> None:
     assert ctl.cycle(delay=2)[0] == pytest.approx(20.0, abs=1e-6)
 
 
-def test_lost_and_back_in_the_same_run_continues_from_aipos(rig) -> None:
+def test_lost_and_back_in_the_same_run_continues_from_aipos(rig: Rig) -> None:
     core, link, ctl, states, events = rig
     ctl.cycle()
     motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
@@ -152,7 +157,7 @@ def test_lost_and_back_in_the_same_run_continues_from_aipos(rig) -> None:
     assert abs(first[0] - back[0]) < 0.01
 
 
-def test_a_restart_rebases_on_the_new_start_pose(rig) -> None:
+def test_a_restart_rebases_on_the_new_start_pose(rig: Rig) -> None:
     core, link, ctl, states, events = rig
     ctl.cycle()
     motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))

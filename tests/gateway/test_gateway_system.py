@@ -6,41 +6,42 @@ import os
 import signal
 import socket
 import time
+from collections.abc import Iterator
 
 import pytest
 
-from tests.system import Client, running
+from tests.system import Client, System, running
 
 GATEWAY_AND_DRIVER = ("driver", "gateway")
 
 
 @pytest.fixture(scope="module")
-def system():
+def system() -> Iterator[System]:
     with running("kr16", services=GATEWAY_AND_DRIVER) as system:
         yield system
 
 
-def test_separate_processes(system) -> None:
+def test_separate_processes(system: System) -> None:
     pids = system.pids()
     assert {"router", "driver", "gateway"} <= set(pids)
     assert len(set(pids.values())) == len(pids)
 
 
 @pytest.mark.parametrize("terminator", [b"\n", b"\r\n"])
-def test_terminated_commands(system, terminator) -> None:
+def test_terminated_commands(system: System, terminator) -> None:
     with system.client() as client:
         client.send(b"GetRobot" + terminator)
         assert client.read_lines(1) == "kr16\n"
 
 
-def test_unterminated_commands_one_per_write(system) -> None:
+def test_unterminated_commands_one_per_write(system: System) -> None:
     with system.client() as client:
         for command, reply in ((b"GetRobot", "kr16\n"), (b"CM_PING", "PONG\n"), (b"GetVersion", "0.1.01\n")):
             client.send(command)
             assert client.read_lines(1) == reply
 
 
-def test_client_that_reads_one_recv_per_reply(system) -> None:
+def test_client_that_reads_one_recv_per_reply(system: System) -> None:
     """A multi-line reply arrives in one segment, so one recv() gets all of it."""
     with system.client() as client:
         client.send(b"SetVerbosity x\n")
@@ -48,20 +49,20 @@ def test_client_that_reads_one_recv_per_reply(system) -> None:
         assert client.sock.recv(4096) == b"ERROR: incorrect value\nfalse\n"
 
 
-def test_several_commands_in_one_write_answered_in_order(system) -> None:
+def test_several_commands_in_one_write_answered_in_order(system: System) -> None:
     with system.client() as client:
         client.send(b"GetRobot\nCM_PING\r\nGetVersion\nFoo\n")
         assert client.read_lines(4) == "kr16\nPONG\n0.1.01\nERROR: Foo\n"
 
 
-def test_command_split_across_writes_is_reassembled(system) -> None:
+def test_command_split_across_writes_is_reassembled(system: System) -> None:
     with system.client() as client:
         client.send(b"GetRo")
         client.send(b"bot\n")  # well within the pause: one line
         assert client.read_lines(1) == "kr16\n"
 
 
-def test_missing_arguments_are_answered_at_once(system) -> None:
+def test_missing_arguments_are_answered_at_once(system: System) -> None:
     with system.client() as client:
         start = time.monotonic()
         assert client.ask("MovePTPJoints", 2) == "ERROR: incorrect joints\nfalse\n"
@@ -71,7 +72,7 @@ def test_missing_arguments_are_answered_at_once(system) -> None:
         assert client.ask("GetRobot") == "kr16\n"  # the next command is a command, not arguments
 
 
-def test_unknown_and_malformed_commands_keep_the_connection(system) -> None:
+def test_unknown_and_malformed_commands_keep_the_connection(system: System) -> None:
     with system.client() as client:
         assert client.ask("getrobot") == "ERROR: getrobot\n"
         assert client.ask("MovePTPJoints 1 2 3", 2) == "ERROR: incorrect joints\nfalse\n"
@@ -83,7 +84,7 @@ def test_unknown_and_malformed_commands_keep_the_connection(system) -> None:
         assert client.ask("CM_PING") == "PONG\n"
 
 
-def test_second_client_is_refused_without_disturbing_the_first(system) -> None:
+def test_second_client_is_refused_without_disturbing_the_first(system: System) -> None:
     with system.client() as first:
         with Client(system.port, handshake=False) as second:
             assert second.greeting == "ERROR: server busy, another client is connected\n"
@@ -94,7 +95,7 @@ def test_second_client_is_refused_without_disturbing_the_first(system) -> None:
         assert third.ask("GetRobot") == "kr16\n"
 
 
-def test_next_client_accepted_right_after_a_disconnect(system) -> None:
+def test_next_client_accepted_right_after_a_disconnect(system: System) -> None:
     client = system.client()
     client.close()
     deadline = time.monotonic() + 1.0
@@ -106,7 +107,7 @@ def test_next_client_accepted_right_after_a_disconnect(system) -> None:
         time.sleep(0.01)
 
 
-def test_ping_robot_measures_the_driver(system) -> None:
+def test_ping_robot_measures_the_driver(system: System) -> None:
     with system.client() as client:
         numbers = client.ask("PingRobot 5 1").split()
         assert len(numbers) == 5

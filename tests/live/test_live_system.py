@@ -27,7 +27,7 @@ def _links(robot: str) -> tuple[str, set[str]]:
     return base, links - {base}
 
 
-def test_live_view_follows_the_arm(tmp_path: Path, live_port) -> None:
+def test_live_view_follows_the_arm(tmp_path: Path, live_port: int) -> None:
     with running("kr16", log_dir=str(tmp_path), extra_env={"ROB6_LIVE_PORT": str(live_port)}) as system:
         url = f"ws://127.0.0.1:{live_port}"
         assert any(f"live view: {url}" in line for line in system.output), system.output

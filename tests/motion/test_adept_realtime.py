@@ -14,6 +14,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,7 @@ from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import running
+from tests.system import System, running
 
 pytestmark = pytest.mark.slow
 
@@ -165,7 +166,7 @@ def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path: Path, order, 
 
 
 @pytest.fixture(scope="module")
-def adept():
+def adept() -> Iterator[tuple[System, int, int]]:
     """One rob6 system on simple_message for the fault tests; each test brings its own controller."""
     motion, state = free_tcp_ports(2)
     with adept_system(motion, state) as system:
@@ -188,7 +189,7 @@ def back_home(client, ctl, system) -> None:
     assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
-def test_estop_mid_motion_then_released_and_drives_on(adept) -> None:
+def test_estop_mid_motion_then_released_and_drives_on(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -209,7 +210,7 @@ def test_estop_mid_motion_then_released_and_drives_on(adept) -> None:
         assert ctl.status()["points_refused"] == refused_at_fault  # nothing sent while it could not move
 
 
-def test_drives_off_mid_motion(adept) -> None:
+def test_drives_off_mid_motion(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -220,7 +221,7 @@ def test_drives_off_mid_motion(adept) -> None:
         back_home(client, ctl, system)
 
 
-def test_controller_error_mid_motion(adept) -> None:
+def test_controller_error_mid_motion(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -233,7 +234,7 @@ def test_controller_error_mid_motion(adept) -> None:
         back_home(client, ctl, system)
 
 
-def test_motion_connection_dropped_mid_motion_and_restored(adept) -> None:
+def test_motion_connection_dropped_mid_motion_and_restored(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -247,7 +248,7 @@ def test_motion_connection_dropped_mid_motion_and_restored(adept) -> None:
         assert link_status(system).runs >= 2
 
 
-def test_state_connection_dropped_mid_motion_and_restored(adept) -> None:
+def test_state_connection_dropped_mid_motion_and_restored(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -259,7 +260,7 @@ def test_state_connection_dropped_mid_motion_and_restored(adept) -> None:
         back_home(client, ctl, system)
 
 
-def test_slow_then_missing_acknowledgements(adept) -> None:
+def test_slow_then_missing_acknowledgements(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)

@@ -16,6 +16,7 @@ import re
 from pathlib import Path
 
 import pytest
+from pytest import CaptureFixture
 
 from rob6.status import parse_status
 from rob6_planner.config import MotionSettings
@@ -176,7 +177,7 @@ def test_transcript(robot, script):
     print(robot, script, stats)
 
 
-def test_totals(capsys):
+def test_totals(capsys: CaptureFixture[str]):
     total: dict[str, int] = {}
     for robot in ROBOTS:
         for script in SCRIPTS:

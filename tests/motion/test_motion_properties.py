@@ -18,6 +18,7 @@ from typing import TypedDict
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
+from pytest import CaptureFixture
 
 from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
@@ -227,6 +228,6 @@ def test_property_harness_sees_something():
     assert h.problems == []
 
 
-def test_zz_report(capsys):
+def test_zz_report(capsys: CaptureFixture[str]):
     with capsys.disabled():
         print("\nproperty tests:", STATS)

@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import free_port, running
+from tests.system import System, free_port, running
 
 pytestmark = pytest.mark.slow
 
@@ -157,7 +158,7 @@ def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp
 
 
 @pytest.fixture(scope="module")
-def rsi():
+def rsi() -> Iterator[tuple[System, int]]:
     """One rob6 system on RSI for the fault tests; each test brings its own controller."""
     port = free_port(socket.SOCK_DGRAM)
     with rsi_system(port) as system:
@@ -171,7 +172,7 @@ def long_move(client, kuka) -> None:
     wait_until(lambda: kuka.status()["aipos"][0] > 5.0, timeout=10.0, what="the robot to move")
 
 
-def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi) -> None:
+def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi: tuple[System, int]) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -189,7 +190,7 @@ def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi) -> None
         assert_no_jump(kuka.status())
 
 
-def test_every_50th_packet_dropped_the_motion_completes(rsi) -> None:
+def test_every_50th_packet_dropped_the_motion_completes(rsi: tuple[System, int]) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -208,7 +209,7 @@ def test_every_50th_packet_dropped_the_motion_completes(rsi) -> None:
         assert np.allclose(joints(client), status["aipos"], atol=POSITION_TOL)
 
 
-def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi) -> None:
+def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi: tuple[System, int]) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -227,7 +228,7 @@ def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi) -> None:
         assert_no_jump(status)
 
 
-def test_controller_vanishes_and_returns(rsi) -> None:
+def test_controller_vanishes_and_returns(rsi: tuple[System, int]) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)

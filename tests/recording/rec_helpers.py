@@ -7,6 +7,9 @@ import asyncio
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
+
+from rob6_recorder.writer import Recorder
 
 URDF = """<?xml version="1.0"?>
 <robot name="mini6">
@@ -51,8 +54,12 @@ SESSION_LINES = [
 ]
 
 
-def record_session(rec, session: int = 3, t0: int | None = None, step_ns: int = 20_000_000,
-                   joint_states_per_line: int = 2) -> list[tuple[str, int, dict]]:
+#: one record as submitted to the recorder: topic, log time (ns), payload
+Submitted = tuple[str, int, dict[str, Any]]
+
+
+def record_session(rec: Recorder, session: int = 3, t0: int | None = None, step_ns: int = 20_000_000,
+                   joint_states_per_line: int = 2) -> list[Submitted]:
     """Feed ``rec`` (a Recorder) a scripted client session; return what was submitted."""
     t = time.time_ns() if t0 is None else t0
     submitted: list[tuple[str, int, dict]] = []

@@ -26,14 +26,14 @@ from tests.system import CONFORMANCE
 
 
 @pytest.fixture
-def session_file(tmp_path: Path):
+def session_file(tmp_path: Path) -> Path:
     with Recorder(tmp_path / "rec", "kr16", "robot1", system=False) as rec:
         record_session(rec, session=3, step_ns=4_000_000)  # 1 ms between records
     (path,) = (tmp_path / "rec").glob("*_session3.mcap")
     return path
 
 
-def test_load_recording(session_file) -> None:
+def test_load_recording(session_file: Path) -> None:
     (script,) = load_script(session_file)
     assert script.robot == "kr16" and script.greeting == "welcome to rob6server 0.1.01 !\n"
     assert [ex.send.decode() for ex in script.exchanges] == SESSION_LINES
@@ -42,7 +42,7 @@ def test_load_recording(session_file) -> None:
     assert all(b.t > a.t for a, b in pairwise(script.exchanges))
 
 
-def test_replay_identical_server_zero_differences(session_file) -> None:
+def test_replay_identical_server_zero_differences(session_file: Path) -> None:
     with FakeServer(dict_handler(REPLIES)) as server:
         res = CliRunner().invoke(cli, ["replay", str(session_file), "--to",
                                        f"127.0.0.1:{server.port}", "--as-fast-as-possible"])
@@ -53,14 +53,14 @@ def test_replay_identical_server_zero_differences(session_file) -> None:
         assert [m.decode() for m in server.received] == SESSION_LINES
 
 
-def test_replay_with_recorded_pacing(session_file) -> None:
+def test_replay_with_recorded_pacing(session_file: Path) -> None:
     with FakeServer(dict_handler(REPLIES)) as server:
         res = CliRunner().invoke(cli, ["replay", str(session_file), "--to",
                                        f"127.0.0.1:{server.port}", "--speed", "4"])
         assert res.exit_code == 0, res.output
 
 
-def test_replay_reports_differences(session_file) -> None:
+def test_replay_reports_differences(session_file: Path) -> None:
     overrides = {
         # a number beyond the tolerance
         "ForwardCalc 10 0 0 0 0 0\n": REPLIES["ForwardCalc 10 0 0 0 0 0\n"].replace(
@@ -85,7 +85,7 @@ def test_replay_reports_differences(session_file) -> None:
     assert "> 'ForwardCalc 10 0 0 0 0 0'" in out and "cid=c003" in out
 
 
-def test_replay_unreachable_server(session_file) -> None:
+def test_replay_unreachable_server(session_file: Path) -> None:
     res = CliRunner().invoke(cli, ["replay", str(session_file), "--to", "127.0.0.1:1",
                                    "--no-progress"])
     assert res.exit_code == 2 and "cannot connect" in res.output
@@ -154,7 +154,7 @@ def test_replay_conformance_transcript(tmp_path: Path) -> None:
     assert result.exchanges == sum(len(s.exchanges) for s in scripts)
 
 
-def test_replay_joints_pacing(session_file) -> None:
+def test_replay_joints_pacing(session_file: Path) -> None:
     got: list[dict] = []
     sleeps: list[float] = []
     now = [0.0]
@@ -174,7 +174,7 @@ def test_replay_joints_pacing(session_file) -> None:
     assert replay_joints(session_file, fast.append, speed=None) == n
 
 
-def test_replay_joints_cli(session_file) -> None:
+def test_replay_joints_cli(session_file: Path) -> None:
     res = CliRunner().invoke(cli, ["replay-joints", str(session_file), "--speed", "0"])
     assert res.exit_code == 0
     lines = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]

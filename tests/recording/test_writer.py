@@ -36,7 +36,7 @@ def _checked_summary(path):
         return summary, messages
 
 
-def test_scripted_session_every_record_in_order_with_cid(tmp_path: Path, urdf) -> None:
+def test_scripted_session_every_record_in_order_with_cid(tmp_path: Path, urdf: str) -> None:
     def fk(q):
         return [1, 0, 0, 1000.0, 0, 1, 0, 0, 0, 0, 1, 500.0]
 
@@ -247,7 +247,7 @@ def test_log_mapping_levels() -> None:
     assert to_foxglove_log({"level": "DEBUG", "message": "x"}, 7)["timestamp"] == {"sec": 0, "nsec": 7}
 
 
-def test_tf_from_urdf(urdf) -> None:
+def test_tf_from_urdf(urdf: str) -> None:
     tf = TfDeriver(urdf)
     msg = tf.transforms([90.0, 0.0, 0, 0, 0, 0], 1_500_000_000)
     frames = [(t["parent_frame_id"], t["child_frame_id"]) for t in msg["transforms"]]

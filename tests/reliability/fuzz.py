@@ -34,10 +34,12 @@ from typing import cast
 from hypothesis import strategies as st
 
 from rob6.bus import Bus
+from rob6.robots import get_robot
 from rob6.status import STATUS_WORDS as _CATEGORIES
 from rob6_gateway.args import Args, ParseError
 from rob6_gateway.commands import COMMANDS, GRIPPER_REPLY_LINES, Close, Gateway, Options, _split_command
 from rob6_gateway.framing import Framer, _clean
+from rob6_gateway.state import Session
 from tests.system import System
 
 COMMAND_NAMES = sorted(COMMANDS)
@@ -224,9 +226,11 @@ class _DeadBus:
         raise self._error("unavailable", f"{service} unavailable")
 
 
-def make_dead_gateway(robot: str = "kr16"):
-    from rob6.robots import get_robot
-    from rob6_gateway.state import Session
+#: a gateway whose every bus call fails, and a session of it
+DeadGateway = tuple[Gateway, Session]
+
+
+def make_dead_gateway(robot: str = "kr16") -> DeadGateway:
     logging.getLogger("rob6").setLevel(logging.CRITICAL)  # every call fails: thousands of warnings
     gateway = Gateway(cast(Bus, _DeadBus()), get_robot(robot), Options())  # the part of a Bus it uses
     return gateway, Session(number=1, peer="fuzz")

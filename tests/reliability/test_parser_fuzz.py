@@ -15,6 +15,7 @@ from rob6_gateway.commands import _split_command
 from rob6_gateway.framing import MAX_LINE, Framer
 from tests.reliability.fuzz import (
     COMMAND_NAMES,
+    DeadGateway,
     check_args,
     check_execute,
     check_framer,
@@ -69,14 +70,14 @@ def test_args_never_crash_on_any_unicode(text) -> None:
 
 
 @pytest.fixture(scope="module", params=["kr16", "ad850"])
-def dead_gateway(request: FixtureRequest):
+def dead_gateway(request: FixtureRequest) -> DeadGateway:
     return make_dead_gateway(request.param)
 
 
 @settings(max_examples=800, deadline=None, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(text=command_line_strategy())
-def test_every_command_line_gets_one_well_formed_reply(dead_gateway, text) -> None:
+def test_every_command_line_gets_one_well_formed_reply(dead_gateway: DeadGateway, text) -> None:
     gateway, session = dead_gateway
     check_execute(gateway, session, text)
 
@@ -85,7 +86,7 @@ EXTREMES = ["nan", "inf", "-inf", "1e308", "-1e308", "1e309", "-0", "4.9e-324", 
 
 
 @pytest.mark.parametrize("name", COMMAND_NAMES)
-def test_every_command_with_extreme_values_and_wrong_arity(dead_gateway, name) -> None:
+def test_every_command_with_extreme_values_and_wrong_arity(dead_gateway: DeadGateway, name) -> None:
     gateway, session = dead_gateway
     for value in EXTREMES:
         for arity in (0, 1, 5, 6, 7, 11, 12, 13, 20):
