@@ -35,7 +35,7 @@ def test_transcripts_match_the_ground_truth() -> None:
 
 
 @pytest.mark.parametrize("robot, path", list(cases()))
-def test_transcript(robot, path) -> None:
+def test_transcript(robot: str, path) -> None:
     with running(robot) as system:
         result = replay(system, robot, path)
     assert result.checked > 0

@@ -54,7 +54,7 @@ def encoded(name: str, *values) -> Args:
 
 
 @pytest.mark.parametrize("q", [[10, 0, 0, 0, 0, 0], [1e-5, -0.0, 123.456789012345, -1e-12, 1e6, 359.99999999]])
-def test_numbers_reach_the_server_exactly(q) -> None:
+def test_numbers_reach_the_server_exactly(q: list[float] | list[int]) -> None:
     assert encoded("MovePTPJoints", q).joints() == [float(v) for v in q]
 
 
@@ -76,7 +76,7 @@ def test_poses_flat_rows_or_homogeneous() -> None:
     ("noToggleElbow", ("toggleHand", "noToggleElbow", "toggleArm")),
     (Status("flip", "down", "noToggleArm"), ("flip", "down", "noToggleArm")),
 ])
-def test_status_words_are_sent_normalised(words, expected) -> None:
+def test_status_words_are_sent_normalised(words, expected: tuple[str, ...]) -> None:
     assert normalize_status(words) == expected
     args = encoded("BackwardCalc", [0] * 12, words)
     args.matrix()
@@ -84,7 +84,7 @@ def test_status_words_are_sent_normalised(words, expected) -> None:
 
 
 @pytest.mark.parametrize("words", ["", "NOFLIP", "flip up lefty righty", "up down", "flip extra"])
-def test_bad_status_words(words) -> None:
+def test_bad_status_words(words: str) -> None:
     with pytest.raises(ValueError):
         normalize_status(words)
 

@@ -184,7 +184,7 @@ def test_ready_line_and_clean_exit_on_sigterm_and_sigint() -> None:
 
 
 @pytest.mark.parametrize("byte_order", ["big", "little"])
-def test_streamed_points_are_acknowledged_and_executed(byte_order) -> None:
+def test_streamed_points_are_acknowledged_and_executed(byte_order: str) -> None:
     e = ORDER[byte_order]
     targets = [(10, -10, 20, 5, 10, -15), (20, -20, 30, 10, 20, -30), (25, -15, 35, 0, 30, -45)]
     with AdeptController("--state-period", "0.02", byte_order=byte_order) as ctl:

@@ -72,7 +72,7 @@ def test_ethernet_configuration(ethernet: ET.Element) -> None:
 
 
 @pytest.mark.parametrize("fmt", ["rsix", "rsi3"])
-def test_signal_flow_wiring(ethernet: ET.Element, fmt) -> None:
+def test_signal_flow_wiring(ethernet: ET.Element, fmt: str) -> None:
     objects = rsix_objects() if fmt == "rsix" else rsi3_objects()
     base = 0 if fmt == "rsix" else 1  # RSI 4.x counts from 0, RSI 3.x from 1
     by_type = {t.upper(): (oid, tid, params, inputs) for oid, (t, tid, params, inputs) in objects.items()}

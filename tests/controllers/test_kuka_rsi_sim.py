@@ -279,7 +279,7 @@ def test_no_answer_counts_delay_and_stops_after_timeout(pc: Responder) -> None:
 
 
 @pytest.mark.parametrize("offset", [1, -12], ids=["wrong", "stale"])
-def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, offset) -> None:
+def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, offset: int) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"] + offset, [1.0, 0, 0, 0, 0, 0])
     with sim(pc, "--timeout", "6") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")

@@ -111,7 +111,7 @@ def test_forward_kinematics_agree_through_the_convention() -> None:
     ((-1, -1, 1, -1, 1, -1), (0, 0, 90, 0, 0, 0)),  # q2
     ((-1, 1, 1, -1, 1, -1), (0, 0, -90, 0, 0, 0)),  # the J3 offset the other way
 ])
-def test_the_check_would_catch_another_convention(sign, offset) -> None:
+def test_the_check_would_catch_another_convention(sign: tuple[int, ...], offset: tuple[int, ...]) -> None:
     kin = Kinematics(ROBOT)
     rng = np.random.default_rng(1)
     qs = rng.uniform(-100, 100, (4, 6))

@@ -39,7 +39,7 @@ def test_the_controllers_packet() -> None:
     # elements written with an end tag, no Delay element at all, lower-case attribute names
     f'<Rob><AIPos {AXES.lower()}></AIPos><ASPos {START}></ASPos><IPOC>4208105428</IPOC></Rob>',
 ])
-def test_variants_of_other_rsi_versions(text) -> None:
+def test_variants_of_other_rsi_versions(text: str) -> None:
     check(parse_rob(text.encode()))
 
 
@@ -65,7 +65,7 @@ def test_a_missing_delay_counts_as_zero() -> None:
     # the packet cut off by a too small buffer
     (STANDARD[:150], "no <IPOC>"),
 ])
-def test_garbage_gives_a_clear_error(text, message) -> None:
+def test_garbage_gives_a_clear_error(text: bytes, message: str) -> None:
     with pytest.raises(RsiParseError, match=message.replace("(", r"\(").replace("[", r"\[")):
         parse_rob(text)
 

@@ -18,7 +18,7 @@ def packed(e: str, msg_type: int, comm: int, reply: int, body: bytes) -> bytes:
 
 
 @pytest.mark.parametrize("order", ["big", "little"])
-def test_a_trajectory_point_request_is_68_bytes_in_the_protocols_layout(order) -> None:
+def test_a_trajectory_point_request_is_68_bytes_in_the_protocols_layout(order: str) -> None:
     e = ORDERS[order]
     joints = [0.1, -0.2, 1.5, 0.0, 2.0, -3.0]
     frame = sm.Codec(order).traj_pt(7, joints, velocity=0.25, duration=0.048)
@@ -28,7 +28,7 @@ def test_a_trajectory_point_request_is_68_bytes_in_the_protocols_layout(order) -
 
 
 @pytest.mark.parametrize("order", ["big", "little"])
-def test_state_messages_and_replies_are_read(order) -> None:
+def test_state_messages_and_replies_are_read(order: str) -> None:
     e = ORDERS[order]
     codec = sm.Codec(order)
     joints = [0.5, -1.0, 1.5707964, 0.25, -0.75, 3.0, 0, 0, 0, 0]
@@ -55,7 +55,7 @@ def test_state_messages_and_replies_are_read(order) -> None:
 
 
 @pytest.mark.parametrize("order", ["big", "little"])
-def test_what_the_codec_packs_it_reads_back(order) -> None:
+def test_what_the_codec_packs_it_reads_back(order: str) -> None:
     codec = sm.Codec(order)
     status = sm.RobotStatus(0, 1, 42, 1, 0, sm.MODE_MANUAL, -1)
     point = codec.decode(codec.split(bytearray(codec.traj_pt(-3, [1.0, 2.0], 0.5, 1.25)))[0]).value

@@ -28,7 +28,7 @@ def test_separate_processes(system: System) -> None:
 
 
 @pytest.mark.parametrize("terminator", [b"\n", b"\r\n"])
-def test_terminated_commands(system: System, terminator) -> None:
+def test_terminated_commands(system: System, terminator: bytes) -> None:
     with system.client() as client:
         client.send(b"GetRobot" + terminator)
         assert client.read_lines(1) == "kr16\n"

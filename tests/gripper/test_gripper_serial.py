@@ -133,7 +133,7 @@ def test_error_during_motion_fails_the_motion(dev: FakeSmpDevice, grip: SchunkGr
 
 
 @pytest.mark.parametrize("split", [1, 3])
-def test_framing_split_across_reads(dev: FakeSmpDevice, grip: SchunkGripper, split) -> None:
+def test_framing_split_across_reads(dev: FakeSmpDevice, grip: SchunkGripper, split: int) -> None:
     dev.split = split
     assert grip.has_gripper()
     assert grip.move_current(-1.0, timeout=3)

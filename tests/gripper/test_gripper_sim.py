@@ -101,7 +101,7 @@ def test_state_observable_while_moving() -> None:
 
 
 @pytest.mark.parametrize("amps", [-0.5, -1.0, -2.0, -3.0, -5.0])
-def test_gripping_force_proportional_to_current(amps) -> None:
+def test_gripping_force_proportional_to_current(amps: float) -> None:
     m = GripperModel(object_width=0.030)
     m.command_current(amps)
     m.advance(2.0)
@@ -148,7 +148,7 @@ def test_current_limits() -> None:
 
 # ---------------------------------------------------------------- position moves
 @pytest.mark.parametrize("target", [0.025, 0.039, 0.0, 0.070, 0.06])
-def test_move_to_position_reaches_target_in_trapezoid_time(target) -> None:
+def test_move_to_position_reaches_target_in_trapezoid_time(target: float) -> None:
     m = GripperModel()
     mid = m.command_position(target)
     expected = position_move_time(abs(target - 0.040))
@@ -171,7 +171,7 @@ def test_speed_and_acceleration_limits_respected() -> None:
 
 
 @pytest.mark.parametrize("target", [-0.001, 0.0701, 0.5, -1.0])
-def test_move_outside_stroke_rejected(target) -> None:
+def test_move_outside_stroke_rejected(target: float) -> None:
     g = SimGripper(clock=VirtualClock())
     r = g.move_to_position(target)
     assert not r.ok
@@ -221,7 +221,7 @@ def test_timeout_stops_and_fails() -> None:
 
 
 @pytest.mark.parametrize("timeout", [0, -1, float("nan")])
-def test_bad_timeout(timeout) -> None:
+def test_bad_timeout(timeout: float) -> None:
     assert "invalid timeout" in SimGripper(clock=VirtualClock()).go_home(timeout).error
 
 

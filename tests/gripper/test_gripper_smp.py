@@ -38,7 +38,7 @@ def h(text: str) -> bytes:
 
 
 @pytest.mark.parametrize(("body", "crc"), MANUAL_VECTORS)
-def test_crc16_matches_manual(body, crc) -> None:
+def test_crc16_matches_manual(body: str, crc: str) -> None:
     assert smp.crc16(h(body)).to_bytes(2, "little") == h(crc)
 
 
@@ -48,7 +48,7 @@ def test_crc16_is_crc16_arc() -> None:
 
 
 @pytest.mark.parametrize(("body", "crc"), MANUAL_VECTORS)
-def test_encode_decode_manual_frames(body, crc) -> None:
+def test_encode_decode_manual_frames(body: str, crc: str) -> None:
     raw = h(body) + h(crc)
     group, mid, dlen, cmd = raw[:4]
     frame = smp.Frame(group, mid, cmd, raw[4:3 + dlen])

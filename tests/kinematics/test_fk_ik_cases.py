@@ -44,7 +44,7 @@ def angle_diff(a, b):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_fk_cases(robot) -> None:
+def test_fk_cases(robot: str) -> None:
     cases = load(robot)
     g = Geometry.of(get_robot(robot))
     if robot == "kaw_fs":
@@ -61,7 +61,7 @@ def test_fk_cases(robot) -> None:
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_ik_cases(robot) -> None:
+def test_ik_cases(robot: str) -> None:
     cases = load(robot)
     k = Kinematics(get_robot(robot))
     zero = np.zeros(6)
@@ -81,7 +81,7 @@ def test_ik_cases(robot) -> None:
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_ik_batch_matches_single(robot) -> None:
+def test_ik_batch_matches_single(robot: str) -> None:
     """The vectorised all-branch IK (+ limits) equals the per-pose BackwardCalc."""
     cases = load(robot)
     k = Kinematics(get_robot(robot))

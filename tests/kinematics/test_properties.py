@@ -67,7 +67,7 @@ def check_pose(k, T, Q) -> None:
 @pytest.mark.parametrize("branch", range(8), ids=BRANCHES)
 @SETTINGS
 @given(q1=angle, t=st.floats(0.0, 1.0), phi=positive, q4=angle, q5=positive, q6=angle)
-def test_ik_roundtrip_all_branches(robot, branch, q1, t, phi, q4, q5, q6) -> None:
+def test_ik_roundtrip_all_branches(robot: str, branch: int, q1, t, phi, q4, q5, q6) -> None:
     k = KIN[robot]
     g = k.g
     hand, elbow, arm = branch // 4, (branch // 2) % 2, branch % 2
@@ -131,7 +131,7 @@ UNREACHABLE = {("kaw_fs", "noflip up righty"), ("kaw_fs", "flip up righty")}
 @pytest.mark.parametrize("branch", range(8), ids=BRANCHES)
 @SETTINGS
 @given(seed=st.integers(0, 2**32 - 1))
-def test_backward_calc_with_limits(robot, branch, seed) -> None:
+def test_backward_calc_with_limits(robot: str, branch: int, seed) -> None:
     k = KIN[robot]
     status = BRANCHES[branch]
     q = sample_with_status(robot, branch, seed)
@@ -165,7 +165,7 @@ def test_backward_calc_with_limits(robot, branch, seed) -> None:
     max_change=st.lists(st.floats(0.0, 400.0), min_size=6, max_size=6),
     branch=st.integers(0, 7),
 )
-def test_limits_and_max_change_respected(robot, seed, shrink, max_change, branch) -> None:
+def test_limits_and_max_change_respected(robot: str, seed, shrink, max_change, branch) -> None:
     k = KIN[robot]
     rng = np.random.default_rng(seed)
     span = k.turn_max - k.turn_min
@@ -186,7 +186,7 @@ def test_limits_and_max_change_respected(robot, seed, shrink, max_change, branch
 @pytest.mark.parametrize("robot", ROBOTS)
 @SETTINGS
 @given(q=st.lists(st.floats(-400, 400, allow_nan=False), min_size=6, max_size=6))
-def test_forward_calc_strict_limits(robot, q) -> None:
+def test_forward_calc_strict_limits(robot: str, q) -> None:
     k = KIN[robot]
     q = np.array(q)
     r = k.forward_calc(q)
@@ -211,7 +211,7 @@ PATTERN_WORDS = [
     words=st.tuples(*(st.sampled_from(w) for w in PATTERN_WORDS)),
     weights=st.lists(st.sampled_from([0.5, 1.0, 4.0, 100.0]), min_size=6, max_size=6),
 )
-def test_backward_calc_agrees_with_selection_module(robot, seed, words, weights) -> None:
+def test_backward_calc_agrees_with_selection_module(robot: str, seed, words, weights) -> None:
     """calc.backward_calc == selection.select in its BackwardCalc mode (one rule)."""
     from rob6_kinematics import selection
 

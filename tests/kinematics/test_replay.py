@@ -48,7 +48,7 @@ def run(robot, folder, name):
 
 
 @pytest.mark.parametrize("robot,folder,name", FILES, ids=[f"{f}/{n}" for _, f, n in FILES])
-def test_replay(robot, folder, name) -> None:
+def test_replay(robot: str, folder: str, name: str) -> None:
     kin, res = run(robot, folder, name)
     assert res, "no judged lines"
     known: Counter[str] = Counter()

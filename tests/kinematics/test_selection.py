@@ -272,14 +272,14 @@ EXPECTED_COUNTS = {
 
 @pytest.mark.parametrize("name", FILES)
 @pytest.mark.parametrize("robot", ["kr16", "ad850", "kr3rt"])
-def test_replay_matches_original(robot, name) -> None:
+def test_replay_matches_original(robot: str, name: str) -> None:
     matched, mismatches = replay(robot, name)
     assert mismatches == []
     assert matched == EXPECTED_COUNTS[name]
 
 
 @pytest.mark.parametrize("name", FILES)
-def test_replay_kaw_fs_differs_only_where_documented(name) -> None:
+def test_replay_kaw_fs_differs_only_where_documented(name: str) -> None:
     matched, mismatches = replay("kaw_fs", name)
     differing = {(name, m[0]) for m in mismatches}
     expected = {d for d in KAW_FS_EXPECTED_DIFFERENCES if d[0] == name}
@@ -400,7 +400,7 @@ def replay_backward_calc(robot: str):
 
 
 @pytest.mark.parametrize("robot", ["kr16", "ad850", "kr3rt", "kaw_fs"])
-def test_backward_calc_uses_the_same_rule_without_turns(robot) -> None:
+def test_backward_calc_uses_the_same_rule_without_turns(robot: str) -> None:
     matched, mismatches = replay_backward_calc(robot)
     assert mismatches == []
     assert matched == 83

@@ -55,7 +55,7 @@ def assert_same(one, ref, ctx) -> None:
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_ik_one_equals_ik(robot) -> None:
+def test_ik_one_equals_ik(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     T = all_poses(k, seed=sum(map(ord, robot)))
     Q = opw.ik(k.g, T)
@@ -98,7 +98,7 @@ def test_ik_one_degenerate_input() -> None:
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_fk_compiled_one_equals_fk_compiled(robot) -> None:
+def test_fk_compiled_one_equals_fk_compiled(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     q = poses_joints(k, seed=7 + len(robot), n=200)
     q = np.concatenate([q, np.round(q, 3)])
@@ -127,7 +127,7 @@ def backward_reference(k, T, words, cur, lo, hi, mc, w):
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_commands_equal_vectorised(robot) -> None:
+def test_commands_equal_vectorised(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     rng = np.random.default_rng(99)
     qs = poses_joints(k, seed=3, n=40)
@@ -160,7 +160,7 @@ BRANCH_WORDS = list(opw.BRANCHES)
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_forward_calc_text_equals_vectorised(robot) -> None:
+def test_forward_calc_text_equals_vectorised(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     qs = poses_joints(k, seed=5, n=30)
     mid = (np.asarray(k.robot.hw_min, float) + np.asarray(k.robot.hw_max, float)) / 2
@@ -191,7 +191,7 @@ class _VectorisedOnly:
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_select_single_pose_equals_vectorised(robot) -> None:
+def test_select_single_pose_equals_vectorised(robot: str) -> None:
     from rob6_kinematics import selection
 
     k = Kinematics(get_robot(robot))

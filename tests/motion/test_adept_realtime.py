@@ -139,7 +139,7 @@ def recorded_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize("order, timing", [("big", "vplus"), ("little", "duration")])
-def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path: Path, order, timing) -> None:
+def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path: Path, order: str, timing: str) -> None:
     motion, state = free_tcp_ports(2)
     with adept_system(motion, state, order, log_dir=str(tmp_path)) as system, system.client() as client:
         waiting = f"ERROR: driver: robot not connected (waiting for simple_message at 127.0.0.1:{motion}/{state})\n"

@@ -11,7 +11,7 @@ from rob6_planner.config import MotionSettings
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_defaults(robot) -> None:
+def test_defaults(robot: str) -> None:
     c = MotionSettings(robot)
     r = c.robot
     assert c.speed == list(r.default_speed)

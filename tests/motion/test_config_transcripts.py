@@ -170,7 +170,7 @@ def replay(robot: str, script: str):
 
 @pytest.mark.parametrize("script", SCRIPTS)
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_transcript(robot, script):
+def test_transcript(robot: str, script: str):
     stats, mismatches = replay(robot, script)
     assert not mismatches, mismatches[:5]
     assert stats["get_match"] + stats["set_match"] > 10

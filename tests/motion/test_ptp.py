@@ -70,7 +70,7 @@ def test_30deg_a1_kr16_takes_the_analytic_time() -> None:
 
 @pytest.mark.parametrize("d", [0.01, 0.3, 1.0, 2.0, 5.0, 30.0, 120.0])
 @pytest.mark.parametrize("robot", ["kr16", "kr3rt", "ad850"])
-def test_single_axis_duration_matches_analytic(robot, d) -> None:
+def test_single_axis_duration_matches_analytic(robot: str, d: float) -> None:
     c = MotionSettings(robot)
     p = TrajectoryPlanner(robot)
     for joint in (0, 5):

@@ -145,7 +145,7 @@ def test_dummy_mode_jumps_to_the_end() -> None:
 
 # ---------------------------------------------------------------- Alter mode
 @pytest.mark.parametrize("robot", ["kr16rt", "kr16"])
-def test_alter_streaming_250hz(robot) -> None:
+def test_alter_streaming_250hz(robot: str) -> None:
     sim = MotionCore(robot, alter_timeout_s=0.1)
     q_start = np.array([0, -60, 80, 0, 40, 0.0])
     sim.execute(plan(robot, np.zeros(6), q_start).q)

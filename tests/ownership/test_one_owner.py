@@ -98,7 +98,7 @@ def test_a_second_rob6_run_is_refused_at_once() -> None:
 
 
 @pytest.mark.parametrize("service", ["driver", "gateway"])
-def test_two_started_at_the_same_moment_exactly_one_wins(service) -> None:
+def test_two_started_at_the_same_moment_exactly_one_wins(service: str) -> None:
     # only a router and kinematics: both newcomers race for an empty role
     with running("kr16", dummy=True, services=("kinematics",)) as system:
         for _ in range(3):

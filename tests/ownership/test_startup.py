@@ -31,7 +31,7 @@ def _one_line(result: subprocess.CompletedProcess) -> str:
 
 
 @pytest.mark.parametrize("taken", ["client", "router"])
-def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken) -> None:
+def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken: str) -> None:
     port, router_port = free_port(), free_port()
     with socket.socket() as squatter:
         squatter.bind(("127.0.0.1" if taken == "router" else "0.0.0.0", port if taken == "client" else router_port))

@@ -61,7 +61,7 @@ def _kill_while_writing(directory, after: float) -> float:
 
 
 @pytest.mark.parametrize("after", [0.15, 1.6])
-def test_sigkill_mid_write_then_recover(tmp_path: Path, after) -> None:
+def test_sigkill_mid_write_then_recover(tmp_path: Path, after: float) -> None:
     rec_dir = tmp_path / "rec"
     killed_at = _kill_while_writing(rec_dir, after)
     files = sorted(rec_dir.glob("*.mcap"))

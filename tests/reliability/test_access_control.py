@@ -101,7 +101,7 @@ def test_rob6_run_enables_shutdown() -> None:
 
 
 @pytest.mark.parametrize("robot", ["kr16", "ad850"])
-def test_direct_adept_cmd_is_off_in_rob6_run(robot) -> None:
+def test_direct_adept_cmd_is_off_in_rob6_run(robot: str) -> None:
     with running(robot, dummy=True) as system, Client(system.port) as client:
         if robot == "kr16":  # not an Adept: false, as the original
             assert client.ask("DirectAdeptCmd SPEED 100") == "false\n"

@@ -24,7 +24,7 @@ def session() -> Iterator[tuple[System, FuzzClient, int]]:
 
 @pytest.mark.parametrize("fault", FAULTS)
 @pytest.mark.parametrize("service", SERVICES)
-def test_fault_is_survived_and_recovered(session: tuple[System, FuzzClient, int], service, fault) -> None:
+def test_fault_is_survived_and_recovered(session: tuple[System, FuzzClient, int], service: str, fault: str) -> None:
     system, client, gateway = session
     problems: list[tuple] = []
     assert inject(system, client, service, fault, problems), problems

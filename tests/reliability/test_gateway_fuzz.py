@@ -55,7 +55,7 @@ def test_random_command_lines(fuzzer: TcpFuzzer, text) -> None:
 
 
 @pytest.mark.parametrize("terminated", [True, False])
-def test_one_mib_lines(fuzzer: TcpFuzzer, terminated) -> None:
+def test_one_mib_lines(fuzzer: TcpFuzzer, terminated: bool) -> None:
     fuzzer.oversized(1 << 20, terminated)
     fuzzer.oversized(65537, terminated)
     _clean(fuzzer)
@@ -83,7 +83,7 @@ def test_commands_split_across_tcp_segments(fuzzer: TcpFuzzer, text, cuts) -> No
 
 
 @pytest.mark.parametrize("value", EXTREMES_TCP)
-def test_every_command_with_extreme_values_and_wrong_arity(fuzzer: TcpFuzzer, value) -> None:
+def test_every_command_with_extreme_values_and_wrong_arity(fuzzer: TcpFuzzer, value: str) -> None:
     for name in COMMAND_NAMES:
         for arity in (0, 1, 6, 7, 12, 13):
             fuzzer.line(" ".join([name] + [value] * arity))

@@ -42,7 +42,7 @@ def test_framer_terminators_and_nul(parts, cuts, max_line) -> None:
 
 
 @pytest.mark.parametrize("chunk", [1 << 20, 65536, 4096, 1000])
-def test_framer_one_mib_line_is_dropped_with_bounded_buffer(chunk) -> None:
+def test_framer_one_mib_line_is_dropped_with_bounded_buffer(chunk: int) -> None:
     stream = b"GetVersion\n" + b"y" * (1 << 20) + b"\nGetVersion\n" + b"z" * (1 << 20)
     check_framer(stream, list(range(0, len(stream), chunk)), MAX_LINE)
     assert [t for t in reference_lines(stream, MAX_LINE)] == [
@@ -86,7 +86,7 @@ EXTREMES = ["nan", "inf", "-inf", "1e308", "-1e308", "1e309", "-0", "4.9e-324", 
 
 
 @pytest.mark.parametrize("name", COMMAND_NAMES)
-def test_every_command_with_extreme_values_and_wrong_arity(dead_gateway: DeadGateway, name) -> None:
+def test_every_command_with_extreme_values_and_wrong_arity(dead_gateway: DeadGateway, name: str) -> None:
     gateway, session = dead_gateway
     for value in EXTREMES:
         for arity in (0, 1, 5, 6, 7, 11, 12, 13, 20):

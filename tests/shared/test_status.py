@@ -32,7 +32,7 @@ def test_status_matches() -> None:
 
 
 @pytest.mark.parametrize("name", sorted(ROBOTS))
-def test_flags_on_arrays_equal_flags_on_floats(name) -> None:
+def test_flags_on_arrays_equal_flags_on_floats(name: str) -> None:
     robot = ROBOTS[name]
     q = np.random.default_rng(1).uniform(-170, 170, (500, 6))
     q2, q3 = np.radians(q[:, 1]), np.radians(q[:, 2])
