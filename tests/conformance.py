@@ -21,6 +21,7 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from tests.conformance_deviations import DEVIATIONS, KAW_FS_FK_BY_DESIGN, KEEP, Modes, bare_command_error
 from tests.system import Client, System
@@ -38,7 +39,7 @@ class Result:
     failures: list[str] = field(default_factory=list)
 
 
-def load(path: Path) -> list[dict]:
+def load(path: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
 
 

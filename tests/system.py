@@ -18,13 +18,13 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import zenoh
 
 from rob6.bus import Bus, zenoh_config
 from rob6.config import BusSettings
-from rob6.messages import Empty, JointState
+from rob6.messages import Empty, JointState, LinkQuery, LinkStatus, Struct
 from rob6.robots import DEFAULT_ROBOT
 
 __all__ = ["CONFORMANCE", "REPO", "SHARED", "TEST_PORTS", "Client", "System", "driver_state", "free_port",
@@ -41,6 +41,9 @@ SHARED = Path(os.environ.get("ROB6_SHARED", REPO.parent / "shared")).resolve()
 #: kernel picks the local port of every outgoing connection; a port the kernel gave us
 #: from that range can be taken by someone's connection before our server binds it
 TEST_PORTS = range(20000, 32768)
+
+
+R = TypeVar("R")
 
 
 def free_port(kind: int = socket.SOCK_STREAM) -> int:
@@ -212,13 +215,23 @@ def zenoh_router(robot_id: str) -> Iterator[BusSettings]:
         router.close()
 
 
-def driver_state(system: System) -> JointState:
-    """The driver's state, asked over the system's Zenoh router like any service would."""
+def ask_driver(system: System, op: str, body: Struct, reply: type[R]) -> R:
+    """The driver's ``reply`` to ``op``, asked over the system's Zenoh router like any service would."""
     bus = Bus(BusSettings(robot=system.robot, robot_id=system.robot_id,
                           connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
     try:
         bus.wait_for(["driver"], 10)
-        state: JointState = bus.request("driver", "state", Empty())
-        return state
+        answer: R = bus.request("driver", op, body)
+        return answer
     finally:
         bus.close()
+
+
+def driver_state(system: System) -> JointState:
+    """The driver's state."""
+    return ask_driver(system, "state", Empty(), JointState)
+
+
+def link_status(system: System) -> LinkStatus:
+    """The state of the driver's link to the robot."""
+    return ask_driver(system, "link", LinkQuery(), LinkStatus)

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from pathlib import Path
+
 import pytest
+from _pytest.mark import ParameterSet
 
 from tests.conformance import replay
 from tests.system import CONFORMANCE, SHARED, running
@@ -10,7 +14,7 @@ from tests.system import CONFORMANCE, SHARED, running
 ROBOTS = ("kr16", "ad850", "kaw_fs", "kr3rt", "kr16rt", "kr3")
 
 
-def cases():
+def cases() -> Iterator[ParameterSet]:
     """Every transcript of every robot type, each against a freshly started system."""
     for robot in ROBOTS:
         for path in sorted((CONFORMANCE / robot).glob("*.jsonl")):
@@ -35,7 +39,7 @@ def test_transcripts_match_the_ground_truth() -> None:
 
 
 @pytest.mark.parametrize("robot, path", list(cases()))
-def test_transcript(robot: str, path) -> None:
+def test_transcript(robot: str, path: Path) -> None:
     with running(robot) as system:
         result = replay(system, robot, path)
     assert result.checked > 0

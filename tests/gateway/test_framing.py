@@ -1,9 +1,9 @@
 """Line framing: terminators, NUL, several commands per read, bounded lines."""
 
-from rob6_gateway.framing import Framer
+from rob6_gateway.framing import Framer, Line
 
 
-def texts(lines):
+def texts(lines: list[Line]) -> list[str]:
     return [line.text for line in lines]
 
 

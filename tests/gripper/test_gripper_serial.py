@@ -32,7 +32,7 @@ def grip(dev: FakeSmpDevice) -> Iterator[SchunkGripper]:
     g.close()
 
 
-def commands(dev, code):
+def commands(dev: FakeSmpDevice, code: int) -> list[smp.Frame]:
     return [f for f in dev.received if f.command == code]
 
 

@@ -73,7 +73,7 @@ def test_stepping_in_small_steps_matches_one_big_step() -> None:
 
 @settings(max_examples=60, deadline=None)
 @given(amps=st.floats(0.25, 5.0), width=st.floats(0.0005, 0.039))
-def test_close_time_is_what_the_model_implies(amps, width) -> None:
+def test_close_time_is_what_the_model_implies(amps: float, width: float) -> None:
     m = GripperModel(object_width=width)
     mid = m.command_current(-amps)
     expected = current_move_time(amps, 0.040 - width)

@@ -158,7 +158,8 @@ FRAMES = st.builds(
 @given(frames=st.lists(FRAMES, min_size=1, max_size=6),
        garbage=st.lists(st.binary(max_size=6), min_size=7, max_size=7),
        cuts=st.lists(st.integers(0, 400), max_size=12))
-def test_decoder_recovers_every_frame_whatever_the_chunking(frames, garbage, cuts) -> None:
+def test_decoder_recovers_every_frame_whatever_the_chunking(frames: list[smp.Frame], garbage: list[bytes],
+                                                            cuts: list[int]) -> None:
     stream = b""
     for i, f in enumerate(frames):
         stream += garbage[i] + f.encode()

@@ -20,15 +20,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
-from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import System, running
+from tests.system import System, link_status, running
 
 pytestmark = pytest.mark.slow
 
@@ -57,16 +54,6 @@ def adept_system(motion: int, state: int, order: str = "big", **kwargs):
 
 def controller(motion: int, state: int, *args: str, order: str = "big") -> AdeptController:
     return AdeptController("--motion-port", str(motion), "--state-port", str(state), *args, byte_order=order)
-
-
-def link_status(system):
-    bus = Bus(BusSettings(robot="ad850", robot_id=system.robot_id,
-                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
-    try:
-        bus.wait_for(["driver"], 10)
-        return bus.request("driver", "link", LinkQuery())
-    finally:
-        bus.close()
 
 
 def robot_at(ctl) -> np.ndarray:

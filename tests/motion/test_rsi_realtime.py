@@ -16,15 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
-from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import System, free_port, running
+from tests.system import System, free_port, link_status, running
 
 pytestmark = pytest.mark.slow
 
@@ -57,16 +54,6 @@ def assert_no_jump(status: dict) -> None:
     """No correction step of the run went beyond what the axes can move in one cycle."""
     assert not status["trips"], status["trips"]
     assert np.all(np.array(status["max_ak_step"]) <= RATED * ROBOT.cycle_s), status["max_ak_step"]
-
-
-def link_status(system):
-    bus = Bus(BusSettings(robot="kr16rt", robot_id=system.robot_id,
-                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
-    try:
-        bus.wait_for(["driver"], 10)
-        return bus.request("driver", "link", LinkQuery())
-    finally:
-        bus.close()
 
 
 def connected_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -19,14 +19,14 @@ from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import JointState
 from rob6.ownership import EXIT_REFUSED
-from tests.system import free_port, running
+from tests.system import Client, System, free_port, running
 
 pytestmark = pytest.mark.slow
 
 OWNERS = ("driver", "planner", "gripper", "gateway")
 
 
-def _start(system, service: str, **env) -> subprocess.Popen:
+def _start(system: System, service: str, **env: str) -> subprocess.Popen[str]:
     """One more instance of ``service`` for the robot id of ``system``, on its router."""
     env = dict(os.environ, ROB6_ROBOT=system.robot, ROB6_ROBOT_ID=system.robot_id, ROB6_DUMMY="1",
                ROB6_ZENOH_CONNECT=f"tcp/127.0.0.1:{system.router_port}", ROB6_PORT=str(free_port()),
@@ -36,7 +36,7 @@ def _start(system, service: str, **env) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _moves_undisturbed(client, stop: threading.Event, seen: list) -> None:
+def _moves_undisturbed(client: Client, stop: threading.Event, seen: list[bool | tuple[str, str]]) -> None:
     """A client of the first system moving the robot, reading back every position."""
     k = 0
     while not stop.is_set():

@@ -18,13 +18,13 @@ from tests.system import Client, System, free_port
 pytestmark = pytest.mark.slow
 
 
-def _rob6_run(*args: str, **env) -> subprocess.CompletedProcess:
+def _rob6_run(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "rob6.cli", "run", "--dummy", *args],
                           env={**os.environ, "ROB6_LIVE_PORT": "0", **env}, capture_output=True, check=False, text=True,
                           timeout=30)
 
 
-def _one_line(result: subprocess.CompletedProcess) -> str:
+def _one_line(result: subprocess.CompletedProcess[str]) -> str:
     lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stdout + result.stderr
     return lines[0]
