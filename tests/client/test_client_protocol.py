@@ -10,6 +10,7 @@ import pytest
 
 from rob6_client import COMMANDS, AsyncRobot, Pose, Robot, Status, normalize_status, parse_reply
 from rob6_client._stubgen import STUB, stub
+from rob6_client.protocol import StatusLike
 from rob6_gateway.args import Args
 from rob6_gateway.commands import COMMANDS as GATEWAY_COMMANDS
 
@@ -45,7 +46,7 @@ def test_type_stub_is_current() -> None:
     assert methods["RobotCommands"] == methods["AsyncRobotCommands"] == [c.method for c in COMMANDS.values()]
 
 
-def encoded(name: str, *values) -> Args:
+def encoded(name: str, *values: object) -> Args:
     """What the gateway's argument parser (the original's rules) reads from our line."""
     line = COMMANDS[name].encode(values)
     word, _, rest = line.partition(" ")
@@ -76,7 +77,7 @@ def test_poses_flat_rows_or_homogeneous() -> None:
     ("noToggleElbow", ("toggleHand", "noToggleElbow", "toggleArm")),
     (Status("flip", "down", "noToggleArm"), ("flip", "down", "noToggleArm")),
 ])
-def test_status_words_are_sent_normalised(words, expected: tuple[str, ...]) -> None:
+def test_status_words_are_sent_normalised(words: StatusLike, expected: tuple[str, ...]) -> None:
     assert normalize_status(words) == expected
     args = encoded("BackwardCalc", [0] * 12, words)
     args.matrix()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 
 import pytest
 
@@ -23,11 +23,11 @@ def kr16() -> Iterator[System]:
         yield system
 
 
-def close_to(a, b, tol: float = 1e-3) -> bool:
-    return len(a) == len(b) and all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
+def close_to(a: Sequence[float] | None, b: Sequence[float], tol: float = 1e-3) -> bool:
+    return a is not None and len(a) == len(b) and all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
-def stream(robot: Robot, start, count: int, rate_hz: float = 250.0) -> None:
+def stream(robot: Robot, start: Sequence[float], count: int, rate_hz: float = 250.0) -> None:
     """MoveRTJoints targets paced at ``rate_hz``, A1 advancing 0.02 deg each."""
     began = time.monotonic()
     for k in range(1, count + 1):
@@ -35,7 +35,7 @@ def stream(robot: Robot, start, count: int, rate_hz: float = 250.0) -> None:
         time.sleep(max(0.0, began + k / rate_hz - time.monotonic()))
 
 
-def test_lab_session(kr16: System):
+def test_lab_session(kr16: System) -> None:
     with Robot("127.0.0.1", kr16.port) as robot:
         assert robot.greeting == "welcome to rob6server 0.1.01 !"
         assert (robot.get_robot(), robot.get_version(), robot.cm_ping()) == ("kr16", "0.1.01", "PONG")

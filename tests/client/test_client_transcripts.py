@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Iterator
 from itertools import pairwise
+from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -28,7 +31,7 @@ def command_word(sent: str) -> str | None:
     return words[0] if words else None
 
 
-def covered_records(path):
+def covered_records(path: Path) -> Iterator[tuple[str, dict[str, Any], str | list[str]]]:
     """(kind, record, reply to parse) for the records whose reply the library must understand.
 
     Left out: a command left waiting for its missing arguments (`no_reply_within_ms`) and
@@ -66,10 +69,11 @@ def covered_records(path):
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: f"{p.parent.name}/{p.stem}")
-def test_every_recorded_reply_parses(path) -> None:
+def test_every_recorded_reply_parses(path: Path) -> None:
     checked: Counter[str] = Counter()
     for name, record, reply in covered_records(path):
         if name == "handshake":
+            assert isinstance(reply, list)
             accepted = reply[1:] == ["accepted"]
             if accepted:
                 assert run_offline(name, handshake(), reply) == reply[0]
@@ -77,6 +81,7 @@ def test_every_recorded_reply_parses(path) -> None:
                 with pytest.raises(Rob6ConnectionError, match="handshake failed"):
                     run_offline(name, handshake(), reply)
             continue
+        assert isinstance(reply, str)
         try:
             value = parse_reply(name, reply)
         except Rob6Error as exc:

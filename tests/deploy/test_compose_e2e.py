@@ -28,6 +28,7 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pytest
 from pytest import TempPathFactory
@@ -81,7 +82,7 @@ class Stack:
                     "ROB6_ZENOH_PORT": str(self.zenoh_port), "ROB6_HEALTH_INTERVAL": "3s",
                     **self.settings}
 
-    def compose(self, *args: str, timeout: float = 900, check: bool = True) -> subprocess.CompletedProcess:
+    def compose(self, *args: str, timeout: float = 900, check: bool = True) -> subprocess.CompletedProcess[str]:
         files = [a for f in self.files for a in ("-f", str(REPO / f))]
         profiles = [a for p in self.profiles for a in ("--profile", p)]
         return run([*COMPOSE, "-p", self.project, *files, "--env-file", str(self.env_file), *profiles, *args],
@@ -90,8 +91,9 @@ class Stack:
     def containers(self, service: str | None = None) -> list[str]:
         return project_containers(self.project, service)
 
-    def state(self, container: str) -> dict:
-        return json.loads(run(["docker", "inspect", "-f", "{{json .State}}", container]).stdout)
+    def state(self, container: str) -> dict[str, Any]:
+        state: dict[str, Any] = json.loads(run(["docker", "inspect", "-f", "{{json .State}}", container]).stdout)
+        return state
 
     def wait_healthy(self, services: tuple[str, ...], timeout: float = 180) -> float:
         """Seconds until every container of ``services`` is healthy; fails with the logs otherwise."""
@@ -145,7 +147,8 @@ def connect(port: int, *, handshake: bool = True, attempts: int = 50) -> Client:
 def fk_expected() -> str:
     for record in load(CONFORMANCE / ROBOT / "fk.jsonl"):
         if record.get("send", "").strip() == FK:
-            return record["reply"]
+            reply: str = record["reply"]
+            return reply
     raise AssertionError(f"{FK} not in fk.jsonl")
 
 
@@ -224,7 +227,7 @@ def plain(built: None, entry_points: None) -> Iterator[Stack]:
 
 
 @pytest.fixture(scope="module")
-def certs(tmp_path_factory: TempPathFactory):
+def certs(tmp_path_factory: TempPathFactory) -> tuple[Path, Path]:
     out = tmp_path_factory.mktemp("certs")
     make = DEPLOY / "certs" / "make-certs.sh"
     run(["bash", str(make), "--out", str(out), "router", *SERVICES, "intruder"])
@@ -251,7 +254,7 @@ def test_images_offline_minimal_non_root(built: None) -> None:
         run(["docker", "run", "--rm", "--network", "none", image, "python", "-c", script], timeout=120)
 
 
-def test_router_container_tls_and_acl(built: None, certs) -> None:
+def test_router_container_tls_and_acl(built: None, certs: tuple[Path, Path]) -> None:
     """Infrastructure on its own: the router image with the secure profile, probed from here."""
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2erouter{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
@@ -448,7 +451,7 @@ print(json.dumps(out))
 # ---------------------------------------------------------------------- stand-in controllers
 @contextmanager
 def controller_stack(profile: str, controller: str, *, robot: str, link: str,
-                     control_port_setting: str) -> Iterator[tuple[Stack, Callable[[], dict]]]:
+                     control_port_setting: str) -> Iterator[tuple[Stack, Callable[[], dict[str, Any]]]]:
     """The stack of compose profile ``profile`` with the driver on ``link`` to the stand-in
     controller container ``controller``: up and healthy. Yields the
     stack and the controller's status request (its control channel, published on the port
@@ -465,10 +468,11 @@ def controller_stack(profile: str, controller: str, *, robot: str, link: str,
         with socket.create_connection(("127.0.0.1", control_port), timeout=10) as sock, \
                 sock.makefile("rwb") as control:
 
-            def status() -> dict:
+            def status() -> dict[str, Any]:
                 control.write(b'{"cmd": "status"}\n')
                 control.flush()
-                return json.loads(control.readline())
+                reply: dict[str, Any] = json.loads(control.readline())
+                return reply
 
             yield stack, status
     finally:
@@ -544,7 +548,7 @@ def test_adept_profile_drives_the_adept_container(built: None, entry_points: Non
 
 
 # ---------------------------------------------------------------------- tests: secure profile
-def test_secure_profile_end_to_end(built: None, entry_points: None, certs) -> None:
+def test_secure_profile_end_to_end(built: None, entry_points: None, certs: tuple[Path, Path]) -> None:
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2esec{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
                   {"ROB6_CERTS_DIR": str(certs_dir)})

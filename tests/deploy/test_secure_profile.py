@@ -17,7 +17,8 @@ import zenoh
 from pytest import TempPathFactory
 
 from tests.deploy import zenoh_probe
-from tests.deploy.zenoh_probe import free_port, local_router, localize_config, secure_profile_checks
+from tests.deploy.zenoh_probe import local_router, localize_config, secure_profile_checks
+from tests.system import free_port
 
 REPO = Path(__file__).resolve().parents[2]
 ZENOH_DIR = REPO / "deploy" / "zenoh"
@@ -44,7 +45,7 @@ def foreign_certs(tmp_path_factory: TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("path", sorted(ZENOH_DIR.glob("*.json5")), ids=lambda p: p.name)
-def test_zenoh_configs_parse(path) -> None:
+def test_zenoh_configs_parse(path: Path) -> None:
     config = zenoh.Config.from_file(str(path))
     assert config.get_json("mode").strip('"') in ("router", "client", "peer")
     if "secure" in path.name:

@@ -27,9 +27,11 @@ from pathlib import Path
 import pytest
 
 from tests.deploy import images
+from tests.deploy.compose import run
 from tests.deploy.images import TAG
 from tests.deploy.multihost.topology import (
     REMOTE_KINEMATICS,
+    Call,
     Load,
     Topology,
     alter_session,
@@ -39,7 +41,6 @@ from tests.deploy.multihost.topology import (
     cannot_run,
     percentile,
     recovery,
-    run,
 )
 from tests.system import Client
 
@@ -71,7 +72,7 @@ def client(topology: Topology) -> Iterator[Client]:
     c.close()
 
 
-def assert_answered(results, what: str) -> dict[str, object]:
+def assert_answered(results: list[Call], what: str) -> dict[str, object]:
     """Every call answered within CALL_TIMEOUT: the right joints or an ERROR line, nothing else."""
     hung = [c for c in results if not c.reply]
     wrong = [c for c in results if c.reply and not c.ok and not c.error]
@@ -85,7 +86,7 @@ def assert_answered(results, what: str) -> dict[str, object]:
             "max ms": round(max(c.seconds for c in results) * 1000, 1)}
 
 
-def settle(client, line: str, timeout: float = 60.0) -> None:
+def settle(client: Client, line: str, timeout: float = 60.0) -> None:
     """Until 20 calls in a row succeed (after a fault is cleared)."""
     deadline = time.monotonic() + timeout
     streak = 0
@@ -95,7 +96,7 @@ def settle(client, line: str, timeout: float = 60.0) -> None:
 
 
 # ---------------------------------------------------------------------- the topology
-def test_every_host_serves(topology: Topology, client: Client):
+def test_every_host_serves(topology: Topology, client: Client) -> None:
     line = backward_line(client)
     results = calls(client, line, 60)
     REPORT["BackwardCalc x60, no fault"] = assert_answered(results, "no fault")
@@ -208,7 +209,7 @@ def test_robot_pc_router_killed(topology: Topology, client: Client) -> None:
 
 
 # ---------------------------------------------------------------------- the motion
-def _ptp(client) -> None:
+def _ptp(client: Client) -> None:
     ask_true(client, "MovePTPJoints 30 -70 90 10 40 20")
 
 
@@ -216,11 +217,11 @@ def test_motion_unchanged_when_every_remote_host_is_partitioned(topology: Topolo
     """A PTP and an Alter session with compute1, compute2 and storage cut off from the robot
     PC: the joint states (recorded on the robot PC) are those of the same motions without
     faults (PTP: identical sample by sample; Alter: no fault, no missed cycle, the targets reached)."""
-    from tests.deploy.multihost.probe import StateRecorder, motion, same_motion
+    from tests.deploy.multihost.probe import Sample, StateRecorder, motion, same_motion
 
     refused: dict[bool, int] = {}
 
-    def session(fault: bool) -> tuple[list, list]:
+    def session(fault: bool) -> tuple[list[Sample], list[list[float]]]:
         ask_true(client, "MovePTPJoints 0 -80 100 0 30 0")
         with StateRecorder(topology, f"states{int(fault)}") as recorder:
             if fault:

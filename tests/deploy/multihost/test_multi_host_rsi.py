@@ -19,13 +19,13 @@ from collections.abc import Iterator
 import pytest
 
 from tests.deploy import images
+from tests.deploy.compose import run
 from tests.deploy.images import TAG
 from tests.deploy.multihost.topology import (
     Topology,
     alter_session,
     ask_true,
     cannot_run,
-    run,
 )
 from tests.system import Client
 
