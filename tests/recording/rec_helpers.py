@@ -62,9 +62,9 @@ def record_session(rec: Recorder, session: int = 3, t0: int | None = None, step_
                    joint_states_per_line: int = 2) -> list[Submitted]:
     """Feed ``rec`` (a Recorder) a scripted client session; return what was submitted."""
     t = time.time_ns() if t0 is None else t0
-    submitted: list[tuple[str, int, dict]] = []
+    submitted: list[Submitted] = []
 
-    def put(topic: str, data: dict) -> None:
+    def put(topic: str, data: dict[str, Any]) -> None:
         nonlocal t
         t += step_ns // 4
         assert rec.submit(topic, t, data)
@@ -163,7 +163,7 @@ class FakeServer:
         self._ready.wait(5)
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         async def stop() -> None:
             self.server.close()
             await self.server.wait_closed()
@@ -177,7 +177,11 @@ class FakeServer:
         self.loop.close()
 
 
-def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = None):
+#: a fake server's answer to one received chunk of connection n: (reply bytes, close after it)
+Handler = Callable[[int, bytes], tuple[bytes, bool]]
+
+
+def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = None) -> Handler:
     table = dict(replies)
     table.update(overrides or {})
 

@@ -41,7 +41,7 @@ CHILD = textwrap.dedent("""
 """)
 
 
-def _kill_while_writing(directory, after: float) -> float:
+def _kill_while_writing(directory: Path, after: float) -> float:
     proc = subprocess.Popen([sys.executable, "-c", CHILD, str(directory), URDF],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None and proc.stderr is not None  # both are pipes

@@ -14,7 +14,7 @@ from pathlib import Path
 from mcap.reader import make_reader
 
 from rob6_recorder.reader import read_records
-from tests.system import running
+from tests.system import System, running
 
 SCRIPT = ["GetRobot", "ForwardCalc 10 -60 80 20 40 30", "MovePTPJoints 10 -60 80 20 40 30",
           "GetPositionJoints", "GetStatus", "BackwardCalc 1 0 0 1000 0 1 0 0 0 0 1 500 noflip up lefty",
@@ -22,7 +22,7 @@ SCRIPT = ["GetRobot", "ForwardCalc 10 -60 80 20 40 30", "MovePTPJoints 10 -60 80
 REPLY_LINES = {"ForwardCalc": 2}
 
 
-def _session(system) -> None:
+def _session(system: System) -> None:
     with system.client() as client:
         for line in SCRIPT:
             client.ask(line, REPLY_LINES.get(line.split()[0], 1))
@@ -39,7 +39,7 @@ def _session_file(directory: Path) -> Path:
         time.sleep(0.1)
 
 
-def _replay(path: Path, port: int) -> subprocess.CompletedProcess:
+def _replay(path: Path, port: int) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "rob6_recorder.cli", "replay", str(path), "--to",
                            f"127.0.0.1:{port}", "--as-fast-as-possible"], capture_output=True, check=False, text=True,
                           timeout=120)

@@ -7,6 +7,7 @@ import asyncio
 import json
 from itertools import pairwise
 from pathlib import Path
+from typing import Any
 
 import pytest
 from click.testing import CliRunner
@@ -15,13 +16,14 @@ from rob6_recorder.cli import main as cli
 from rob6_recorder.playback import replay_joints
 from rob6_recorder.reader import read_records
 from rob6_recorder.session_replay import (
+    Script,
     compare_reply,
     load_script,
     load_transcript,
     replay,
 )
 from rob6_recorder.writer import Recorder
-from tests.recording.rec_helpers import REPLIES, SESSION_LINES, FakeServer, dict_handler, record_session
+from tests.recording.rec_helpers import REPLIES, SESSION_LINES, FakeServer, Handler, dict_handler, record_session
 from tests.system import CONFORMANCE
 
 
@@ -116,12 +118,12 @@ def test_compare_reply_rules() -> None:
     assert compare_reply("X", "true\n", "") == "expected 1 line(s), got 0 (no reply)"
 
 
-def _transcript_handler(path: Path):
+def _transcript_handler(path: Path) -> tuple[list[Script], Handler]:
     """Answer each connection from the transcript, one received chunk per record."""
     scripts = load_transcript(path)
     raw = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    per_conn: list[list[dict]] = []
-    current: list[dict] | None = None
+    per_conn: list[list[dict[str, Any]]] = []
+    current: list[dict[str, Any]] | None = None
     for rec in raw:
         if rec.get("connect"):
             current = []
@@ -130,7 +132,7 @@ def _transcript_handler(path: Path):
             current.append(rec)
     cursor = [0] * len(per_conn)
 
-    def handle(conn: int, msg: bytes):
+    def handle(conn: int, msg: bytes) -> tuple[bytes, bool]:
         recs = per_conn[conn]
         rec = recs[cursor[conn]]
         cursor[conn] += 1
@@ -155,11 +157,11 @@ def test_replay_conformance_transcript(tmp_path: Path) -> None:
 
 
 def test_replay_joints_pacing(session_file: Path) -> None:
-    got: list[dict] = []
+    got: list[dict[str, Any]] = []
     sleeps: list[float] = []
     now = [0.0]
 
-    def sleep(dt) -> None:
+    def sleep(dt: float) -> None:
         sleeps.append(dt)
         now[0] += dt
 
@@ -170,7 +172,7 @@ def test_replay_joints_pacing(session_file: Path) -> None:
     times = [r.log_time for r in read_records(session_file, ["/driver/joint_state"])]
     assert now[0] == pytest.approx((times[-1] - times[0]) / 1e9 / 2)
     assert len(sleeps) == n - 1
-    fast: list = []
+    fast: list[dict[str, Any]] = []
     assert replay_joints(session_file, fast.append, speed=None) == n
 
 

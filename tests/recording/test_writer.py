@@ -7,9 +7,12 @@ import math
 import re
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 from mcap.reader import make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.summary import Summary
 from pytest import LogCaptureFixture
 
 from rob6_recorder.reader import RecordingReader, is_complete, read_records
@@ -18,14 +21,17 @@ from rob6_recorder.transforms import TfDeriver, pose_from_fk
 from rob6_recorder.writer import Recorder
 from tests.recording.rec_helpers import record_session
 
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
 NAME = re.compile(r"^\d{8}T\d{6}Z_kr16_robot1_(session3|system_\d{3})(-\d+)?\.mcap$")
 
 
-def _files(d, kind):
+def _files(d: Path, kind: str) -> list[Path]:
     return sorted(p for p in d.iterdir() if p.suffix == ".mcap" and f"_{kind}" in p.name)
 
 
-def _checked_summary(path):
+def _checked_summary(path: Path) -> tuple[Summary, list[tuple[Schema | None, Channel, Message]]]:
     """The stock mcap reader accepts the file, with CRCs validated."""
     with open(path, "rb") as fh:
         reader = make_reader(fh, validate_crcs=True)
@@ -37,7 +43,7 @@ def _checked_summary(path):
 
 
 def test_scripted_session_every_record_in_order_with_cid(tmp_path: Path, urdf: str) -> None:
-    def fk(q):
+    def fk(q: list[float]) -> list[float]:
         return [1, 0, 0, 1000.0, 0, 1, 0, 0, 0, 0, 1, 500.0]
 
     with Recorder(tmp_path, "kr16", "robot1", urdf=urdf, fk=fk, tf_max_rate=0) as rec:
@@ -215,7 +221,7 @@ def test_bytes_and_structs_and_unserialisable(tmp_path: Path) -> None:
 
 
 def test_fk_without_urdf_gives_tf_and_flange(tmp_path: Path) -> None:
-    def fk(q):
+    def fk(q: list[float]) -> list[float] | None:
         return None if q[0] > 100 else [1, 0, 0, q[0], 0, 1, 0, 0, 0, 0, 1, 0]
 
     with Recorder(tmp_path, "kr16", "robot1", fk=fk, tf_max_rate=0) as rec:
@@ -303,9 +309,9 @@ def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk() -> None:
         pytest.skip("no shipped URDF")
     tf = TfDeriver(path.read_text())
 
-    def matrix(t):
+    def matrix(t: dict[str, Any]) -> npt.NDArray[Any]:
         x, y, z, w = (t["rotation"][k] for k in "xyzw")
-        m = np.eye(4)
+        m: npt.NDArray[Any] = np.eye(4)
         m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]

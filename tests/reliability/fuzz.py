@@ -29,7 +29,7 @@ import socket
 import time
 from dataclasses import dataclass, field
 from itertools import pairwise
-from typing import cast
+from typing import NoReturn, cast
 
 from hypothesis import strategies as st
 
@@ -81,7 +81,7 @@ def reply_problem(line_text: str, reply: str | None) -> str | None:
 
 
 # ============================================================== input generators
-def _args_strategy():
+def _args_strategy() -> st.SearchStrategy[str]:
     token = st.one_of(st.sampled_from(NUMBER_TOKENS), st.sampled_from(STATUS_WORDS),
                       st.sampled_from(ODD_TOKENS),
                       st.floats(allow_nan=True, allow_infinity=True).map(repr),
@@ -210,19 +210,19 @@ class _DeadBus:
         from rob6.bus import BusError
         self._error = BusError
 
-    def subscribe(self, *a, **k) -> None:
+    def subscribe(self, *a: object, **k: object) -> None:
         pass
 
-    def on_liveliness(self, *a, **k) -> None:
+    def on_liveliness(self, *a: object, **k: object) -> None:
         pass
 
-    def publish(self, *a, **k) -> None:
+    def publish(self, *a: object, **k: object) -> None:
         pass
 
-    def instances(self, *a, **k):
+    def instances(self, *a: object, **k: object) -> list[str]:
         return []
 
-    def request(self, service, op, body, **kwargs):
+    def request(self, service: str, op: str, body: object, **kwargs: object) -> NoReturn:
         raise self._error("unavailable", f"{service} unavailable")
 
 
@@ -236,7 +236,7 @@ def make_dead_gateway(robot: str = "kr16") -> DeadGateway:
     return gateway, Session(number=1, peer="fuzz")
 
 
-def check_execute(gateway, session, text: str) -> None:
+def check_execute(gateway: Gateway, session: Session, text: str) -> None:
     if text == "":
         return  # the server answers empty lines itself (with nothing); they never reach execute
     try:
@@ -319,10 +319,10 @@ class TcpFuzzer:
     gateway_pid: int = 0
     inputs: int = 0
     hangs: int = 0
-    problems: list = field(default_factory=list)
+    problems: list[tuple[object, ...]] = field(default_factory=list)
     reconnects: int = 0
-    turn_lo: list = field(default_factory=list)
-    turn_hi: list = field(default_factory=list)
+    turn_lo: list[float] = field(default_factory=list)
+    turn_hi: list[float] = field(default_factory=list)
     limit_violations: int = 0
     moves_ok: int = 0
     rss0: int = 0  # the gateway's VmRSS (KiB) before the fuzzing, for the caller to set

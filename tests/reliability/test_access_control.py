@@ -15,7 +15,7 @@ import pytest
 from tests.system import Client, free_port, running
 
 
-def _raw_connect(port, source: str = "127.0.0.1"):
+def _raw_connect(port: int, source: str = "127.0.0.1") -> bytes:
     sock = socket.create_connection(("127.0.0.1", port), timeout=10, source_address=(source, 0))
     data = b""
     while True:

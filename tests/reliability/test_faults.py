@@ -26,14 +26,14 @@ def session() -> Iterator[tuple[System, FuzzClient, int]]:
 @pytest.mark.parametrize("service", SERVICES)
 def test_fault_is_survived_and_recovered(session: tuple[System, FuzzClient, int], service: str, fault: str) -> None:
     system, client, gateway = session
-    problems: list[tuple] = []
+    problems: list[tuple[object, ...]] = []
     assert inject(system, client, service, fault, problems), problems
     assert system.pids()["gateway"] == gateway
 
 
 def test_router_stopped_and_continued(session: tuple[System, FuzzClient, int]) -> None:
     system, client, gateway = session
-    problems: list[tuple] = []
+    problems: list[tuple[object, ...]] = []
     assert inject(system, client, "router", "stop", problems), problems
 
 

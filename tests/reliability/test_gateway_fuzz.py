@@ -41,7 +41,7 @@ def fuzzer() -> Iterator[TcpFuzzer]:
         fuzzer.client.close()
 
 
-def _clean(fuzzer) -> None:
+def _clean(fuzzer: TcpFuzzer) -> None:
     assert fuzzer.problems == []
     assert fuzzer.hangs == 0
     assert fuzzer.alive()
@@ -49,7 +49,7 @@ def _clean(fuzzer) -> None:
 
 @settings(max_examples=500, **TCP)
 @given(text=command_line_strategy())
-def test_random_command_lines(fuzzer: TcpFuzzer, text) -> None:
+def test_random_command_lines(fuzzer: TcpFuzzer, text: str) -> None:
     fuzzer.line(text)
     _clean(fuzzer)
 
@@ -77,7 +77,7 @@ def test_pipelined_flood_of_mixed_commands(fuzzer: TcpFuzzer) -> None:
 
 @settings(max_examples=150, **TCP)
 @given(text=command_line_strategy(), cuts=st.lists(st.integers(0, 200), min_size=1, max_size=6))
-def test_commands_split_across_tcp_segments(fuzzer: TcpFuzzer, text, cuts) -> None:
+def test_commands_split_across_tcp_segments(fuzzer: TcpFuzzer, text: str, cuts: list[int]) -> None:
     fuzzer.split(text, cuts)
     _clean(fuzzer)
 

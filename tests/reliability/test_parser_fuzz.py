@@ -30,14 +30,14 @@ FAST = settings(max_examples=1000, deadline=None, database=None,
 
 @FAST
 @given(st.binary(max_size=300), st.lists(st.integers(0, 300), max_size=8), st.integers(1, 40))
-def test_framer_is_chunking_independent(stream, cuts, max_line) -> None:
+def test_framer_is_chunking_independent(stream: bytes, cuts: list[int], max_line: int) -> None:
     check_framer(stream, cuts, max_line)
 
 
 @FAST
 @given(st.lists(st.sampled_from([b"\n", b"\r", b"\r\n", b"\0", b"a", b"x" * 7, b"\xff", b" "]), max_size=60),
        st.lists(st.integers(0, 200), max_size=10), st.integers(1, 12))
-def test_framer_terminators_and_nul(parts, cuts, max_line) -> None:
+def test_framer_terminators_and_nul(parts: list[bytes], cuts: list[int], max_line: int) -> None:
     check_framer(b"".join(parts), cuts, max_line)
 
 
@@ -59,13 +59,13 @@ def test_framer_buffer_stays_bounded_on_endless_line() -> None:
 
 @FAST
 @given(command_line_strategy())
-def test_args_never_crash(text) -> None:
+def test_args_never_crash(text: str) -> None:
     check_args(_split_command(text)[2])
 
 
 @FAST
 @given(st.text(max_size=200))
-def test_args_never_crash_on_any_unicode(text) -> None:
+def test_args_never_crash_on_any_unicode(text: str) -> None:
     check_args(text)
 
 
@@ -77,7 +77,7 @@ def dead_gateway(request: FixtureRequest) -> DeadGateway:
 @settings(max_examples=800, deadline=None, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(text=command_line_strategy())
-def test_every_command_line_gets_one_well_formed_reply(dead_gateway: DeadGateway, text) -> None:
+def test_every_command_line_gets_one_well_formed_reply(dead_gateway: DeadGateway, text: str) -> None:
     gateway, session = dead_gateway
     check_execute(gateway, session, text)
 
