@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Iterable, Set
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -63,7 +64,7 @@ def leading_numbers(text: str, limit: int) -> tuple[list[float], str, bool]:
     return out, text[pos:], False
 
 
-def fmt(values) -> str:
+def fmt(values: Iterable[float]) -> str:
     return " ".join("%f" % v for v in values)
 
 
@@ -208,7 +209,7 @@ class Result:
         return None
 
 
-def replay(kin: Kinematics, path: Path, judge=JUDGED) -> list[Result]:
+def replay(kin: Kinematics, path: Path, judge: Set[str] = JUDGED) -> list[Result]:
     st = State(kin)
     records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     out: list[Result] = []

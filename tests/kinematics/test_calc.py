@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from rob6.robots import get_robot
@@ -14,7 +16,8 @@ P1_KR16 = [-0.788518, 0.399854, -0.467285, 1272.955930, -0.568459, -0.763835, 0.
 ZERO = np.zeros(6)
 
 
-def fmt(xs):
+def fmt(xs: Iterable[float] | None) -> str:
+    assert xs is not None, "no solution"
     return " ".join("%f" % x for x in xs)
 
 

@@ -14,13 +14,15 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from rob6.robots import get_robot
 from rob6_kinematics.calc import Kinematics
-from rob6_kinematics.opw import BRANCHES, Geometry
+from rob6_kinematics.opw import BRANCHES, FloatArray, Geometry
 from tests.system import CONFORMANCE as CONF
 
 ROBOTS = ["kr16", "kr3", "ad850", "kaw_fs"]
@@ -28,19 +30,22 @@ JOINT_TOL = 1e-5  # the brief allows 5e-3 on J6; rob6 uses the original's J6 for
 MATRIX_TOL = 2e-6
 
 
-def load(robot):
+def load(robot: str) -> list[dict[str, Any]]:
     with open(f"{CONF}/{robot}/fk_ik_cases.json") as f:
-        return json.load(f)
+        cases: list[dict[str, Any]] = json.load(f)
+        return cases
 
 
-def printed(x):
+def printed(x: npt.ArrayLike) -> FloatArray:
     """What the original would print (%f) for our value, as a float."""
-    return np.array([float("%f" % v) for v in np.ravel(x)])
+    out: FloatArray = np.array([float("%f" % v) for v in np.ravel(x)])
+    return out
 
 
-def angle_diff(a, b):
+def angle_diff(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     d = np.abs(np.asarray(a, float) - np.asarray(b, float))
-    return np.minimum(d, np.abs(360.0 - d))
+    out: FloatArray = np.minimum(d, np.abs(360.0 - d))
+    return out
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
@@ -73,7 +78,7 @@ def test_ik_cases(robot: str) -> None:
             assert (got is None) == (rec is None), (c["tag"], status, got, rec)
             assert k.is_possible(c["matrix"], status, zero) == c["possible"][status]
             assert (rec is not None) == c["possible"][status]
-            if rec is not None:
+            if got is not None and rec is not None:  # both or neither (asserted above)
                 d = angle_diff(got, rec)
                 assert np.all(d <= JOINT_TOL), (c["tag"], status, got, rec)
             checked += 1

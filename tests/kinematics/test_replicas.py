@@ -15,10 +15,10 @@ import msgspec
 from rob6.bus import Bus, trace_records
 from rob6.config import BusSettings
 from rob6.messages import FkRequest, IkBatchRequest
-from tests.system import running
+from tests.system import System, running
 
 
-def _replica(system) -> subprocess.Popen:
+def _replica(system: System) -> subprocess.Popen[bytes]:
     env = dict(os.environ, ROB6_ROBOT=system.robot, ROB6_ROBOT_ID=system.robot_id,
                ROB6_ZENOH_CONNECT=f"tcp/127.0.0.1:{system.router_port}")
     return subprocess.Popen([sys.executable, "-m", "rob6_kinematics"], env=env)

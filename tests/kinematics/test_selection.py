@@ -21,14 +21,17 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from functools import cache
-from typing import Literal, TypedDict
+from typing import Any, Literal, TypedDict
 
+import numpy.typing as npt
 import pytest
 
 from rob6.robots import get_robot
 from rob6.status import PTP_HOM_PATTERN, TOGGLE_ALL, Status, parse_status, status_matches
 from rob6_kinematics import opw
+from rob6_kinematics.opw import FloatArray
 from rob6_kinematics.selection import (
     STATUS_ORDER,
     _nearest_in_limits,
@@ -94,17 +97,17 @@ class _OpwKin:
     def __init__(self, robot: str) -> None:
         self.geometry = opw.Geometry.of(get_robot(robot))
 
-    def ik(self, T):
+    def ik(self, T: npt.ArrayLike) -> FloatArray:
         return opw.ik(self.geometry, T)
 
 
 @cache
-def _branches(robot: str, pose: tuple[float, ...]) -> dict:
+def _branches(robot: str, pose: tuple[float, ...]) -> dict[Status, list[float] | None]:
     return branches_of(_OpwKin(robot), pose)
 
 
 # ---------------------------------------------------------------- replay
-def _records(robot: str, name: str) -> list[dict]:
+def _records(robot: str, name: str) -> list[dict[str, Any]]:
     recs = [json.loads(line) for line in (CONFORMANCE / robot / f"{name}.jsonl").open()]
     return [r for r in recs if "send" in r]
 
@@ -135,7 +138,7 @@ class _Tracked(TypedDict):
 Mismatch = tuple[int, str, list[str], bool, "list[float] | None", "bool | list[float] | None"]
 
 
-def _accepted(values: list[float] | None, rec: dict) -> list[float]:
+def _accepted(values: list[float] | None, rec: dict[str, Any]) -> list[float]:
     """The numbers of a command the original accepted (answered ``true``)."""
     assert values is not None, f"the original accepted {rec['send']!r}"
     return values
@@ -288,8 +291,12 @@ def test_replay_kaw_fs_differs_only_where_documented(name: str) -> None:
 
 
 # ---------------------------------------------------------------- the rule in small
-def _sols(**by_status):
-    return {tuple(k.split("_")): v for k, v in by_status.items()}
+def _sols(**by_status: list[float] | None) -> dict[Status, Sequence[float] | None]:
+    sols: dict[Status, Sequence[float] | None] = {}
+    for key, q in by_status.items():
+        hand, elbow, arm = key.split("_")
+        sols[(hand, elbow, arm)] = q
+    return sols
 
 
 def test_weighted_max_not_sum_and_tie_goes_to_earlier_branch() -> None:
@@ -351,7 +358,7 @@ def test_joint_move_allowed_limits_and_status() -> None:
 
 
 # ---------------------------------------------------------------- BackwardCalc
-def replay_backward_calc(robot: str):
+def replay_backward_calc(robot: str) -> tuple[int, list[tuple[int, str, list[str], str, list[float] | None]]]:
     """ik.jsonl: BackwardCalc/GetJointsRowWise/IsPossible (explicit and toggle words) by the
     same rule without the ±360° variants and without the allowed status."""
     model = get_robot(robot)
@@ -417,7 +424,8 @@ def test_select_wrapper_with_the_kinematics_service_class() -> None:
     start = [-84.0, -75.0, -41.0, -60.0, 27.0, 38.0]
     lim = (m.turn_min, m.turn_max, m.default_max_change)
 
-    def run(pattern, weights=DEFAULT_WEIGHTS, allowed=TOGGLE_ALL):
+    def run(pattern: Sequence[str], weights: Sequence[float] = DEFAULT_WEIGHTS,
+            allowed: Sequence[str] = TOGGLE_ALL) -> Status | None:
         q = select(kin, target, pattern, start, *lim, weights, allowed)
         return None if q is None else m.status(q)
 

@@ -9,13 +9,16 @@ of J4 / J5 / J6 at +-180, which numpy's rounding noise decides.  ForwardCalc's
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from rob6.robots import ROBOT_TYPES, get_robot
 from rob6_kinematics import opw
 from rob6_kinematics.calc import TIE_EPS, TIE_ORDER, Kinematics, apply_limits
+from rob6_kinematics.opw import FloatArray
 
 TOL = 1e-9
 SPECIAL = [0.0, 90.0, -90.0, 180.0, -180.0, 45.0, 10.0]
@@ -43,7 +46,7 @@ def all_poses(k: Kinematics, seed: int) -> np.ndarray:
     return np.concatenate([T, np.round(T, 6), far])
 
 
-def assert_same(one, ref, ctx) -> None:
+def assert_same(one: Sequence[Sequence[float] | None], ref: FloatArray, ctx: object) -> None:
     assert len(one) == 8
     for b in range(8):
         r = ref[b]
@@ -111,7 +114,8 @@ def test_fk_compiled_one_equals_fk_compiled(robot: str) -> None:
 
 
 # ------------------------------------------------------------------ Kinematics commands
-def backward_reference(k, T, words, cur, lo, hi, mc, w):
+def backward_reference(k: Kinematics, T: npt.ArrayLike, words: Sequence[str], cur: FloatArray, lo: FloatArray,
+                       hi: FloatArray, mc: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray | None]:
     """The vectorised BackwardCalc (before the single-pose path)."""
     Q = apply_limits(opw.ik(k.g, np.asarray(T).reshape(1, 12))[0], lo, hi)
     with np.errstate(invalid="ignore"):
@@ -181,12 +185,12 @@ def test_forward_calc_text_equals_vectorised(robot: str) -> None:
 class _VectorisedOnly:
     """A kin without ik_one: selection.branches_of takes the vectorised path."""
 
-    def __init__(self, k) -> None:
+    def __init__(self, k: Kinematics) -> None:
         self.k = k
         self.BRANCHES = k.BRANCHES
         self.robot_status = k.robot_status
 
-    def ik(self, T):
+    def ik(self, T: npt.ArrayLike) -> FloatArray:
         return self.k.ik(T)
 
 
