@@ -14,8 +14,10 @@ it) and the angles between flange orientations.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from rob6.robots import get_robot
@@ -71,7 +73,7 @@ def _rot(axis: str, angle: float) -> np.ndarray:
     return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
 
 
-def urdf_flange(q_controller_deg) -> tuple[np.ndarray, np.ndarray]:
+def urdf_flange(q_controller_deg: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     rotation, position = np.eye(3), np.zeros(3)
     for (origin, axis), angle in zip(URDF_CHAIN, np.radians(q_controller_deg), strict=True):
         position = position + rotation @ np.array(origin, float)
@@ -79,12 +81,12 @@ def urdf_flange(q_controller_deg) -> tuple[np.ndarray, np.ndarray]:
     return rotation, position
 
 
-def rob6_flange(kin: Kinematics, q_deg) -> tuple[np.ndarray, np.ndarray]:
+def rob6_flange(kin: Kinematics, q_deg: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     pose = kin.fk(np.asarray(q_deg, float))[0]
     return pose[:, :3], pose[:, 3]
 
 
-def invariants(flanges) -> list[float]:
+def invariants(flanges: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[float]:
     """Distances, the signed volume and the angles between orientations of four flanges."""
     (r0, p0), *rest = flanges
     values = [float(np.linalg.norm(p - p0)) for _, p in rest]

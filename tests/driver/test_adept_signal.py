@@ -7,15 +7,17 @@ state agree afterwards. A port that cannot be reached fails with ``ERROR: driver
 
 from __future__ import annotations
 
+from contextlib import AbstractContextManager
+
 import pytest
 
 from tests.controllers.adept_controller import AdeptController
-from tests.system import Client, driver_state, free_port, running
+from tests.system import Client, System, driver_state, free_port, running
 
 pytestmark = pytest.mark.slow
 
 
-def adept_system(ctl: AdeptController, io_port: int):
+def adept_system(ctl: AdeptController, io_port: int) -> AbstractContextManager[System]:
     assert ctl.motion is not None and ctl.state is not None
     return running("ad850", dummy=False, extra_env={
         "ROB6_LINK": "simple_message", "ROB6_SM_HOST": "127.0.0.1", "ROB6_SM_MOTION_PORT": str(ctl.motion[1]),

@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rob6_driver.motion import MotionCore, Offline
+from rob6_driver.motion import Motion, MotionCore, Offline
 from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
 
 
-def ptp(core, target):
+def ptp(core: MotionCore, target: list[float]) -> Motion:
     plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), target, MotionSettings(core.robot))
     assert plan.ok, plan.reason
     t = plan.trajectory

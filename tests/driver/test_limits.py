@@ -21,7 +21,7 @@ def limits(vmax: float = 100.0, amax: float = 1000.0, turn: float = 10.0) -> Lim
     return Limits(-turn * six, turn * six, vmax * six, amax * six, amax / 0.048 * six, 5.0 * six)
 
 
-def monitor(**kw) -> LimitMonitor:
+def monitor(**kw: float) -> LimitMonitor:
     return LimitMonitor(limits(**kw), DT)
 
 

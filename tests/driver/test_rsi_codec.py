@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from rob6_driver.links.rsi_codec import RsiParseError, format_sen, ipoc_of, parse_rob
+from rob6_driver.links.rsi_codec import RobPacket, RsiParseError, format_sen, ipoc_of, parse_rob
 
 AXES = 'A1="1.5" A2="-90.25" A3="90" A4="0.0001" A5="-0.5" A6="180"'
 START = 'A1="0" A2="-90" A3="90" A4="0" A5="0" A6="0"'
@@ -15,7 +15,7 @@ STANDARD = (f'<Rob TYPE="KUKA"><RIst X="1" Y="2" Z="3" A="4" B="5" C="6"/><RSol 
             f'B="5" C="6"/><AIPos {AXES}/><ASPos {START}/><Delay D="7"/><IPOC>4208105428</IPOC></Rob>').encode()
 
 
-def check(packet) -> None:
+def check(packet: RobPacket) -> None:
     assert packet.aipos == (1.5, -90.25, 90.0, 0.0001, -0.5, 180.0)
     assert packet.aspos == (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
     assert packet.ipoc == b"4208105428" and packet.stamp == 4208105428
