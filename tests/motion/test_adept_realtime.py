@@ -14,8 +14,10 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -25,7 +27,7 @@ from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import System, link_status, running
+from tests.system import Client, System, link_status, running
 
 pytestmark = pytest.mark.slow
 
@@ -46,7 +48,7 @@ def free_tcp_ports(n: int) -> list[int]:
             sock.close()
 
 
-def adept_system(motion: int, state: int, order: str = "big", **kwargs):
+def adept_system(motion: int, state: int, order: str = "big", **kwargs: Any) -> AbstractContextManager[System]:
     return running("ad850", dummy=False, extra_env={
         "ROB6_LINK": "simple_message", "ROB6_SM_HOST": "127.0.0.1", "ROB6_SM_MOTION_PORT": str(motion),
         "ROB6_SM_STATE_PORT": str(state), "ROB6_SM_BYTE_ORDER": order}, **kwargs)
@@ -56,36 +58,36 @@ def controller(motion: int, state: int, *args: str, order: str = "big") -> Adept
     return AdeptController("--motion-port", str(motion), "--state-port", str(state), *args, byte_order=order)
 
 
-def robot_at(ctl) -> np.ndarray:
+def robot_at(ctl: AdeptController) -> np.ndarray:
     return np.array(ctl.status()["position_rob6_deg"])
 
 
-def connected(client, ctl, system) -> np.ndarray:
+def connected(client: Client, ctl: AdeptController, system: System) -> np.ndarray:
     """Wait until rob6 can move the robot again and follows it: a motion to where the robot
     stands is accepted (it sends nothing), and rob6's position is the robot's."""
-    def ready():
+    def ready() -> np.ndarray | None:
         here = robot_at(ctl)
         if reply(client, "MovePTPJoints " + fmt(here)) != "true\n":
             return None
         q = joints(client)
         return q if np.allclose(q, robot_at(ctl), atol=POSITION_TOL) else None
-    q = wait_until(ready, what="rob6 to follow the controller")
+    q: np.ndarray = wait_until(ready, what="rob6 to follow the controller")
     assert link_status(system).state == "connected"
     return q
 
 
-def arrived(ctl, target) -> dict:
+def arrived(ctl: AdeptController, target: Sequence[float] | np.ndarray) -> dict[str, Any]:
     """The controller at rest on target (rob6's degrees)."""
     return ctl.wait_for(lambda st: not st["in_motion"] and np.allclose(st["position_rob6_deg"], target,
                                                                        atol=POSITION_TOL),
                         timeout=20, what=f"the robot at {target}")
 
 
-def fmt(q) -> str:
+def fmt(q: Iterable[float]) -> str:
     return " ".join(f"{x:f}" for x in q)
 
 
-def session(client, ctl) -> None:
+def session(client: Client, ctl: AdeptController) -> None:
     """PTP, LIN and Alter (EnableAdeptAlter, MoveRTJoints every 16 ms)."""
     for ptp_target in (START, [30.0, -50.0, 50.0, 10.0, 20.0, -20.0], START):
         assert reply(client, "MovePTPJoints " + fmt(ptp_target)) == "true\n"
@@ -160,7 +162,7 @@ def adept() -> Iterator[tuple[System, int, int]]:
         yield system, motion, state
 
 
-def long_move(client, ctl) -> None:
+def long_move(client: Client, ctl: AdeptController) -> None:
     """Start a PTP of ~3 s (J1 0 -> 60) without waiting for its reply."""
     assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
     target = list(START)
@@ -169,7 +171,7 @@ def long_move(client, ctl) -> None:
     wait_until(lambda: float(robot_at(ctl)[0]) > 5.0, what="the robot to move")
 
 
-def back_home(client, ctl, system) -> None:
+def back_home(client: Client, ctl: AdeptController, system: System) -> None:
     here = connected(client, ctl, system)
     assert 5.0 < here[0] < 60.0  # where the fault caught it: rob6 continues from there
     assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"

@@ -1,28 +1,31 @@
 """LIN planning: straight line, limits, rejection before motion (singularity, reach, config)."""
 
+from collections.abc import Sequence
+
 import numpy as np
 import pytest
 
-from rob6.robots import get_robot
+from rob6.robots import RobotModel, get_robot
 from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionSettings
-from rob6_planner.lin_planner import LinOptions, plan_lin
-from rob6_planner.trajectory import TrajectoryPlanner, finite_difference_violations
+from rob6_planner.lin_planner import IkFn, LinOptions, plan_lin
+from rob6_planner.trajectory import SampledTrajectory, TrajectoryPlanner, finite_difference_violations
 from tests.motion.motion_kin import fk, make_ik
 
 
-def rot_z(deg):
+def rot_z(deg: float) -> np.ndarray:
     c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
 
 
-def setup(robot: str = "kr16", q0=(10, -80, 100, 20, 40, 30)):
+def setup(robot: str = "kr16", q0: Sequence[float] = (10, -80, 100, 20, 40, 30)
+          ) -> tuple[RobotModel, MotionSettings, TrajectoryPlanner, np.ndarray, np.ndarray, IkFn]:
     r = get_robot(robot)
-    q0 = np.array(q0, float)
-    return r, MotionSettings(r), TrajectoryPlanner(r), q0, fk(r, q0)[0], make_ik(r, q0)
+    start = np.array(q0, float)
+    return r, MotionSettings(r), TrajectoryPlanner(r), start, fk(r, start)[0], make_ik(r, start)
 
 
-def line_deviation(r, tr, T0, T1):
+def line_deviation(r: RobotModel, tr: SampledTrajectory, T0: np.ndarray, T1: np.ndarray) -> tuple[float, np.ndarray]:
     P = fk(r, tr.q)[:, :, 3]
     u = (T1[:, 3] - T0[:, 3]) / np.linalg.norm(T1[:, 3] - T0[:, 3])
     d = P - T0[:, 3]

@@ -29,7 +29,7 @@ def test_runner_publishes_every_cycle_on_time() -> None:
 def test_runner_counts_missed_cycles_and_survives_errors() -> None:
     calls = []
 
-    def step():
+    def step() -> int:
         calls.append(time.monotonic())
         if len(calls) == 3:
             time.sleep(0.035)  # overruns ~3 periods of 10 ms

@@ -1,15 +1,17 @@
 """PTP planning: timing against the analytic jerk-limited profile, validation, limits."""
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
 
 from rob6.robots import ROBOT_TYPES
 from rob6.units import JERK_RAMP_S, UNIT_CYCLE_S
-from rob6_driver.motion import MotionCore
+from rob6_driver.motion import Motion, MotionCore
 from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import (
+    SampledTrajectory,
     TrajectoryPlanner,
     check_target,
     finite_difference_violations,
@@ -28,12 +30,13 @@ def analytic_time(d: float, v: float, a: float, j: float) -> float:
     # no cruise
     tau = (d / (2 * j)) ** (1 / 3)
     if j * tau <= a:
-        return 4 * tau  # reaches neither
+        return float(4 * tau)  # reaches neither
     vp = (-a / j + math.sqrt((a / j) ** 2 + 4 * d / a)) * a / 2  # reaches a, not v
     return 2 * (vp / a + a / j)
 
 
-def run_ptp_in_sim(robot, q1, config=None):
+def run_ptp_in_sim(robot: str, q1: Sequence[float], config: MotionSettings | None = None
+                   ) -> tuple[MotionCore, Motion, int, SampledTrajectory]:
     config = config or MotionSettings(robot)
     planner = TrajectoryPlanner(robot)
     sim = MotionCore(robot)

@@ -5,11 +5,12 @@ reach their targets; a 30 deg PTP of A1 takes the time the limits imply."""
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from rob6.robots import get_robot
+from rob6.robots import RobotModel, get_robot
 from rob6.units import UNIT_CYCLE_S
 from rob6_driver.service import REST_STATE_PERIOD_S
 from rob6_recorder.reader import read_records
@@ -18,7 +19,7 @@ from tests.system import running
 TOL = 1e-6
 
 
-def joint_states(directory) -> tuple[np.ndarray, np.ndarray]:
+def joint_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
     """(t, q) of every recorded driver cycle, from the system recording."""
     rows = []
     for path in directory.glob("*_system_*.mcap"):
@@ -27,7 +28,8 @@ def joint_states(directory) -> tuple[np.ndarray, np.ndarray]:
     return np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
 
 
-def assert_within_limits(robot, t, q, speed=None, accel=None) -> int:
+def assert_within_limits(robot: RobotModel, t: np.ndarray, q: np.ndarray, speed: Sequence[float] | None = None,
+                         accel: Sequence[float] | None = None) -> int:
     """The recorded states within the joint, speed and acceleration limits; returns the
     number of records in which the robot had moved since the one before.
 
@@ -35,8 +37,8 @@ def assert_within_limits(robot, t, q, speed=None, accel=None) -> int:
     are whole cycles apart and a gap is at most that long. A change across a gap is taken as
     one cycle's step (the robot may start in the gap's last cycle): that can only
     overestimate speed and acceleration, so the check stays sound."""
-    speed = np.array(speed or robot.default_speed) / UNIT_CYCLE_S
-    accel = np.array(accel or robot.default_accel) / UNIT_CYCLE_S ** 2
+    vmax = np.array(speed or robot.default_speed) / UNIT_CYCLE_S
+    amax = np.array(accel or robot.default_accel) / UNIT_CYCLE_S ** 2
     assert np.all(q > np.array(robot.turn_min)) and np.all(q < np.array(robot.turn_max))
     cycles = np.diff(t) / robot.cycle_s
     assert np.allclose(cycles, np.rint(cycles), atol=1e-6) and np.all(np.rint(cycles) >= 1), \
@@ -44,8 +46,8 @@ def assert_within_limits(robot, t, q, speed=None, accel=None) -> int:
     assert np.all(np.diff(t) <= REST_STATE_PERIOD_S + robot.cycle_s + 1e-9), "a driver cycle is missing from the recording"
     v = np.diff(q, axis=0) / robot.cycle_s
     a = np.diff(v, axis=0) / robot.cycle_s
-    assert np.all(np.abs(v) <= speed * (1 + TOL) + TOL), f"speed {np.abs(v).max(axis=0)} > {speed}"
-    assert np.all(np.abs(a) <= accel * (1 + TOL) + 1e-3), f"acceleration {np.abs(a).max(axis=0)} > {accel}"
+    assert np.all(np.abs(v) <= vmax * (1 + TOL) + TOL), f"speed {np.abs(v).max(axis=0)} > {vmax}"
+    assert np.all(np.abs(a) <= amax * (1 + TOL) + 1e-3), f"acceleration {np.abs(a).max(axis=0)} > {amax}"
     return int(np.any(v != 0, axis=1).sum())
 
 

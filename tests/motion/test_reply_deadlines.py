@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 
 import pytest
 
 from rob6_client import Robot
-from tests.system import System, running
+from tests.system import Client, System, running
 
 START = [0.0, -10.0, 10.0, 0.0, 30.0, 0.0]
 READ_S = 30.0  # a reply later than this is a hang, whatever the machine's load
@@ -24,11 +24,11 @@ def kr16rt() -> Iterator[System]:
         yield system
 
 
-def _joints(values) -> str:
+def _joints(values: Iterable[float]) -> str:
     return " ".join(f"{v:f}" for v in values)
 
 
-def _position(client) -> list[float]:
+def _position(client: Client) -> list[float]:
     return [float(x) for x in client.ask("GetPositionJoints").split()]
 
 

@@ -11,7 +11,9 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -21,7 +23,7 @@ from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import System, free_port, link_status, running
+from tests.system import Client, System, free_port, link_status, running
 
 pytestmark = pytest.mark.slow
 
@@ -34,23 +36,23 @@ RATED = np.array([156.0, 156.0, 156.0, 330.0, 330.0, 615.0])
 POSITION_TOL = 2e-4
 
 
-def rsi_system(port: int, **kwargs):
+def rsi_system(port: int, **kwargs: Any) -> AbstractContextManager[System]:
     return running("kr16rt", dummy=False, extra_env={"ROB6_LINK": "rsi", "ROB6_RSI_LISTEN": f"127.0.0.1:{port}"},
                    **kwargs)
 
 
-def connected(client, kuka, system) -> np.ndarray:
+def connected(client: Client, kuka: RsiController, system: System) -> np.ndarray:
     """Wait until rob6 follows the controller: the driver's link is up again and rob6's
     position is the controller's AIPos (a robot holding still shows that already while
     the link is still lost)."""
-    def follows():
+    def follows() -> np.ndarray | None:
         q = joints(client)
         return q if np.allclose(q, kuka.status()["aipos"], atol=POSITION_TOL) else None
     wait_until(lambda: link_status(system).state == "connected", timeout=10.0, what="the RSI link to be up")
     return wait_until(follows, timeout=10.0, what="rob6 to follow the controller")
 
 
-def assert_no_jump(status: dict) -> None:
+def assert_no_jump(status: dict[str, Any]) -> None:
     """No correction step of the run went beyond what the axes can move in one cycle."""
     assert not status["trips"], status["trips"]
     assert np.all(np.array(status["max_ak_step"]) <= RATED * ROBOT.cycle_s), status["max_ak_step"]
@@ -68,7 +70,7 @@ def connected_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.array([rows[c][0] for c in cycles]), np.array([rows[c][1] for c in cycles])
 
 
-def session(client) -> None:
+def session(client: Client) -> None:
     """PTP, LIN and Alter (MoveRTJoints streamed at 250 Hz), as in test_realtime_system."""
     start = "0 -80 100 0 30 0"
     assert reply(client, "MovePTPJoints " + start) == "true\n"
@@ -152,7 +154,7 @@ def rsi() -> Iterator[tuple[System, int]]:
         yield system, port
 
 
-def long_move(client, kuka) -> None:
+def long_move(client: Client, kuka: RsiController) -> None:
     """Start a PTP of ~3 s from HOME (A1 0 -> 40) without waiting for its reply."""
     assert reply(client, "MovePTPJoints 0 -90 90 0 0 0") == "true\n"
     client.send("MovePTPJoints 40 -90 90 0 0 0\n")

@@ -4,26 +4,30 @@ Everything runs in fast-forward (``sim.step()``), never on the wall clock.
 """
 
 import math
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from rob6_driver.limits import Limits
-from rob6_driver.motion import Motion, MotionCore
+from rob6_driver.motion import CoreState, Motion, MotionCore
 from rob6_planner.config import MotionSettings
-from rob6_planner.trajectory import TrajectoryPlanner
+from rob6_planner.trajectory import SampledTrajectory, TrajectoryPlanner
 
 TOL_REL = 1e-6
 TOL_V = 1e-9
 TOL_A = 1e-6
 
 
-def limit_problems(qs, dt, lim: Limits, q_before=None, v_before=None, qd=None, qdd=None):
+def limit_problems(qs: npt.ArrayLike, dt: float, lim: Limits, q_before: npt.ArrayLike | None = None,
+                   v_before: npt.ArrayLike | None = None, qd: npt.ArrayLike | None = None,
+                   qdd: npt.ArrayLike | None = None) -> list[tuple[str, np.ndarray]]:
     """All speed/acceleration/turn problems of a state sequence (finite differences + exact)."""
     qs = np.asarray(qs, float)
     if q_before is not None:
         qs = np.vstack([q_before, qs])
-    problems = []
+    problems: list[tuple[str, np.ndarray]] = []
     v = np.diff(qs, axis=0) / dt
     v0 = np.zeros((1, 6)) if v_before is None else np.asarray(v_before)[None]
     a = np.diff(np.vstack([v0, v]), axis=0) / dt
@@ -40,16 +44,18 @@ def limit_problems(qs, dt, lim: Limits, q_before=None, v_before=None, qd=None, q
     return problems
 
 
-def run_states(sim, n):
+def run_states(sim: MotionCore, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[CoreState]]:
     states = sim.run(n)
     return (np.array([s.q for s in states]), np.array([s.qd for s in states]),
             np.array([s.qdd for s in states]), states)
 
 
-def plan(robot, q0, q1, config=None):
+def plan(robot: str, q0: npt.ArrayLike, q1: npt.ArrayLike,
+         config: MotionSettings | None = None) -> SampledTrajectory:
     config = config or MotionSettings(robot)
     res = TrajectoryPlanner(robot).plan_ptp(q0, q1, config)
     assert res.ok, res.reason
+    assert res.trajectory is not None
     return res.trajectory
 
 
@@ -180,7 +186,7 @@ def test_alter_streaming_250hz(robot: str) -> None:
 
 
 def test_watchdog_event_and_resume() -> None:
-    events: list[dict] = []
+    events: list[dict[str, Any]] = []
     sim = MotionCore("kr16rt", alter_timeout_s=0.05, on_event=events.append)
     sim.enable_alter()
     sim.set_target([40, 0, 0, 0, 0, 0])

@@ -157,7 +157,7 @@ class MotionCore:
     """The robot's motion. Thread-safe: commands from any thread, ``step()`` from one."""
 
     def __init__(self, robot: RobotModel | str, dt: float | None = None, *, dummy: bool = False,
-                 q0: Sequence[float] | None = None, limits: Limits | None = None,
+                 q0: npt.ArrayLike | None = None, limits: Limits | None = None,
                  alter_timeout_s: float = 0.5, offline: str = "",
                  on_event: Callable[[dict[str, Any]], None] | None = None, max_violations: int = 1000) -> None:
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
