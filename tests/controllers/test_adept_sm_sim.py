@@ -14,7 +14,8 @@ import socket
 import struct
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 import pytest
 from pytest import FixtureRequest
@@ -29,7 +30,7 @@ STATUS_FIELDS = ("drives_powered", "e_stopped", "error_code", "in_error", "in_mo
                  "motion_possible")
 
 
-def to_controller_rad(q_rob6_deg):
+def to_controller_rad(q_rob6_deg: Sequence[float]) -> list[float]:
     """rob6 joints (deg) -> the controller's joints on the wire (rad), as documented in
     deploy/adept/README.md: (-q1, q2, q3 + 90, -q4, q5, -q6)."""
     q1, q2, q3, q4, q5, q6 = q_rob6_deg
@@ -41,7 +42,8 @@ def frame(e: str, msg_type: int, comm: int, reply: int, body: bytes) -> bytes:
     return struct.pack(e + "i", 12 + len(body)) + header + body
 
 
-def traj_pt(e, seq, q_rob6_deg=(0, 0, 0, 0, 0, 0), vel: float = 0.5, dur: float = 0.0, comm=REQUEST, rad=None):
+def traj_pt(e: str, seq: int, q_rob6_deg: Sequence[float] = (0, 0, 0, 0, 0, 0), vel: float = 0.5, dur: float = 0.0,
+            comm: int = REQUEST, rad: Sequence[float] | None = None) -> bytes:
     joints = list(rad if rad is not None else to_controller_rad(q_rob6_deg)) + [0.0] * 4
     return frame(e, JOINT_TRAJ_PT, comm, 0, struct.pack(e + "i10fff", seq, *joints, vel, dur))
 
@@ -56,7 +58,11 @@ def recv_exact(sock: socket.socket, n: int) -> bytes:
     return data
 
 
-def read_frame(sock: socket.socket, e: str):
+def read_frame(sock: socket.socket, e: str) -> tuple[int, int, int, int, bytes]:
+    length: int
+    msg_type: int
+    comm: int
+    reply: int
     (length,) = struct.unpack(e + "i", recv_exact(sock, 4))
     payload = recv_exact(sock, length)
     msg_type, comm, reply = struct.unpack_from(e + "3i", payload)
@@ -74,20 +80,21 @@ def closed_by_peer(sock: socket.socket, timeout: float = 10.0) -> bool:
 class Motion:
     """The motion port: send a point, read its reply."""
 
-    def __init__(self, addr, e: str) -> None:
+    def __init__(self, addr: tuple[str, int], e: str) -> None:
         self.e = e
         self.sock = socket.create_connection(addr, timeout=20)
 
     def send(self, data: bytes) -> None:
         self.sock.sendall(data)
 
-    def reply(self):
+    def reply(self) -> tuple[int, int]:
         length, msg_type, comm, code, body = read_frame(self.sock, self.e)
         assert (length, msg_type, comm) == (16, JOINT_TRAJ_PT, REPLY), (length, msg_type, comm)
+        seq: int
         (seq,) = struct.unpack(self.e + "i", body)
         return code, seq
 
-    def point(self, seq, q_rob6_deg=(0, 0, 0, 0, 0, 0), **kw):
+    def point(self, seq: int, q_rob6_deg: Sequence[float] = (0, 0, 0, 0, 0, 0), **kw: Any) -> tuple[int, int]:
         self.send(traj_pt(self.e, seq, q_rob6_deg, **kw))
         return self.reply()
 
@@ -98,15 +105,15 @@ class Motion:
 class State:
     """The state port, read in the background: every JOINT_POSITION and STATUS."""
 
-    def __init__(self, addr, e: str) -> None:
+    def __init__(self, addr: tuple[str, int], e: str) -> None:
         self.e = e
         self.sock = socket.create_connection(addr, timeout=20)
-        self.frames: list[tuple[float, str, tuple]] = []
+        self.frames: list[tuple[float, str, tuple[float, ...] | dict[str, int]]] = []
         self.lock = threading.Lock()
         self.error: Exception | None = None
         threading.Thread(target=self._run, daemon=True).start()
 
-    def _run(self):
+    def _run(self) -> None:
         try:
             while True:
                 length, msg_type, comm, reply, body = read_frame(self.sock, self.e)
@@ -130,7 +137,7 @@ class State:
         with self.lock:
             return len(self.frames)
 
-    def wait(self, kind: str, pred, since: int = 0, timeout: float = 15.0):
+    def wait(self, kind: str, pred: Callable[[Any], object], since: int = 0, timeout: float = 15.0) -> Any:
         """The first frame of this kind from index `since` on that satisfies pred."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -147,7 +154,7 @@ class State:
         self.sock.close()
 
 
-def close_to(a, b, tol):
+def close_to(a: Sequence[float], b: Sequence[float], tol: float) -> bool:
     return all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
@@ -158,7 +165,7 @@ def sim(request: FixtureRequest) -> Iterator[AdeptController]:
         yield ctl
 
 
-def moving_sim(*extra):
+def moving_sim(*extra: str) -> AdeptController:
     # J1 at 10 % monitor speed: 25 deg/s, so a long move leaves time to interfere
     return AdeptController("--state-period", "0.02", "--monitor-speed", "10", *extra)
 

@@ -23,25 +23,30 @@ def ethernet() -> ET.Element:
     return ET.parse(KUKA / "rob6_rsi_ethernet.xml").getroot()
 
 
-def rsix_objects():
+#: an RSI object of a signal-flow file: type, type id, parameters by name, inputs by index
+#: (the object and output each comes from)
+RsiObject = tuple[str, int, dict[str | None, ET.Element], dict[int, tuple[str | None, int]]]
+
+
+def rsix_objects() -> dict[str | None, RsiObject]:
     root = ET.parse(KUKA / "rob6_rsi.rsix").getroot()
     assert root.tag == "{RsiContext}RsiContext"
-    objects = {}
+    objects: dict[str | None, RsiObject] = {}
     for obj in root.iter("{RsiDriver}RsiObject"):
         params = {p.get("Name"): p for p in obj.iter("{RsiDriver}Parameter")}
         inputs = {int(i.attrib["InIdx"]): (i.get("OutObjId"), int(i.attrib["OutIdx"]))
                   for i in obj.iter("{RsiDriver}Input")}
-        objects[obj.get("ObjId")] = (obj.get("ObjType"), int(obj.attrib["ObjTypeId"]), params, inputs)
+        objects[obj.get("ObjId")] = (obj.attrib["ObjType"], int(obj.attrib["ObjTypeId"]), params, inputs)
     return objects
 
 
-def rsi3_objects():
+def rsi3_objects() -> dict[str | None, RsiObject]:
     root = ET.parse(KUKA / "rsi3" / "rob6_rsi.rsi.xml").getroot()
-    objects = {}
+    objects: dict[str | None, RsiObject] = {}
     for obj in root.iter("RSIObject"):
         params = {p.get("Name"): p for p in obj.iter("Parameter")}
         inputs = {int(i.attrib["InIdx"]): (i.get("OutObjID"), int(i.attrib["OutIdx"])) for i in obj.iter("Input")}
-        objects[obj.get("ObjID")] = (obj.get("ObjType"), int(obj.attrib["ObjTypeID"]), params, inputs)
+        objects[obj.get("ObjID")] = (obj.attrib["ObjType"], int(obj.attrib["ObjTypeID"]), params, inputs)
     return objects
 
 
@@ -95,14 +100,14 @@ def test_signal_flow_wiring(ethernet: ET.Element, fmt: str) -> None:
     _, tid, mon, _ = by_type["AXISCORRMON"]
     assert tid == 82
     for n in range(1, 7):
-        lo = float(params[f"LowerLimA{n}"].get("ParamValue"))
-        hi = float(params[f"UpperLimA{n}"].get("ParamValue"))
-        mx = float(mon[f"MaxA{n}"].get("ParamValue"))
+        lo = float(params[f"LowerLimA{n}"].attrib["ParamValue"])
+        hi = float(params[f"UpperLimA{n}"].attrib["ParamValue"])
+        mx = float(mon[f"MaxA{n}"].attrib["ParamValue"])
         for machine in MACHINES.values():  # any correction inside the axis range, from any start
             width = machine.upper[n - 1] - machine.lower[n - 1]
             assert lo <= -width and hi >= width and mx >= width, (fmt, n, machine.name)
     # parameter ids: 0-based and contiguous in RSI 4.x; RSI 3.x keeps 7..12 for external axes
-    upper_a1 = int(params["UpperLimA1"].get("ParamId" if fmt == "rsix" else "ParamID"))
+    upper_a1 = int(params["UpperLimA1"].attrib["ParamId" if fmt == "rsix" else "ParamID"])
     assert upper_a1 == (6 if fmt == "rsix" else 13)
 
 

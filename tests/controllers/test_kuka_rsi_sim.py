@@ -16,7 +16,7 @@ import signal
 import socket
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from itertools import pairwise
 from typing import Any
 
@@ -33,7 +33,13 @@ _ATTR = re.compile(rb'(\w+)="([^"]*)"')
 _IPOC = re.compile(rb"<IPOC>(-?\d+)</IPOC>")
 
 
-def parse_rob(data: bytes) -> dict:
+#: a <Rob> packet as the PC reads it: its elements' attributes, and IPOC, D, aipos, aspos, rist, rsol
+Packet = dict[str, Any]
+#: the PC's answer to a packet (None: no answer)
+Policy = Callable[[Packet], bytes | None]
+
+
+def parse_rob(data: bytes) -> Packet:
     assert data.startswith(b'<Rob TYPE="KUKA">') and data.endswith(b"</Rob>"), data
     text = {tag.decode(): {k.decode(): v.decode() for k, v in _ATTR.findall(attrs)}
             for tag, attrs in _ELEMENT.findall(data)}
@@ -52,17 +58,17 @@ def parse_rob(data: bytes) -> dict:
     return pkt
 
 
-def sen(ipoc: int, ak=(0.0,) * 6, stop: bool = False, sen_type: str = "ImFree") -> bytes:
+def sen(ipoc: int, ak: Sequence[float] = (0.0,) * 6, stop: bool = False, sen_type: str = "ImFree") -> bytes:
     axes = " ".join(f'A{i}="{v:.4f}"' for i, v in enumerate(ak, 1))
     return (f'<Sen Type="{sen_type}"><AK {axes}/>' + ("<Stop>1</Stop>" if stop else "")
             + f"<IPOC>{ipoc}</IPOC></Sen>").encode()
 
 
-def zero(pkt):
+def zero(pkt: Packet) -> bytes:
     return sen(pkt["IPOC"])
 
 
-def silent(pkt):
+def silent(pkt: Packet) -> None:
     return None
 
 
@@ -70,7 +76,7 @@ class Follow:
     """What a careful PC does: step AK towards `target` by at most `step` per cycle,
     counting as applied only answers the controller took (its Delay did not grow)."""
 
-    def __init__(self, target=(0.0,) * 6, step: float = 0.5, sen_type: str = "ImFree") -> None:
+    def __init__(self, target: Sequence[float] = (0.0,) * 6, step: float = 0.5, sen_type: str = "ImFree") -> None:
         self.target = list(target)
         self.step = step
         self.sen_type = sen_type
@@ -80,7 +86,7 @@ class Follow:
         self.aspos: list[float] | None = None
         self.last_delay: int | None = None
 
-    def __call__(self, pkt):
+    def __call__(self, pkt: Packet) -> bytes:
         if pkt["aspos"] != self.aspos:  # a new run: AK counts from the new start pose
             self.aspos, self.applied, self.sent = pkt["aspos"], [0.0] * 6, None
         elif self.sent is not None and pkt["D"] == self.last_delay:
@@ -94,13 +100,13 @@ class Follow:
 class Responder:
     """The rob6 PC: a UDP server answering every packet with policy(packet)."""
 
-    def __init__(self, policy=zero) -> None:
+    def __init__(self, policy: Policy = zero) -> None:
         self.policy = policy
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.1)
         self.address = self.sock.getsockname()
-        self.packets: list[dict] = []
+        self.packets: list[Packet] = []
         self.raw: list[bytes] = []
         self._closed = False
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -122,7 +128,8 @@ class Responder:
             if answer is not None:
                 self.sock.sendto(answer, addr)
 
-    def wait(self, predicate, timeout: float = 10.0, what: str = "packets"):
+    def wait(self, predicate: Callable[[list[Packet]], object], timeout: float = 10.0,
+             what: str = "packets") -> list[Packet]:
         deadline = time.monotonic() + timeout
         while True:
             try:
@@ -151,7 +158,7 @@ def sim(pc: Responder, *args: str, robot: str = "kr16") -> RsiController:
     return RsiController(*args, rob6=pc.address, robot=robot)
 
 
-def close(a, b, tol: float = 1e-4):
+def close(a: Sequence[float], b: Sequence[float], tol: float = 1e-4) -> bool:
     return all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
@@ -295,7 +302,7 @@ def test_timeout_counts_consecutive_late_packets(pc: Responder) -> None:
     # every other answer missing: Delay grows past Timeout, but never 3 in a row
     answered = [0]
 
-    def every_other(pkt):
+    def every_other(pkt: Packet) -> bytes | None:
         answered[0] += 1
         return sen(pkt["IPOC"]) if answered[0] % 2 else None
 
@@ -308,7 +315,7 @@ def test_timeout_counts_consecutive_late_packets(pc: Responder) -> None:
 def test_timeout_counts_total_when_asked(pc: Responder) -> None:
     answered = [0]
 
-    def every_other(pkt):
+    def every_other(pkt: Packet) -> bytes | None:
         answered[0] += 1
         return sen(pkt["IPOC"]) if answered[0] % 2 else None
 
@@ -359,7 +366,7 @@ def test_unreadable_answer_counts_late(pc: Responder) -> None:
 
 
 # ---------------------------------------------------------------------------- faults
-def ipoc_steps(pkts, cycle):
+def ipoc_steps(pkts: list[Packet], cycle: int) -> list[int]:
     return [(b["IPOC"] - a["IPOC"]) // cycle for a, b in pairwise(pkts)]
 
 
