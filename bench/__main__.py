@@ -15,8 +15,6 @@ import time
 
 import numpy as np
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
 from rob6.messages import IkBatchRequest
 from tests.system import Client, running
 
@@ -179,9 +177,7 @@ def replica_scaling(requests: int = 40, poses: int = 2000) -> tuple[float, float
     T = Kinematics(get_robot("kr16")).fk(rng.uniform(-60, 60, (poses, 6)) * [1, 0.5, 0.5, 1, 1, 1])
     body = IkBatchRequest(poses=T.reshape(-1, 12).tolist())
     with running("kr16", services=("kinematics",)) as system:
-        settings = BusSettings(robot="kr16", robot_id=system.robot_id,
-                               connect=(f"tcp/127.0.0.1:{system.router_port}",))
-        bus = Bus(settings, "bench")
+        bus = system.bus("bench")
         try:
             bus.wait_for(["kinematics"], 10)
 

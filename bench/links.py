@@ -22,8 +22,6 @@ from typing import Any
 
 import numpy as np
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
 from rob6.messages import Empty, LinkQuery
 from tests.system import free_port, running
 
@@ -68,8 +66,7 @@ def stream(link: str, seconds: float, live: bool = False) -> dict[str, Any]:
     kuka = viewer = None
     with tempfile.TemporaryDirectory() as logs, \
             running("kr16rt", dummy=False, log_dir=logs, extra_env=extra) as system:
-        bus = Bus(BusSettings(robot="kr16rt", robot_id=system.robot_id,
-                              connect=(f"tcp/127.0.0.1:{system.router_port}",)), "bench")
+        bus = system.bus("bench")
         try:
             bus.wait_for(["driver"], 10)
             if link == "rsi":
@@ -129,8 +126,7 @@ def adept_stream(timing: str, seconds: float) -> dict[str, Any]:
     try:
         with tempfile.TemporaryDirectory() as logs, \
                 running("ad850", dummy=False, log_dir=logs, extra_env=extra) as system:
-            bus = Bus(BusSettings(robot="ad850", robot_id=system.robot_id,
-                                  connect=(f"tcp/127.0.0.1:{system.router_port}",)), "bench")
+            bus = system.bus("bench")
             try:
                 bus.wait_for(["driver"], 10)
                 with system.client() as client:

@@ -113,6 +113,11 @@ class System:
     def client(self, **kwargs: Any) -> Client:
         return Client(self.port, **kwargs)
 
+    def bus(self, service: str = "test") -> Bus:
+        """A bus session on this system's router, for this robot (the caller closes it)."""
+        return Bus(BusSettings(robot=self.robot, robot_id=self.robot_id,
+                               connect=(f"tcp/127.0.0.1:{self.router_port}",)), service)
+
     def stop(self, timeout: float = 5.0) -> int:
         if self.process.poll() is None:
             self.process.send_signal(signal.SIGINT)
@@ -217,8 +222,7 @@ def zenoh_router(robot_id: str) -> Iterator[BusSettings]:
 
 def ask_driver(system: System, op: str, body: Struct, reply: type[R]) -> R:
     """The driver's ``reply`` to ``op``, asked over the system's Zenoh router like any service would."""
-    bus = Bus(BusSettings(robot=system.robot, robot_id=system.robot_id,
-                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
+    bus = system.bus()
     try:
         bus.wait_for(["driver"], 10)
         answer: R = bus.request("driver", op, body)

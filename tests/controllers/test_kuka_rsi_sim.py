@@ -298,28 +298,28 @@ def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, offse
             assert replies["stale_replies"] >= 4
 
 
+def every_other() -> Policy:
+    """A policy answering the first packet, then every other one (the rest: no answer)."""
+    answered = 0
+
+    def policy(pkt: Packet) -> bytes | None:
+        nonlocal answered
+        answered += 1
+        return sen(pkt["IPOC"]) if answered % 2 else None
+
+    return policy
+
+
 def test_timeout_counts_consecutive_late_packets(pc: Responder) -> None:
     # every other answer missing: Delay grows past Timeout, but never 3 in a row
-    answered = [0]
-
-    def every_other(pkt: Packet) -> bytes | None:
-        answered[0] += 1
-        return sen(pkt["IPOC"]) if answered[0] % 2 else None
-
-    pc.policy = every_other
+    pc.policy = every_other()
     with sim(pc, *SLOW, "--timeout", "3") as kuka:
         st = kuka.wait_for(lambda s: s["delay"] >= 8, what="8 late packets")
         assert st["state"] == "running" and st["trips"] == [] and st["late_consecutive"] < 3
 
 
 def test_timeout_counts_total_when_asked(pc: Responder) -> None:
-    answered = [0]
-
-    def every_other(pkt: Packet) -> bytes | None:
-        answered[0] += 1
-        return sen(pkt["IPOC"]) if answered[0] % 2 else None
-
-    pc.policy = every_other
+    pc.policy = every_other()
     with sim(pc, "--timeout", "3", "--timeout-counts", "total") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
         assert st["stop_reason"] == "RSI timeout: 3 late packets (Timeout 3)"

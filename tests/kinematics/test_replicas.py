@@ -12,8 +12,7 @@ import time
 
 import msgspec
 
-from rob6.bus import Bus, trace_records
-from rob6.config import BusSettings
+from rob6.bus import trace_records
 from rob6.messages import FkRequest, IkBatchRequest
 from tests.system import System, running
 
@@ -26,9 +25,7 @@ def _replica(system: System) -> subprocess.Popen[bytes]:
 
 def test_requests_spread_over_replicas_and_survive_a_killed_one() -> None:
     with running("kr16", services=("kinematics",)) as system:
-        settings = BusSettings(robot="kr16", robot_id=system.robot_id,
-                               connect=(f"tcp/127.0.0.1:{system.router_port}",))
-        bus = Bus(settings, "test")
+        bus = system.bus()
         served: collections.Counter[str] = collections.Counter()
         bus.subscribe("trace/kinematics", lambda _k, batch: served.update(
             msgspec.json.decode(record)["instance"] for _suffix, record in trace_records(batch)))
