@@ -53,8 +53,8 @@ test-fast: install
 	ROB6_SKIP_DOCKER=1 ROB6_SHARED=$(SHARED_TRUTH) $(BIN)/pytest -x -q $(PYTEST_ARGS)
 
 # ruff: pyflakes, import order, bugbear, E4/E7/E9, pyupgrade, simplify, return, pylint's
-# errors, unused noqa; mypy: strict for shared, gateway, kinematics, planner, gripper,
-# recorder and kawasaki-as-sim, annotated functions only elsewhere (pyproject.toml)
+# errors, warnings, conventions and idiom refactors, unused noqa; mypy: strict for every
+# package, bench and tests (pyproject.toml)
 check: install
 	$(BIN)/ruff check .
 	$(BIN)/mypy

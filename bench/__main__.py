@@ -15,10 +15,8 @@ import time
 
 import numpy as np
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
 from rob6.messages import IkBatchRequest
-from tests.system import running
+from tests.system import Client, running
 
 from .busy import busy_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baselines
@@ -64,8 +62,6 @@ def gateway_latency(services: tuple[str, ...] = (), log_dir: str | None = None,
         with system.client() as client:
             pose = client.ask("ForwardCalc 10 -20 30 40 50 60", 2).replace("\n", " ")
             for command, lines, _ in COMMANDS:
-                if command == "BackwardCalc":
-                    command = f"BackwardCalc {pose}"
                 if command == "MoveRTJoints":
                     assert client.ask("EnableAlter") == "true\n"
                     results[command] = measure_alternating(
@@ -76,11 +72,12 @@ def gateway_latency(services: tuple[str, ...] = (), log_dir: str | None = None,
                     results[command] = measure_alternating(
                         client, ("MovePTPJoints 10 -60 80 20 40 30\n", "MovePTPJoints 11 -60 80 20 40 30\n"), COUNT)
                     continue
-                results[command.split()[0]] = measure(client, command, lines, COUNT)
+                request = f"BackwardCalc {pose}" if command == "BackwardCalc" else command
+                results[command.split()[0]] = measure(client, request, lines, COUNT)
     return results
 
 
-def measure_alternating(client, lines: tuple[str, str], count: int, warmup: int = 200) -> list[float]:
+def measure_alternating(client: Client, lines: tuple[str, str], count: int, warmup: int = 200) -> list[float]:
     """A command that must answer ``true``, sent with two arguments in turn (a target 0.01 deg
     from the last for MoveRTJoints, between two poses for MovePTPJoints on the dummy kr16,
     whose motion takes no time)."""
@@ -180,14 +177,12 @@ def replica_scaling(requests: int = 40, poses: int = 2000) -> tuple[float, float
     T = Kinematics(get_robot("kr16")).fk(rng.uniform(-60, 60, (poses, 6)) * [1, 0.5, 0.5, 1, 1, 1])
     body = IkBatchRequest(poses=T.reshape(-1, 12).tolist())
     with running("kr16", services=("kinematics",)) as system:
-        settings = BusSettings(robot="kr16", robot_id=system.robot_id,
-                               connect=(f"tcp/127.0.0.1:{system.router_port}",))
-        bus = Bus(settings, "bench")
+        bus = system.bus("bench")
         try:
             bus.wait_for(["kinematics"], 10)
 
             def rate() -> float:
-                def worker(n):
+                def worker(n: int) -> None:
                     for _ in range(n):
                         bus.request("kinematics", "ik_batch", body, timeout=30)
                 start = time.perf_counter()

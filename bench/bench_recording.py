@@ -27,26 +27,26 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import msgspec
 
+from bench.tables import Table
 from rob6_recorder.session_replay import load_script, replay
 from rob6_recorder.writer import Recorder
 from tests.recording.rec_helpers import FakeServer  # the replay target: the test suite's fake rob6 server
 
 
-def _state(i: int) -> dict:
+def _state(i: int) -> dict[str, Any]:
     return {"t": i * 0.012, "cycle": i, "q": [10.123456 + i * 1e-4, -20.5, 30.25, 0.0, 45.0, -90.0],
             "qd": [0.01, 0.0, -0.02, 0.0, 0.0, 0.0], "moving": True, "mode": "trajectory"}
 
 
-def _recorder(directory: Path, **kw) -> Recorder:
-    kw.setdefault("max_backlog", 1_000_000)
-    kw.setdefault("warn_backlog", 1_000_000)
-    return Recorder(directory, "kr16", "robot1", **kw).start()
+def _recorder(directory: Path, max_backlog: int = 1_000_000, warn_backlog: int = 1_000_000) -> Recorder:
+    return Recorder(directory, "kr16", "robot1", max_backlog=max_backlog, warn_backlog=warn_backlog).start()
 
 
-def bench_burst(n: int = 200_000, session: bool = True) -> dict:
+def bench_burst(n: int = 200_000, session: bool = True) -> dict[str, Any]:
     d = Path(tempfile.mkdtemp(prefix="rob6-bench-"))
     try:
         rec = _recorder(d)
@@ -70,7 +70,7 @@ def bench_burst(n: int = 200_000, session: bool = True) -> dict:
         shutil.rmtree(d, ignore_errors=True)
 
 
-def bench_sustained(rate: int = 50_000, seconds: float = 3.0, session: bool = True) -> dict:
+def bench_sustained(rate: int = 50_000, seconds: float = 3.0, session: bool = True) -> dict[str, Any]:
     d = Path(tempfile.mkdtemp(prefix="rob6-bench-"))
     try:
         rec = _recorder(d, max_backlog=100_000, warn_backlog=100_000)
@@ -102,7 +102,7 @@ def bench_sustained(rate: int = 50_000, seconds: float = 3.0, session: bool = Tr
         shutil.rmtree(d, ignore_errors=True)
 
 
-def bench_replay(lines: int = 2000) -> dict:
+def bench_replay(lines: int = 2000) -> dict[str, Any]:
     d = Path(tempfile.mkdtemp(prefix="rob6-bench-"))
     try:
         fc = ("0.000000 -0.173648 -0.984808 1741.140107 0.000000 -0.984808 0.173648 -307.009978 "
@@ -134,7 +134,7 @@ def bench_replay(lines: int = 2000) -> dict:
         shutil.rmtree(d, ignore_errors=True)
 
 
-def bench_writers(n: int = 300_000) -> list[dict]:
+def bench_writers(n: int = 300_000) -> list[dict[str, Any]]:
     """Messages/s of foxglove-sdk's and the ``mcap`` package's writers, 1 and 2 files."""
     import foxglove
     from foxglove.mcap import MCAPWriteOptions
@@ -223,7 +223,7 @@ def bench_live(count: int = 2000) -> dict[str, dict[str, list[float]]]:
     return results
 
 
-def live_table(table) -> None:
+def live_table(table: Table) -> None:
     """The live view's cost on the real-time path: p50/p99 round trips, off vs on."""
     from bench.latency import percentiles
 

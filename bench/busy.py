@@ -1,4 +1,6 @@
-"""A busy robot PC: the mixed client (bench/workload.py) on the real-time kr16rt, once on a quiet
+"""Benchmark of a busy robot PC: the mixed client on the real-time kr16rt, quiet and with CPU hogs.
+
+A busy robot PC: the mixed client (bench/workload.py) on the real-time kr16rt, once on a quiet
 machine and once with CPU hogs spinning at normal priority, errors and round trips per
 command side by side."""
 

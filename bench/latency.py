@@ -1,4 +1,6 @@
-"""Round-trip latency through the gateway, next to its floors measured in the same run: a
+"""Benchmark of the gateway's round trips, beside the floors (bare TCP echo, bare Zenoh query).
+
+Round-trip latency through the gateway, next to its floors measured in the same run: a
 bare TCP echo and a bare Zenoh query between two processes."""
 
 from __future__ import annotations

@@ -1,4 +1,6 @@
-"""Alter streaming through the whole system on each robot link: MoveRTJoints at 250 Hz on
+"""Benchmark of Alter streaming through the whole system on each robot link (sim, RSI, simple_message).
+
+Alter streaming through the whole system on each robot link: MoveRTJoints at 250 Hz on
 kr16rt (4 ms cycle) with the recorder on, once on the simulation (``--link sim``) and
 once on RSI against the KR C4 simulator (kuka-rsi-sim, a separate process speaking
 RSI over real UDP), so the RSI figures stand beside the simulation's in the same run.
@@ -16,15 +18,16 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
 from rob6.messages import Empty, LinkQuery
 from tests.system import free_port, running
 
 from .latency import percentiles
+from .tables import Row, Table
 from .viewer import Viewer
 
 START = "0 -80 100 0 30 0"
@@ -34,7 +37,7 @@ class ControllerSim:
     """A stand-in controller (``python -m <module> ... --control 127.0.0.1:0``) as a process,
     asked for its status on its JSON-lines control channel (address in its ready line)."""
 
-    def __init__(self, module: str, *args: str):
+    def __init__(self, module: str, *args: str) -> None:
         self.proc = subprocess.Popen([sys.executable, "-m", module, *args, "--control", "127.0.0.1:0"],
                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         assert self.proc.stdout is not None
@@ -42,10 +45,11 @@ class ControllerSim:
         host, port = ready.split("control ", 1)[1].split(",", 1)[0].strip().rsplit(":", 1)
         self.control = socket.create_connection((host, int(port)), timeout=10).makefile("rwb")
 
-    def status(self) -> dict:
+    def status(self) -> dict[str, Any]:
         self.control.write(b'{"cmd": "status"}\n')
         self.control.flush()
-        return json.loads(self.control.readline())
+        reply: dict[str, Any] = json.loads(self.control.readline())
+        return reply
 
     def close(self) -> None:
         self.control.close()
@@ -53,7 +57,7 @@ class ControllerSim:
         self.proc.wait(10)
 
 
-def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> dict:
+def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> dict[str, Any]:
     """Stream for ``seconds``; the client's round trips and what the driver and controller
     counted. ``live``: with the live view on and a Foxglove viewer subscribed to every channel.
     ``ros``: with the ROS 2 service on (ROB6_ROS) and a subscriber of its joint_states."""
@@ -66,8 +70,7 @@ def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> d
     kuka = viewer = None
     with tempfile.TemporaryDirectory() as logs, \
             running("kr16rt", dummy=False, log_dir=logs, extra_env=extra) as system:
-        bus = Bus(BusSettings(robot="kr16rt", robot_id=system.robot_id,
-                              connect=(f"tcp/127.0.0.1:{system.router_port}",)), "bench")
+        bus = system.bus("bench")
         ros_subscriber = None
         try:
             bus.wait_for(["driver"], 10)
@@ -125,7 +128,7 @@ ADEPT_START = [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]
 ADEPT_PTP = ([30.0, -50.0, 50.0, 10.0, 20.0, -20.0], [-20.0, -70.0, 60.0, -10.0, 40.0, 20.0], ADEPT_START)
 
 
-def adept_stream(timing: str, seconds: float) -> dict:
+def adept_stream(timing: str, seconds: float) -> dict[str, Any]:
     """PTP moves, then MoveRTJoints every 16 ms for ``seconds``, on ad850 over simple_message."""
     motion, state = free_port(), free_port()
     extra = {"ROB6_LINK": "simple_message", "ROB6_SM_MOTION_PORT": str(motion), "ROB6_SM_STATE_PORT": str(state)}
@@ -134,8 +137,7 @@ def adept_stream(timing: str, seconds: float) -> dict:
     try:
         with tempfile.TemporaryDirectory() as logs, \
                 running("ad850", dummy=False, log_dir=logs, extra_env=extra) as system:
-            bus = Bus(BusSettings(robot="ad850", robot_id=system.robot_id,
-                                  connect=(f"tcp/127.0.0.1:{system.router_port}",)), "bench")
+            bus = system.bus("bench")
             try:
                 bus.wait_for(["driver"], 10)
                 with system.client() as client:
@@ -179,10 +181,10 @@ def adept_stream(timing: str, seconds: float) -> dict:
             "packets": link.packets, "moves": moves}
 
 
-def adept_table(seconds: float, table) -> None:
+def adept_table(seconds: float, table: Table) -> None:
     runs = {timing: adept_stream(timing, seconds) for timing in ("duration", "vplus")}
 
-    def each(fmt):
+    def each(fmt: Callable[[dict[str, Any]], object]) -> Row:
         return tuple(fmt(runs[t]) for t in ("duration", "vplus"))
 
     table(f"The Adept over simple_message: 3 PTP moves, then MoveRTJoints every 16 ms for {seconds:.0f} s "
@@ -205,7 +207,7 @@ def adept_table(seconds: float, table) -> None:
           ])
 
 
-def links_table(seconds: float, table) -> None:
+def links_table(seconds: float, table: Table) -> None:
     sim, rsi = stream("sim", seconds), stream("rsi", seconds)
     p50s, p99s = sim["rtt"]
     p50r, p99r = rsi["rtt"]
@@ -231,12 +233,12 @@ def links_table(seconds: float, table) -> None:
     kawasaki_table(max(5.0, seconds / 3), table)
 
 
-def live_realtime_table(seconds: float, table) -> None:
+def live_realtime_table(seconds: float, table: Table) -> None:
     """The live view's cost on the real-time path: the RSI Alter stream with it off, then on
     with a Foxglove viewer (a process of its own) subscribed to every channel."""
     off, on = stream("rsi", seconds), stream("rsi", seconds, live=True)
 
-    def row(r: dict) -> tuple[str, ...]:
+    def row(r: dict[str, Any]) -> tuple[str, ...]:
         lat = r["latency_us"] or [float("nan")] * 3
         return (f"{r['late']} / {r['trips']}", f"{r['cycles']} / {r['missed']}",
                 f"{lat[1] / 1000:.3f} / {lat[2] / 1000:.3f}", "%.3f / %.3f" % r["rtt"],

@@ -1,4 +1,6 @@
-"""The multi-host figures (issue 14, deploy/MULTI_HOST.md): deploy/multihost/docker-compose.yml
+"""Benchmark of the multi-host deployment under real network faults (latency, partitions, loss, router kill).
+
+The multi-host figures (issue 14, deploy/MULTI_HOST.md): deploy/multihost/docker-compose.yml
 with real network faults from this machine (tests/deploy/multihost/topology.py).
 
     sudo .venv/bin/python -m bench.multihost        # Docker, root (nsenter, iptables); ~6 min
@@ -23,8 +25,10 @@ import sys
 import time
 
 from tests.deploy import images
+from tests.deploy.compose import run
 from tests.deploy.multihost.topology import (
     REMOTE_KINEMATICS,
+    Call,
     Load,
     Topology,
     backward_line,
@@ -32,10 +36,10 @@ from tests.deploy.multihost.topology import (
     fault_tools_missing,
     percentile,
     recovery,
-    run,
 )
+from tests.system import Client
 
-from .tables import Table, table
+from .tables import Row, Table, table
 
 COUNT = int(os.environ.get("ROB6_BENCH_MH_COUNT", "400"))
 DELAYS_MS = (0, 1, 5)
@@ -45,7 +49,7 @@ def _ms(values: list[float], q: float) -> str:
     return f"{percentile(values, q) * 1000:.2f}"
 
 
-def _wait_only(client, line: str, timeout: float = 60) -> None:
+def _wait_only(client: Client, line: str, timeout: float = 60) -> None:
     """Until 20 calls in a row succeed (the liveliness of the replicas settled)."""
     deadline = time.monotonic() + timeout
     streak = 0
@@ -69,14 +73,14 @@ def _place(topo: Topology, where: str) -> None:
         run(["docker", "stop", "-t", "3", *local])
 
 
-def latency_rows(topo: Topology, client, line: str, rounds: int = 8) -> list[tuple]:
+def latency_rows(topo: Topology, client: Client, line: str, rounds: int = 8) -> list[Row]:
     """Each placement: ``rounds`` rounds of COUNT/rounds calls at each delay in turn, so a
     machine that gets busier or quieter meanwhile weighs on every delay alike."""
-    rows = []
+    rows: list[Row] = []
     for where in ("robot PC", "compute hosts (3 replicas)"):
         _place(topo, where)
         _wait_only(client, line)
-        results: dict[int, list] = {delay: [] for delay in DELAYS_MS}
+        results: dict[int, list[Call]] = {delay: [] for delay in DELAYS_MS}
         for _ in range(rounds):
             for delay in DELAYS_MS:
                 for host in ("compute1", "compute2"):
@@ -95,7 +99,7 @@ def latency_rows(topo: Topology, client, line: str, rounds: int = 8) -> list[tup
     return rows
 
 
-def partition_row(topo: Topology, client, line: str, seconds: float = 8.0, watch: float = 10.0) -> tuple:
+def partition_row(topo: Topology, client: Client, line: str, seconds: float = 8.0, watch: float = 10.0) -> Row:
     with Load(client, line) as load:
         time.sleep(2)
         with topo.partitioned("compute1"):
@@ -115,7 +119,7 @@ def partition_row(topo: Topology, client, line: str, seconds: float = 8.0, watch
             "none" if last_error is None else f"{last_error:.2f}", f"{sum(not c.ok for c in after)}/{len(after)}")
 
 
-def loss_row(topo: Topology, client, line: str) -> tuple:
+def loss_row(topo: Topology, client: Client, line: str) -> Row:
     with topo.impaired(delay_ms=10, jitter_ms=10, loss=0.05):
         results = calls(client, line, COUNT)
     seconds = [c.seconds for c in results]
@@ -125,7 +129,7 @@ def loss_row(topo: Topology, client, line: str) -> tuple:
             _ms(seconds, 99), first_error[:60])
 
 
-def router_kill_rows(topo: Topology, client, line: str) -> list[tuple]:
+def router_kill_rows(topo: Topology, client: Client, line: str) -> list[Row]:
     """BackwardCalc in a loop (remote kinematics) while the robot PC's router is killed and,
     8 s later, started again; the robot PC's own services meanwhile."""
     router = topo.container("router-pc")

@@ -15,8 +15,10 @@ from __future__ import annotations
 import argparse
 import random
 import sys
+import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from hypothesis import HealthCheck, given, settings, strategies as st
 
@@ -35,9 +37,10 @@ from tests.reliability.fuzz import (
     make_dead_gateway,
     vm_rss_kib,
 )
+from tests.system import System
 
 
-def records_session(system, examples: int, seed: int = 2) -> int:
+def records_session(system: System, examples: int, seed: int = 2) -> int:
     """Session 1 of a fresh system: a known number of non-empty lines (counted for the
     recorder check: every one must be in the session's MCAP file). Returns the count."""
     rng = random.Random(seed)
@@ -68,7 +71,7 @@ def recorded_lines(log_dir: str, session: int = 1) -> int:
     return total
 
 
-def run_tcp_campaign(system, examples: int, seed: int = 1) -> dict:
+def run_tcp_campaign(system: System, examples: int, seed: int = 1) -> dict[str, Any]:
     rng = random.Random(seed)
     fuzzer = TcpFuzzer(system)
     fuzzer.start()
@@ -97,9 +100,9 @@ def run_tcp_campaign(system, examples: int, seed: int = 1) -> dict:
 
 
 # ============================================================== the campaign
-def run_parser_campaign(examples: int) -> dict:
+def run_parser_campaign(examples: int) -> dict[str, int]:
     """Hypothesis-driven in-process fuzz; returns counts. Failures raise (crash = 1)."""
-    counts = {}
+    counts: dict[str, int] = {}
     budget = settings(max_examples=examples, deadline=None, database=None,
                       suppress_health_check=list(HealthCheck))
 
@@ -107,7 +110,7 @@ def run_parser_campaign(examples: int) -> dict:
 
     @budget
     @given(st.binary(max_size=300), st.lists(st.integers(0, 300), max_size=8), st.integers(1, 40))
-    def framer(stream, cuts, max_line):
+    def framer(stream: bytes, cuts: list[int], max_line: int) -> None:
         n[0] += 1
         check_framer(stream, cuts, max_line)
     framer()
@@ -117,7 +120,7 @@ def run_parser_campaign(examples: int) -> dict:
 
     @budget
     @given(command_line_strategy())
-    def args(text):
+    def args(text: str) -> None:
         n2[0] += 1
         check_args(_split_command(text)[2])
     args()
@@ -128,7 +131,7 @@ def run_parser_campaign(examples: int) -> dict:
 
     @budget
     @given(command_line_strategy())
-    def execute(text):
+    def execute(text: str) -> None:
         n3[0] += 1
         check_execute(gateway, session, text)
     execute()
@@ -136,7 +139,7 @@ def run_parser_campaign(examples: int) -> dict:
     return counts
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--parser-examples", type=int, default=35000,
                         help="hypothesis examples per in-process target (framer, args, execute)")
@@ -148,13 +151,13 @@ def main(argv=None) -> int:
 
     t0 = time.monotonic()
     crashes = 0
+    parser_counts: dict[str, int | str]
     try:
-        parser_counts = run_parser_campaign(opts.parser_examples)
+        parser_counts = dict(run_parser_campaign(opts.parser_examples))
     except Exception as exc:  # a falsified property
         crashes += 1
         parser_counts = {"error": repr(exc)[:300]}
     t1 = time.monotonic()
-    import tempfile
     log_dir = tempfile.mkdtemp(prefix="rob6-reliability-")
     with running(opts.robot, dummy=True, log_dir=log_dir, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:
         records_sent = records_session(system, 1000)

@@ -1,4 +1,6 @@
-"""Zenoh's transport options side by side: a bare query between two processes over loopback
+"""Benchmark of Zenoh's transport options side by side (TCP, unix socket, lowlatency).
+
+Zenoh's transport options side by side: a bare query between two processes over loopback
 TCP and a unix socket, each with the default transport and with ``lowlatency``."""
 
 from __future__ import annotations

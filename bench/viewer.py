@@ -1,4 +1,6 @@
-"""A Foxglove viewer in a process of its own, for the live-view benchmark: a real viewer
+"""A Foxglove viewer in a process of its own, the subscriber of the live-view benchmark.
+
+A Foxglove viewer in a process of its own, for the live-view benchmark: a real viewer
 (Foxglove Studio) is a separate program, usually on another machine, and decoding every
 message in the measuring process would charge its cost to the gateway round trips.
 
@@ -18,7 +20,7 @@ import sys
 class Viewer:
     """This program as a subprocess: ``Viewer(url)`` returns once it is connected."""
 
-    def __init__(self, url: str):
+    def __init__(self, url: str) -> None:
         self.process = subprocess.Popen([sys.executable, "-m", "bench.viewer", url],
                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         if self._says() != "ready":

@@ -62,7 +62,7 @@ def cpu_hogs(count: int) -> Iterator[list[subprocess.Popen[bytes]]]:
 
 
 class _Mix:
-    def __init__(self, client: Client, result: MixResult):
+    def __init__(self, client: Client, result: MixResult) -> None:
         self.client = client
         self.result = result
 
@@ -77,7 +77,7 @@ class _Mix:
             raise TimeoutError(f"{line!r}: no complete reply within {self.client.timeout} s (got {text!r})")
         if text.startswith("ERROR") or "\nERROR" in text:
             text += self.client.read_quiet(ERROR_TAIL_S)
-        self.result.samples.setdefault(line.split()[0], []).append(elapsed)
+        self.result.samples.setdefault(line.split(maxsplit=1)[0], []).append(elapsed)
         reply = text.splitlines()
         if "ERROR" in text or (expect is not None and reply != [expect]):
             self.result.errors.append((line, text))

@@ -21,6 +21,7 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from tests.conformance_deviations import DEVIATIONS, KAW_FS_FK_BY_DESIGN, KEEP, Modes, bare_command_error
 from tests.system import Client, System
@@ -38,7 +39,7 @@ class Result:
     failures: list[str] = field(default_factory=list)
 
 
-def load(path: Path) -> list[dict]:
+def load(path: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
 
 
@@ -71,7 +72,7 @@ def partial_forward_calc(send: str) -> bool:
 
 def same(send: str, got: str, expected: str) -> bool:
     word = command_word(send)
-    if word == "ForwardCalc" and partial_forward_calc(send.split("\n")[0]) and expected.count("\n") >= 2:
+    if word == "ForwardCalc" and partial_forward_calc(send.split("\n", maxsplit=1)[0]) and expected.count("\n") >= 2:
         got_lines, want_lines = got.split("\n", 2), expected.split("\n", 2)
         return (len(got_lines) == len(want_lines) and same("ForwardCalc", got_lines[0], want_lines[0])
                 and bool(STATUS.match(got_lines[1])) and same(send, got_lines[2], want_lines[2]))

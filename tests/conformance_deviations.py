@@ -21,8 +21,9 @@ def _name(robot: str) -> str:
     return robot + "\n"
 
 
-def _reply(records, number):
-    return records[number - 1]["reply"]
+def _reply(records: list[dict[str, Any]], number: int) -> str:
+    reply: str = records[number - 1]["reply"]
+    return reply
 
 
 #: ``(robot, records) -> expected reply``, ``None``: not judged
@@ -134,11 +135,11 @@ class Modes:
     original answered), and position queries are not judged once the robot really
     moved where the original stayed."""
 
-    def __init__(self, robot: str):
+    def __init__(self, robot: str) -> None:
         self.robot = robot
         self.alter = self.lin = self.moved = False
 
-    def expect(self, send: str):
+    def expect(self, send: str) -> str | object | None:
         words = send.split()
         word = words[0] if words else ""
         if word == "EnableAlter" or (word == "EnableAdeptAlter" and self.robot == "ad850"):

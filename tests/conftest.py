@@ -8,7 +8,7 @@ import pytest
 from tests.deploy import images
 
 
-def pytest_collection_modifyitems(config, items):
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     if os.environ.get("ROB6_SKIP_DOCKER") != "1":
         return
     skip = pytest.mark.skip(reason="ROB6_SKIP_DOCKER=1")
@@ -17,7 +17,7 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-def pytest_collection_finish(session):
+def pytest_collection_finish(session: pytest.Session) -> None:
     """Build the images here, after selection (-k, -m) and before any test: outside every
     test's timeout, once for all Docker suites."""
     selected = [item for item in session.items

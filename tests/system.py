@@ -18,13 +18,13 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import zenoh
 
 from rob6.bus import Bus, zenoh_config
 from rob6.config import BusSettings
-from rob6.messages import Empty, JointState
+from rob6.messages import Empty, JointState, LinkQuery, LinkStatus, Struct
 from rob6.robots import DEFAULT_ROBOT
 
 __all__ = ["CONFORMANCE", "REPO", "SHARED", "TEST_PORTS", "Client", "System", "driver_state", "free_port",
@@ -41,6 +41,9 @@ SHARED = Path(os.environ.get("ROB6_SHARED", REPO.parent / "shared")).resolve()
 #: kernel picks the local port of every outgoing connection; a port the kernel gave us
 #: from that range can be taken by someone's connection before our server binds it
 TEST_PORTS = range(20000, 32768)
+
+
+R = TypeVar("R")
 
 
 def free_port(kind: int = socket.SOCK_STREAM) -> int:
@@ -60,7 +63,7 @@ class System:
     """A running ``rob6 run`` (router, services, gateway) on free ports."""
 
     def __init__(self, robot: str = DEFAULT_ROBOT, *, dummy: bool = True, services: tuple[str, ...] = (),
-                 restart: bool = False, log_dir: str | None = None, extra_env: dict[str, str] | None = None):
+                 restart: bool = False, log_dir: str | None = None, extra_env: dict[str, str] | None = None) -> None:
         self.robot = robot
         self.port = free_port()
         self.router_port = free_port()
@@ -96,7 +99,7 @@ class System:
     def pids(self) -> dict[str, int]:
         """Service name -> pid of the processes the launcher started."""
         out = subprocess.run(["ps", "-o", "pid=,args=", "--ppid", str(self.process.pid)],
-                             capture_output=True, text=True).stdout
+                             capture_output=True, check=False, text=True).stdout
         pids = {}
         for line in out.splitlines():
             pid, _, args = line.strip().partition(" ")
@@ -109,6 +112,11 @@ class System:
 
     def client(self, **kwargs: Any) -> Client:
         return Client(self.port, **kwargs)
+
+    def bus(self, service: str = "test") -> Bus:
+        """A bus session on this system's router, for this robot (the caller closes it)."""
+        return Bus(BusSettings(robot=self.robot, robot_id=self.robot_id,
+                               connect=(f"tcp/127.0.0.1:{self.router_port}",)), service)
 
     def stop(self, timeout: float = 5.0) -> int:
         if self.process.poll() is None:
@@ -134,7 +142,7 @@ def running(robot: str = DEFAULT_ROBOT, **kwargs: Any) -> Iterator[System]:
 class Client:
     """A raw TCP client of the gateway."""
 
-    def __init__(self, port: int, *, host: str = "127.0.0.1", handshake: bool = True, timeout: float = 10.0):
+    def __init__(self, port: int, *, host: str = "127.0.0.1", handshake: bool = True, timeout: float = 10.0) -> None:
         self.sock = socket.create_connection((host, port), timeout=timeout)
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.timeout = timeout
@@ -150,30 +158,29 @@ class Client:
     def read_lines(self, count: int, timeout: float | None = None) -> str:
         """Exactly ``count`` lines (or what came before EOF/timeout)."""
         self.sock.settimeout(timeout or self.timeout)
-        while self.buffer.count(b"\n") < count:
-            try:
-                chunk = self.sock.recv(65536)
-            except TimeoutError:
-                break
-            if not chunk:
-                break
-            self.buffer += chunk
+        while self.buffer.count(b"\n") < count and self._receive():
+            pass
         lines = self.buffer.split(b"\n")
         taken = b"".join(line + b"\n" for line in lines[:count]) if len(lines) > count else self.buffer
         self.buffer = self.buffer[len(taken):]
         return taken.decode("latin-1")
 
+    def _receive(self) -> bool:
+        """One chunk into the buffer; False at the socket's timeout or at EOF."""
+        try:
+            chunk = self.sock.recv(65536)
+        except TimeoutError:
+            return False
+        if not chunk:
+            return False
+        self.buffer += chunk
+        return True
+
     def read_quiet(self, quiet: float = 0.15) -> str:
         """Whatever arrives until nothing more comes for ``quiet`` seconds."""
         self.sock.settimeout(quiet)
-        while True:
-            try:
-                chunk = self.sock.recv(65536)
-            except TimeoutError:
-                break
-            if not chunk:
-                break
-            self.buffer += chunk
+        while self._receive():
+            pass
         data, self.buffer = self.buffer, b""
         return data.decode("latin-1")
 
@@ -213,13 +220,22 @@ def zenoh_router(robot_id: str) -> Iterator[BusSettings]:
         router.close()
 
 
-def driver_state(system: System) -> JointState:
-    """The driver's state, asked over the system's Zenoh router like any service would."""
-    bus = Bus(BusSettings(robot=system.robot, robot_id=system.robot_id,
-                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
+def ask_driver(system: System, op: str, body: Struct, reply: type[R]) -> R:
+    """The driver's ``reply`` to ``op``, asked over the system's Zenoh router like any service would."""
+    bus = system.bus()
     try:
         bus.wait_for(["driver"], 10)
-        state: JointState = bus.request("driver", "state", Empty())
-        return state
+        answer: R = bus.request("driver", op, body)
+        return answer
     finally:
         bus.close()
+
+
+def driver_state(system: System) -> JointState:
+    """The driver's state."""
+    return ask_driver(system, "state", Empty(), JointState)
+
+
+def link_status(system: System) -> LinkStatus:
+    """The state of the driver's link to the robot."""
+    return ask_driver(system, "link", LinkQuery(), LinkStatus)

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from pathlib import Path
+
 import pytest
+from _pytest.mark import ParameterSet
 
 from tests.conformance import replay
 from tests.system import CONFORMANCE, SHARED, running
@@ -10,20 +14,20 @@ from tests.system import CONFORMANCE, SHARED, running
 ROBOTS = ("kr16", "ad850", "kaw_fs", "kr3rt", "kr16rt", "kr3")
 
 
-def cases():
+def cases() -> Iterator[ParameterSet]:
     """Every transcript of every robot type, each against a freshly started system."""
     for robot in ROBOTS:
         for path in sorted((CONFORMANCE / robot).glob("*.jsonl")):
             yield pytest.param(robot, path, id=f"{robot}-{path.stem}")
 
 
-def test_every_robot_has_transcripts():
+def test_every_robot_has_transcripts() -> None:
     """A missing or emptied transcript set is a failure, never a silently shorter suite."""
     counts = {robot: len(list((CONFORMANCE / robot).glob("*.jsonl"))) for robot in ROBOTS}
     assert all(counts.values()) and sum(counts.values()) >= 150, counts  # 150 when copied
 
 
-def test_transcripts_match_the_ground_truth():
+def test_transcripts_match_the_ground_truth() -> None:
     """The copy kept with the tests is the ground truth's (when it is beside the project)."""
     truth = SHARED / "conformance"
     if not truth.is_dir():
@@ -35,7 +39,7 @@ def test_transcripts_match_the_ground_truth():
 
 
 @pytest.mark.parametrize("robot, path", list(cases()))
-def test_transcript(robot, path):
+def test_transcript(robot: str, path: Path) -> None:
     with running(robot) as system:
         result = replay(system, robot, path)
     assert result.checked > 0

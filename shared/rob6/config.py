@@ -30,6 +30,12 @@ DEFAULT_LIVE_PORT = 8765
 LINKS = ("sim", "rsi", "simple_message", "adept", "kawasaki")
 
 
+def default_instance() -> str:
+    """A key-expression-safe id for this process: host name plus a random suffix."""
+    host = "".join(c if c.isalnum() or c in "-_" else "-" for c in socket.gethostname())
+    return f"{host or 'host'}-{uuid.uuid4().hex[:6]}"
+
+
 @dataclass(frozen=True)
 class BusSettings:
     robot: str = DEFAULT_ROBOT
@@ -38,7 +44,7 @@ class BusSettings:
     listen: tuple[str, ...] = ()
     mode: str = "peer"  # peer: direct links between services (lowest latency); client: all via router
     zenoh_config: str | None = None
-    instance: str = field(default_factory=lambda: default_instance())
+    instance: str = field(default_factory=default_instance)
 
     @classmethod
     def from_env(cls, **overrides: Any) -> BusSettings:
@@ -54,12 +60,6 @@ class BusSettings:
         )
         values.update(overrides)
         return cls(**values)
-
-
-def default_instance() -> str:
-    """A key-expression-safe id for this process: host name plus a random suffix."""
-    host = "".join(c if c.isalnum() or c in "-_" else "-" for c in socket.gethostname())
-    return f"{host or 'host'}-{uuid.uuid4().hex[:6]}"
 
 
 def _split(text: str) -> tuple[str, ...]:

@@ -260,16 +260,10 @@ class IkBatchReply(Struct):
     solutions: list[list[Joints | None]]  # per pose, per branch
 
 
-class SelectRequest(Struct):
-    """Configuration choice for a Cartesian move (the original's min-change rule)."""
+class SelectRequest(BackwardCalcRequest):
+    """Configuration choice for a Cartesian move (the original's min-change rule): BackwardCalc's
+    question, the same fields in the same order, restricted to the ``allowed`` status."""
 
-    pose: Pose
-    pattern: Pattern
-    current: Joints
-    turn_min: Joints
-    turn_max: Joints
-    max_change: Joints
-    weights: Joints
     allowed: Pattern
 
 

@@ -33,6 +33,7 @@ from collections.abc import Callable
 import zenoh
 
 from .bus import Bus
+from .errors import RefusedError
 from .messages import OWNER_SERVICES
 
 __all__ = ["OWNER_SERVICES", "EXIT_REFUSED", "Claim", "ClaimRefused"]
@@ -50,7 +51,7 @@ ROUTER_WAIT_S = 10.0
 EXIT_REFUSED = 78
 
 
-class ClaimRefused(Exception):
+class ClaimRefused(RefusedError):
     """This process may not own the role (another owner exists, or none can be ruled out)."""
 
 

@@ -1,4 +1,6 @@
-"""Rotations shared by the services: unit quaternions of a rotation matrix, of roll/pitch/yaw
+"""Rotations shared by the services: unit quaternions (of matrices, roll/pitch/yaw, axis-angle) and their product.
+
+Rotations shared by the services: unit quaternions of a rotation matrix, of roll/pitch/yaw
 angles and of an axis and angle, and their product.
 
 One component order everywhere: ``(w, x, y, z)``, the scalar first. Foxglove messages

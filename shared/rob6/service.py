@@ -21,6 +21,7 @@ import msgspec
 from . import logs
 from .bus import Bus
 from .config import BusSettings
+from .errors import ServiceError
 from .messages import SERVICES, Verbosity
 from .ownership import EXIT_REFUSED, OWNER_SERVICES, Claim, ClaimRefused
 
@@ -37,7 +38,7 @@ NEEDS: dict[str, tuple[str, ...]] = {
 NEEDS_WAIT_S = 30.0
 
 
-class StartupError(Exception):
+class StartupError(ServiceError):
     """Why rob6 or one of its services cannot start, in one line naming the cause and what
     to do (no traceback). ``rob6 run`` prints it and exits 1; a service whose ``setup``
     raises it exits ``EXIT_REFUSED``: a restart cannot fix it."""

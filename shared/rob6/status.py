@@ -1,4 +1,6 @@
-"""The robot's configuration ("status"): its words, how a pattern of them is read and
+"""The robot's configuration words ("status"): parsing, pattern matching and the flags' formulas.
+
+The robot's configuration ("status"): its words, how a pattern of them is read and
 matched, and the flags' formulas (robots.md "Status flags"). The one home of these rules:
 the gateway parses with it, the planner and the kinematics match and compute with it.
 

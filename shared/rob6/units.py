@@ -1,4 +1,6 @@
-"""The protocol's motion units and their SI equivalents: one conversion for the planner's
+"""The protocol's motion units and their SI equivalents, one conversion for planner and driver.
+
+The protocol's motion units and their SI equivalents: one conversion for the planner's
 trajectories and the driver's limit monitor, so both enforce the same numbers.
 
 The protocol gives speeds in degrees per 12 ms *unit* cycle and accelerations in degrees per

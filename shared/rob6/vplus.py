@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import re
 
+from .errors import RefusedError
+
 OUTPUTS = range(1, 513)
 INPUTS = range(1001, 1513)
 SOFT_SIGNALS = range(2001, 2513)
@@ -24,7 +26,7 @@ _SEPARATOR = re.compile(r"\s*,\s*|\s+")
 _NUMBER = re.compile(r"[+-]?\d+")
 
 
-class SignalError(ValueError):
+class SignalError(RefusedError, ValueError):
     """A SIGNAL instruction that cannot be carried out (the text says why)."""
 
 

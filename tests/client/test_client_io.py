@@ -12,8 +12,12 @@ import asyncio
 import socket
 import threading
 import time
+from collections.abc import Callable, Iterator
+from contextlib import AbstractAsyncContextManager
+from typing import Any
 
 import pytest
+from pytest import FixtureRequest
 
 from rob6_client import AsyncRobot, Rob6ConnectionError, Rob6Error, Rob6ProtocolError, Rob6Timeout, Robot
 
@@ -23,12 +27,16 @@ FK_LINES = ["0.000000 -0.000000 -1.000000 1768.000000 0.000000 -1.000000 0.00000
             "-1.000000 -0.000000 -0.000000 640.000000", "noflip up lefty"]
 
 
+#: message -> reply lines (a float is a pause in seconds, None silence, "CLOSE" hangs up)
+Script = dict[str, list[str | float | None]]
+
+
 class FakeOriginal:
     """Serves one session from a script: message -> reply lines (a float is a pause in
     seconds, None is silence). Unscripted messages get the original's `ERROR: <message>`."""
 
-    def __init__(self, script: dict, *, greeting: str | None = GREETING, accept: bool = True,
-                 line_gap: float = 0.03):
+    def __init__(self, script: Script, *, greeting: str | None = GREETING, accept: bool = True,
+                 line_gap: float = 0.03) -> None:
         self.script = script
         self.greeting, self.accept, self.line_gap = greeting, accept, line_gap
         self.messages: list[str] = []  # what each recv() brought, as the original saw it
@@ -73,41 +81,46 @@ class FakeOriginal:
 class BlockingTwin:
     """An AsyncRobot driven from blocking test code, so one scenario tests both clients."""
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, host: str, port: int, **kwargs: float) -> None:
         self.loop = asyncio.new_event_loop()
-        self.robot = AsyncRobot(*args, **kwargs)
+        self.robot = AsyncRobot(host, port, **kwargs)
         try:
             self.loop.run_until_complete(self.robot.connect())
         except BaseException:
             self.loop.close()
             raise
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:  # any AsyncRobot attribute, its methods made blocking
         attr = getattr(self.robot, name)
         if not callable(attr):
             return attr
         return lambda *args, **kwargs: self.loop.run_until_complete(attr(*args, **kwargs))
 
-    def alter(self, **kwargs):
-        return _SyncAlter(self.loop, self.robot.alter(**kwargs))
+    def alter(self, *, adept: bool = False, timeout: float | None = None) -> _SyncAlter:
+        return _SyncAlter(self.loop, self.robot.alter(adept=adept, timeout=timeout))
 
 
 class _SyncAlter:
-    def __init__(self, loop, manager):
+    def __init__(self, loop: asyncio.AbstractEventLoop, manager: AbstractAsyncContextManager[AsyncRobot]) -> None:
         self.loop, self.manager = loop, manager
 
-    def __enter__(self):
+    def __enter__(self) -> AsyncRobot:
         return self.loop.run_until_complete(self.manager.__aenter__())
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: Any) -> bool | None:
         return self.loop.run_until_complete(self.manager.__aexit__(*exc))
 
 
-@pytest.fixture(params=["sync", "async"])
-def connect(request):
-    servers, robots = [], []
+#: the fixture: connect(script, **options) -> (a client, sync or async, and its fake server)
+Connect = Callable[..., tuple["Robot | BlockingTwin", FakeOriginal]]
 
-    def connect(script=None, **kwargs):
+
+@pytest.fixture(params=["sync", "async"])
+def connect(request: FixtureRequest) -> Iterator[Connect]:
+    servers: list[FakeOriginal] = []
+    robots: list[Robot | BlockingTwin] = []
+
+    def connect(script: Script | None = None, **kwargs: Any) -> tuple[Robot | BlockingTwin, FakeOriginal]:
         server_options = {k: kwargs.pop(k) for k in ("greeting", "accept", "line_gap") if k in kwargs}
         server = FakeOriginal(script or {}, **server_options)
         servers.append(server)
@@ -124,17 +137,19 @@ def connect(request):
         server.close()
 
 
-def test_multi_line_replies_arriving_line_by_line(connect):
+def test_multi_line_replies_arriving_line_by_line(connect: Connect) -> None:
     robot, server = connect({"ForwardCalc 0.0 0.0 0.0 0.0 0.0 0.0": FK_LINES, "GetRobot": ["kr16"]},
                             line_gap=0.05)
-    pose, status = robot.forward_calc([0, 0, 0, 0, 0, 0])
+    fk = robot.forward_calc([0, 0, 0, 0, 0, 0])
+    assert fk is not None
+    pose, status = fk
     assert pose.position == (1768.0, -0.0, 640.0) and str(status) == "noflip up lefty"
     assert robot.get_robot() == "kr16"
     # one command per write, the next only after the reply: the original runs one per read
     assert server.commands() == ["ForwardCalc 0.0 0.0 0.0 0.0 0.0 0.0\n", "GetRobot\n"]
 
 
-def test_parse_error_with_a_late_false_keeps_the_session_in_step(connect):
+def test_parse_error_with_a_late_false_keeps_the_session_in_step(connect: Connect) -> None:
     robot, _ = connect({f"MovePTPJoints {HOME}": ["ERROR: incorrect joints", 0.2, "false"],
                         "GetRobot": ["kr16"]})
     with pytest.raises(Rob6Error) as caught:
@@ -143,7 +158,7 @@ def test_parse_error_with_a_late_false_keeps_the_session_in_step(connect):
     assert robot.get_robot() == "kr16"
 
 
-def test_error_without_false_does_not_wait(connect):
+def test_error_without_false_does_not_wait(connect: Connect) -> None:
     """rob6's `ERROR: <service> unavailable` has no `false` line after it."""
     robot, _ = connect({"GetPositionJoints": ["ERROR: driver unavailable"], "GetRobot": ["kr16"]})
     began = time.monotonic()
@@ -153,7 +168,7 @@ def test_error_without_false_does_not_wait(connect):
     assert robot.get_robot() == "kr16"
 
 
-def test_gripper_reply_lines_before_true(connect):
+def test_gripper_reply_lines_before_true(connect: Connect) -> None:
     robot, _ = connect({"GripperMove -1.0": ["Start moving with amperage -1.000", "true"],
                         "GripperGoHome": ["ERROR: gripper blocked", "false"], "HasGripper": ["true"]})
     assert robot.gripper_move(-1) is True
@@ -162,7 +177,7 @@ def test_gripper_reply_lines_before_true(connect):
     assert robot.has_gripper() is True
 
 
-def test_set_allowed_status_learns_the_silent_outcome_from_a_ping(connect):
+def test_set_allowed_status_learns_the_silent_outcome_from_a_ping(connect: Connect) -> None:
     robot, server = connect({"SetAllowedStatus noflip up toggleArm": [None], "CM_PING": ["PONG"],
                              "SetAllowedStatus flip down righty": ["ERROR: incorrect status"],
                              "GetAllowedStatus": ["noflip up toggleArm"]})
@@ -175,7 +190,7 @@ def test_set_allowed_status_learns_the_silent_outcome_from_a_ping(connect):
                                  "SetAllowedStatus flip down righty\n", "CM_PING\n", "CM_PING\n"]
 
 
-def test_no_reply_times_out_and_closes_the_connection(connect):
+def test_no_reply_times_out_and_closes_the_connection(connect: Connect) -> None:
     robot, _ = connect({f"MovePTPJoints {HOME}": [None]}, timeout=5.0)
     began = time.monotonic()
     with pytest.raises(Rob6Timeout) as caught:
@@ -187,7 +202,7 @@ def test_no_reply_times_out_and_closes_the_connection(connect):
         robot.get_robot()
 
 
-def test_default_timeouts_short_for_queries_long_for_moves(connect):
+def test_default_timeouts_short_for_queries_long_for_moves(connect: Connect) -> None:
     robot, _ = connect({"GetRobot": [0.5, "kr16"], f"MovePTPJoints {HOME}": [0.5, "true"]},
                        timeout=0.3, move_timeout=2.0)
     assert robot.move_ptp_joints([0] * 6) is True  # move_timeout
@@ -195,21 +210,21 @@ def test_default_timeouts_short_for_queries_long_for_moves(connect):
         robot.get_robot()  # timeout
 
 
-def test_server_closing_mid_reply(connect):
+def test_server_closing_mid_reply(connect: Connect) -> None:
     robot, _ = connect({"ForwardCalc 0.0 0.0 0.0 0.0 0.0 0.0": [FK_LINES[0], "CLOSE"]})
     with pytest.raises(Rob6ConnectionError, match="closed the connection"):
         robot.forward_calc([0] * 6)
     assert not robot.connected
 
 
-def test_unintelligible_reply_closes_the_connection(connect):
+def test_unintelligible_reply_closes_the_connection(connect: Connect) -> None:
     robot, _ = connect({"GetPositionJoints": ["1 2 3"]})
     with pytest.raises(Rob6ProtocolError, match="unexpected reply '1 2 3'"):
         robot.get_position_joints()
     assert not robot.connected
 
 
-def test_bad_arguments_are_refused_before_anything_is_sent(connect):
+def test_bad_arguments_are_refused_before_anything_is_sent(connect: Connect) -> None:
     """The original would wait for missing arguments and swallow the next command."""
     robot, server = connect({"GetRobot": ["kr16"]})
     with pytest.raises(ValueError, match="expected 6 numbers, got 5"):
@@ -217,7 +232,7 @@ def test_bad_arguments_are_refused_before_anything_is_sent(connect):
     with pytest.raises(ValueError, match="finite"):
         robot.forward_calc([float("nan"), 0, 0, 0, 0, 0])
     with pytest.raises(TypeError):
-        robot.move_ptp_joints("10 0 0 0 0 0")
+        robot.move_ptp_joints("10 0 0 0 0 0")  # type: ignore[arg-type]  # the wrong type on purpose
     with pytest.raises(ValueError, match="unknown status word 'Noflip'"):
         robot.backward_calc([0] * 12, "Noflip up lefty")
     with pytest.raises(ValueError, match="one category"):
@@ -225,28 +240,28 @@ def test_bad_arguments_are_refused_before_anything_is_sent(connect):
     with pytest.raises(ValueError, match="12 numbers"):
         robot.move_ptp_hom_row_wise([0] * 11)
     with pytest.raises(TypeError):
-        robot.set_single_joint_max_speed(1.5, 0.1)  # a joint index is an int
+        robot.set_single_joint_max_speed(1.5, 0.1)  # type: ignore[arg-type]  # a joint index is an int
     with pytest.raises(ValueError, match="single line"):
         robot.direct_adept_cmd("jmove 0\nQuit")
     with pytest.raises(TypeError):
-        robot.set_verbosity()  # no command without its arguments
+        robot.set_verbosity()  # type: ignore[call-arg]  # no command without its arguments
     assert robot.get_robot() == "kr16"
     assert server.commands() == ["GetRobot\n"]
 
 
-def test_no_greeting_means_another_client_is_connected(connect):
+def test_no_greeting_means_another_client_is_connected(connect: Connect) -> None:
     with pytest.raises(Rob6ConnectionError, match="no greeting"):
         connect(greeting=None, connect_timeout=0.3)
 
 
-def test_busy_server_and_failed_handshake(connect):
+def test_busy_server_and_failed_handshake(connect: Connect) -> None:
     with pytest.raises(Rob6ConnectionError, match="server busy"):
         connect(greeting="ERROR: server busy, another client is connected")
     with pytest.raises(Rob6ConnectionError, match="handshake failed"):
         connect(accept=False)
 
 
-def test_quit_on_close(connect):
+def test_quit_on_close(connect: Connect) -> None:
     robot, server = connect({"Quit": ["bye!", "CLOSE"]})
     assert robot.greeting == GREETING
     robot.close()
@@ -254,7 +269,7 @@ def test_quit_on_close(connect):
     assert not robot.connected and server.commands() == ["Quit\n"]
 
 
-def test_alter_is_disabled_even_when_the_block_fails(connect):
+def test_alter_is_disabled_even_when_the_block_fails(connect: Connect) -> None:
     robot, server = connect({"EnableAlter": ["true"], "DisableAlter": ["true"],
                              f"MoveRTJoints {HOME}": ["true"], "EnableAdeptAlter": ["false"]})
     with pytest.raises(KeyError), robot.alter():
@@ -266,7 +281,7 @@ def test_alter_is_disabled_even_when_the_block_fails(connect):
     assert server.commands()[-1] == "EnableAdeptAlter\n"
 
 
-def test_connection_refused():
+def test_connection_refused() -> None:
     port = socket.create_server(("127.0.0.1", 0))
     free = port.getsockname()[1]
     port.close()

@@ -10,11 +10,12 @@ import pytest
 
 from rob6_client import COMMANDS, AsyncRobot, Pose, Robot, Status, normalize_status, parse_reply
 from rob6_client._stubgen import STUB, stub
+from rob6_client.protocol import StatusLike
 from rob6_gateway.args import Args
 from rob6_gateway.commands import COMMANDS as GATEWAY_COMMANDS
 
 
-def test_every_protocol_command_has_a_method():
+def test_every_protocol_command_has_a_method() -> None:
     assert set(COMMANDS) == set(GATEWAY_COMMANDS) and len(COMMANDS) == 78
     for command in COMMANDS.values():
         assert inspect.isfunction(getattr(Robot, command.method))
@@ -27,7 +28,7 @@ def test_every_protocol_command_has_a_method():
     assert len(set(names.values())) == 78
 
 
-def test_generated_signatures_and_docs():
+def test_generated_signatures_and_docs() -> None:
     signature = inspect.signature(Robot.backward_calc)
     assert list(signature.parameters) == ["self", "pose", "status", "timeout"]
     assert signature.parameters["timeout"].kind is inspect.Parameter.KEYWORD_ONLY
@@ -37,7 +38,7 @@ def test_generated_signatures_and_docs():
     assert doc is not None and "Original rob6server" in doc and "kr16" in doc
 
 
-def test_type_stub_is_current():
+def test_type_stub_is_current() -> None:
     assert STUB.read_text() == stub(), "run: .venv/bin/python -m rob6_client._stubgen"
     stubbed = ast.parse(STUB.read_text())
     methods = {c.name: [f.name for f in c.body if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))]
@@ -45,7 +46,7 @@ def test_type_stub_is_current():
     assert methods["RobotCommands"] == methods["AsyncRobotCommands"] == [c.method for c in COMMANDS.values()]
 
 
-def encoded(name: str, *values) -> Args:
+def encoded(name: str, *values: object) -> Args:
     """What the gateway's argument parser (the original's rules) reads from our line."""
     line = COMMANDS[name].encode(values)
     word, _, rest = line.partition(" ")
@@ -54,11 +55,11 @@ def encoded(name: str, *values) -> Args:
 
 
 @pytest.mark.parametrize("q", [[10, 0, 0, 0, 0, 0], [1e-5, -0.0, 123.456789012345, -1e-12, 1e6, 359.99999999]])
-def test_numbers_reach_the_server_exactly(q):
+def test_numbers_reach_the_server_exactly(q: list[float] | list[int]) -> None:
     assert encoded("MovePTPJoints", q).joints() == [float(v) for v in q]
 
 
-def test_poses_flat_rows_or_homogeneous():
+def test_poses_flat_rows_or_homogeneous() -> None:
     flat = [0, 0, -1, 1768, 0, -1, 0, 0, -1, 0, 0, 640]
     rows = [flat[0:4], flat[4:8], flat[8:12]]
     for pose in (flat, rows, rows + [[0, 0, 0, 1]], tuple(map(tuple, rows)), Pose(*flat)):
@@ -76,7 +77,7 @@ def test_poses_flat_rows_or_homogeneous():
     ("noToggleElbow", ("toggleHand", "noToggleElbow", "toggleArm")),
     (Status("flip", "down", "noToggleArm"), ("flip", "down", "noToggleArm")),
 ])
-def test_status_words_are_sent_normalised(words, expected):
+def test_status_words_are_sent_normalised(words: StatusLike, expected: tuple[str, ...]) -> None:
     assert normalize_status(words) == expected
     args = encoded("BackwardCalc", [0] * 12, words)
     args.matrix()
@@ -84,12 +85,12 @@ def test_status_words_are_sent_normalised(words, expected):
 
 
 @pytest.mark.parametrize("words", ["", "NOFLIP", "flip up lefty righty", "up down", "flip extra"])
-def test_bad_status_words(words):
+def test_bad_status_words(words: str) -> None:
     with pytest.raises(ValueError):
         normalize_status(words)
 
 
-def test_reply_values():
+def test_reply_values() -> None:
     pose, status = parse_reply("ForwardCalc", "0.000000 -0.173648 -0.984808 1741.140107 0.000000 -0.984808 "
                                               "0.173648 -307.009978 -1.000000 -0.000000 -0.000000 640.000000\n"
                                               "noflip up lefty\n")

@@ -5,28 +5,29 @@ from __future__ import annotations
 import asyncio
 import math
 import time
+from collections.abc import Iterator, Sequence
 
 import pytest
 
 from rob6_client import COMMANDS, AsyncRobot, Rob6ConnectionError, Rob6Error, Rob6Timeout, Robot
-from tests.system import running
+from tests.system import System, running
 
 Q = (10.0, -60.0, 80.0, 20.0, 40.0, 30.0)  # kr16, noflip up lefty
 KR16_SPEED = (0.1872, 0.1872, 0.1872, 0.396, 0.396, 0.738)
 
 
 @pytest.fixture(scope="module")
-def kr16():
+def kr16() -> Iterator[System]:
     # Shutdown refused, as on a shared lab server: a rob6-only ERROR without `false`
     with running("kr16", dummy=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:
         yield system
 
 
-def close_to(a, b, tol=1e-3) -> bool:
-    return len(a) == len(b) and all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
+def close_to(a: Sequence[float] | None, b: Sequence[float], tol: float = 1e-3) -> bool:
+    return a is not None and len(a) == len(b) and all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
-def stream(robot: Robot, start, count: int, rate_hz: float = 250.0) -> None:
+def stream(robot: Robot, start: Sequence[float], count: int, rate_hz: float = 250.0) -> None:
     """MoveRTJoints targets paced at ``rate_hz``, A1 advancing 0.02 deg each."""
     began = time.monotonic()
     for k in range(1, count + 1):
@@ -34,7 +35,7 @@ def stream(robot: Robot, start, count: int, rate_hz: float = 250.0) -> None:
         time.sleep(max(0.0, began + k / rate_hz - time.monotonic()))
 
 
-def test_lab_session(kr16):
+def test_lab_session(kr16: System) -> None:
     with Robot("127.0.0.1", kr16.port) as robot:
         assert robot.greeting == "welcome to rob6server 0.1.01 !"
         assert (robot.get_robot(), robot.get_version(), robot.cm_ping()) == ("kr16", "0.1.01", "PONG")
@@ -119,7 +120,7 @@ def test_lab_session(kr16):
     assert not robot.connected
 
 
-def test_timeout_closes_the_session_and_a_new_one_starts(kr16):
+def test_timeout_closes_the_session_and_a_new_one_starts(kr16: System) -> None:
     robot = Robot("127.0.0.1", kr16.port)
     with pytest.raises(Rob6Timeout):
         robot.ping_robot(40, 25, timeout=0.2)  # ~1 s of pings
@@ -136,8 +137,8 @@ def test_timeout_closes_the_session_and_a_new_one_starts(kr16):
             time.sleep(0.1)
 
 
-def test_asyncio_twin(kr16):
-    async def session():
+def test_asyncio_twin(kr16: System) -> None:
+    async def session() -> None:
         async with AsyncRobot("127.0.0.1", kr16.port) as robot:
             assert await robot.get_robot() == "kr16"
             fk = await robot.forward_calc(Q)
@@ -165,7 +166,7 @@ def test_asyncio_twin(kr16):
     asyncio.run(session())
 
 
-def test_ad850_gripper_and_adept_commands():
+def test_ad850_gripper_and_adept_commands() -> None:
     with running("ad850", dummy=True) as system, Robot("127.0.0.1", system.port) as robot:
         assert robot.is_adept() and robot.has_gripper() is True
         assert robot.gripper_go_home() is True

@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Iterator
 from itertools import pairwise
+from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -24,11 +27,11 @@ MAX_MESSAGE = 1024  # the original reads at most this much per message (longer s
 
 def command_word(sent: str) -> str | None:
     """The command the original executed: the first word of the message up to a NUL."""
-    words = sent.split("\0")[0].split()
+    words = sent.split("\0", maxsplit=1)[0].split()
     return words[0] if words else None
 
 
-def covered_records(path):
+def covered_records(path: Path) -> Iterator[tuple[str, dict[str, Any], str | list[str]]]:
     """(kind, record, reply to parse) for the records whose reply the library must understand.
 
     Left out: a command left waiting for its missing arguments (`no_reply_within_ms`) and
@@ -66,10 +69,11 @@ def covered_records(path):
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: f"{p.parent.name}/{p.stem}")
-def test_every_recorded_reply_parses(path):
+def test_every_recorded_reply_parses(path: Path) -> None:
     checked: Counter[str] = Counter()
     for name, record, reply in covered_records(path):
         if name == "handshake":
+            assert isinstance(reply, list)
             accepted = reply[1:] == ["accepted"]
             if accepted:
                 assert run_offline(name, handshake(), reply) == reply[0]
@@ -77,6 +81,7 @@ def test_every_recorded_reply_parses(path):
                 with pytest.raises(Rob6ConnectionError, match="handshake failed"):
                     run_offline(name, handshake(), reply)
             continue
+        assert isinstance(reply, str)
         try:
             value = parse_reply(name, reply)
         except Rob6Error as exc:
@@ -90,7 +95,7 @@ def test_every_recorded_reply_parses(path):
     assert checked or path.stem in ("framing_wait",), "no reply of this file was checked"
 
 
-def test_the_transcripts_exercise_every_reply_shape():
+def test_the_transcripts_exercise_every_reply_shape() -> None:
     """The corpus is big enough to stand for the original: nearly every command, every shape."""
     commands, shapes, total = set(), set(), 0
     for path in FILES:
@@ -105,7 +110,7 @@ def test_the_transcripts_exercise_every_reply_shape():
             "tuple[Pose, Status] | None", "PingResult | None", "None"} <= shapes
 
 
-def test_set_allowed_status_normalises_like_the_original():
+def test_set_allowed_status_normalises_like_the_original() -> None:
     """After a successful SetAllowedStatus the original's GetAllowedStatus shows the pattern
     in hand/elbow/arm order with missing categories toggled: what normalize_status sends."""
     compared = 0

@@ -16,6 +16,11 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
+from typing import Any
+
+#: a request to or reply of the control channel (JSON object)
+Json = dict[str, Any]
 
 READY = re.compile(
     r"adept-sm-sim ready: motion ([\d.]+):(\d+), state ([\d.]+):(\d+), "
@@ -26,14 +31,15 @@ READY = re.compile(
 class AdeptController:
     """Starts ``python -m adept_sm_sim`` on free ports; extra CLI flags via ``args``."""
 
-    def __init__(self, *args: str, byte_order: str = "big", start_timeout: float = 20.0):
+    def __init__(self, *args: str, byte_order: str = "big", start_timeout: float = 20.0) -> None:
         self.args = ["--motion-port", "0", "--state-port", "0", "--io-port", "0", "--control", "127.0.0.1:0",
                      "--byte-order", byte_order, *args]
         self.start_timeout = start_timeout
-        self.proc: subprocess.Popen | None = None
-        self.motion: tuple[str, int] | None = None
-        self.state: tuple[str, int] | None = None
-        self.control: tuple[str, int] | None = None
+        self.proc: subprocess.Popen[str] | None = None
+        # (host, port) of the simple_message ports and the control channel: set by start()
+        self.motion: tuple[str, int]
+        self.state: tuple[str, int]
+        self.control: tuple[str, int]
         self.io: tuple[str, int] | None = None
         self.stderr_lines: list[str] = []
         self._ctl: socket.socket | None = None
@@ -107,11 +113,11 @@ class AdeptController:
     def __enter__(self) -> AdeptController:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     # ---- control channel ---------------------------------------------------------
-    def request(self, req: dict | str) -> dict:
+    def request(self, req: Json | str) -> Json:
         """One request (a dict, or a raw line to test bad input) and its reply."""
         line = req if isinstance(req, str) else json.dumps(req)
         assert self._ctl_file is not None, "not started"
@@ -120,15 +126,16 @@ class AdeptController:
         reply = self._ctl_file.readline()
         if not reply:
             raise ConnectionError(f"control channel closed; stderr: {self.stderr_lines}")
-        return json.loads(reply)
+        answer: Json = json.loads(reply)
+        return answer
 
-    def _ok(self, req: dict) -> dict:
+    def _ok(self, req: Json) -> Json:
         reply = self.request(req)
         if not reply.get("ok"):
             raise RuntimeError(f"{req} refused: {reply.get('error')}")
         return reply
 
-    def status(self) -> dict:
+    def status(self) -> Json:
         return self._ok({"cmd": "status"})
 
     def estop(self) -> None:
@@ -147,12 +154,13 @@ class AdeptController:
         self._ok({"cmd": "clear_error"})
 
     def drop_connection(self, port: str) -> bool:
-        return self._ok({"cmd": "drop_connection", "port": port})["dropped"]
+        dropped: bool = self._ok({"cmd": "drop_connection", "port": port})["dropped"]
+        return dropped
 
     def slow_ack(self, ms: float) -> None:
         self._ok({"cmd": "slow_ack", "ms": ms})
 
-    def wait_for(self, predicate, timeout: float = 15.0, what: str = "condition") -> dict:
+    def wait_for(self, predicate: Callable[[Json], object], timeout: float = 15.0, what: str = "condition") -> Json:
         """Poll status() until predicate(status) holds; the last status."""
         deadline = time.monotonic() + timeout
         while True:

@@ -20,6 +20,11 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+#: a request to or reply of the control channel (JSON object)
+Json = dict[str, Any]
 
 READY = re.compile(r"kuka-rsi-sim ready: control ([\d.]+):(\d+), sending to (\S+):(\d+) every (\d+) ms$")
 
@@ -32,10 +37,10 @@ class RsiController:
     """Starts ``python -m kuka_rsi_sim`` sending to ``rob6``; more CLI flags via ``args``
     (e.g. ``"--timeout", "20"``, ``"--cycle-ms", "12"``)."""
 
-    def __init__(self, *args: str, rob6: tuple[str, int], robot: str = "kr16rt", start_timeout: float = 20.0):
+    def __init__(self, *args: str, rob6: tuple[str, int], robot: str = "kr16rt", start_timeout: float = 20.0) -> None:
         self.args = ["--robot", robot, "--rob6", f"{rob6[0]}:{rob6[1]}", "--control", "127.0.0.1:0", *args]
         self.start_timeout = start_timeout
-        self.proc: subprocess.Popen | None = None
+        self.proc: subprocess.Popen[str] | None = None
         self.control: tuple[str, int] | None = None
         self.cycle_ms: int | None = None
         self.stderr_lines: list[str] = []
@@ -122,11 +127,11 @@ class RsiController:
     def __enter__(self) -> RsiController:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     # ---- control channel -----------------------------------------------------
-    def send_line(self, line: bytes) -> dict:
+    def send_line(self, line: bytes) -> Json:
         """One raw request line (no newline inside), its JSON reply."""
         if self._ctl_file is None:
             raise RsiControllerError("not started")
@@ -135,37 +140,38 @@ class RsiController:
         reply = self._ctl_file.readline()
         if not reply:
             raise RsiControllerError(f"control channel closed; stderr: {self.stderr_lines[-20:]}")
-        return json.loads(reply)
+        answer: Json = json.loads(reply)
+        return answer
 
-    def request(self, req: dict) -> dict:
+    def request(self, req: Json) -> Json:
         return self.send_line(json.dumps(req).encode())
 
-    def _ok(self, req: dict) -> dict:
+    def _ok(self, req: Json) -> Json:
         reply = self.request(req)
         if not reply.get("ok"):
             raise RsiControllerError(f"{req} refused: {reply.get('error')}")
         return reply
 
-    def status(self) -> dict:
+    def status(self) -> Json:
         return self._ok({"cmd": "status"})
 
-    def fault(self, **kw) -> dict:
+    def fault(self, **kw: float) -> Json:
         """lose_s=, drop_every=, delay_ms= (for_s=), duplicate_every=, reorder_every="""
         return self._ok({"cmd": "fault", **kw})
 
-    def clear(self) -> dict:
+    def clear(self) -> Json:
         return self._ok({"cmd": "clear"})
 
-    def restart(self, start=None) -> dict:
+    def restart(self, start: Sequence[float] | None = None) -> Json:
         req: dict[str, object] = {"cmd": "restart"}
         if start is not None:
             req["start"] = list(start)
         return self._ok(req)
 
-    def vanish(self, for_s: float | None = None) -> dict:
+    def vanish(self, for_s: float | None = None) -> Json:
         return self._ok({"cmd": "vanish", "for_s": for_s})
 
-    def wait_for(self, predicate, timeout: float = 10.0, what: str = "condition") -> dict:
+    def wait_for(self, predicate: Callable[[Json], object], timeout: float = 10.0, what: str = "condition") -> Json:
         """Poll the status until predicate(status) is true; the last status."""
         deadline = time.monotonic() + timeout
         while True:

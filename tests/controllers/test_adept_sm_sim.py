@@ -14,8 +14,11 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 import pytest
+from pytest import FixtureRequest
 
 from tests.controllers.adept_controller import AdeptController
 
@@ -27,7 +30,7 @@ STATUS_FIELDS = ("drives_powered", "e_stopped", "error_code", "in_error", "in_mo
                  "motion_possible")
 
 
-def to_controller_rad(q_rob6_deg):
+def to_controller_rad(q_rob6_deg: Sequence[float]) -> list[float]:
     """rob6 joints (deg) -> the controller's joints on the wire (rad), as documented in
     deploy/adept/README.md: (-q1, q2, q3 + 90, -q4, q5, -q6)."""
     q1, q2, q3, q4, q5, q6 = q_rob6_deg
@@ -39,7 +42,8 @@ def frame(e: str, msg_type: int, comm: int, reply: int, body: bytes) -> bytes:
     return struct.pack(e + "i", 12 + len(body)) + header + body
 
 
-def traj_pt(e, seq, q_rob6_deg=(0, 0, 0, 0, 0, 0), vel=0.5, dur=0.0, comm=REQUEST, rad=None):
+def traj_pt(e: str, seq: int, q_rob6_deg: Sequence[float] = (0, 0, 0, 0, 0, 0), vel: float = 0.5, dur: float = 0.0,
+            comm: int = REQUEST, rad: Sequence[float] | None = None) -> bytes:
     joints = list(rad if rad is not None else to_controller_rad(q_rob6_deg)) + [0.0] * 4
     return frame(e, JOINT_TRAJ_PT, comm, 0, struct.pack(e + "i10fff", seq, *joints, vel, dur))
 
@@ -54,7 +58,11 @@ def recv_exact(sock: socket.socket, n: int) -> bytes:
     return data
 
 
-def read_frame(sock: socket.socket, e: str):
+def read_frame(sock: socket.socket, e: str) -> tuple[int, int, int, int, bytes]:
+    length: int
+    msg_type: int
+    comm: int
+    reply: int
     (length,) = struct.unpack(e + "i", recv_exact(sock, 4))
     payload = recv_exact(sock, length)
     msg_type, comm, reply = struct.unpack_from(e + "3i", payload)
@@ -72,39 +80,40 @@ def closed_by_peer(sock: socket.socket, timeout: float = 10.0) -> bool:
 class Motion:
     """The motion port: send a point, read its reply."""
 
-    def __init__(self, addr, e: str):
+    def __init__(self, addr: tuple[str, int], e: str) -> None:
         self.e = e
         self.sock = socket.create_connection(addr, timeout=20)
 
     def send(self, data: bytes) -> None:
         self.sock.sendall(data)
 
-    def reply(self):
+    def reply(self) -> tuple[int, int]:
         length, msg_type, comm, code, body = read_frame(self.sock, self.e)
         assert (length, msg_type, comm) == (16, JOINT_TRAJ_PT, REPLY), (length, msg_type, comm)
+        seq: int
         (seq,) = struct.unpack(self.e + "i", body)
         return code, seq
 
-    def point(self, seq, q_rob6_deg=(0, 0, 0, 0, 0, 0), **kw):
+    def point(self, seq: int, q_rob6_deg: Sequence[float] = (0, 0, 0, 0, 0, 0), **kw: Any) -> tuple[int, int]:
         self.send(traj_pt(self.e, seq, q_rob6_deg, **kw))
         return self.reply()
 
-    def close(self):
+    def close(self) -> None:
         self.sock.close()
 
 
 class State:
     """The state port, read in the background: every JOINT_POSITION and STATUS."""
 
-    def __init__(self, addr, e: str):
+    def __init__(self, addr: tuple[str, int], e: str) -> None:
         self.e = e
         self.sock = socket.create_connection(addr, timeout=20)
-        self.frames: list[tuple[float, str, tuple]] = []
+        self.frames: list[tuple[float, str, tuple[float, ...] | dict[str, int]]] = []
         self.lock = threading.Lock()
         self.error: Exception | None = None
         threading.Thread(target=self._run, daemon=True).start()
 
-    def _run(self):
+    def _run(self) -> None:
         try:
             while True:
                 length, msg_type, comm, reply, body = read_frame(self.sock, self.e)
@@ -128,7 +137,7 @@ class State:
         with self.lock:
             return len(self.frames)
 
-    def wait(self, kind: str, pred, since: int = 0, timeout: float = 15.0):
+    def wait(self, kind: str, pred: Callable[[Any], object], since: int = 0, timeout: float = 15.0) -> Any:
         """The first frame of this kind from index `since` on that satisfies pred."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -141,22 +150,22 @@ class State:
             time.sleep(0.01)
         raise AssertionError(f"no {kind} frame matching within {timeout} s (error: {self.error})")
 
-    def close(self):
+    def close(self) -> None:
         self.sock.close()
 
 
-def close_to(a, b, tol):
+def close_to(a: Sequence[float], b: Sequence[float], tol: float) -> bool:
     return all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
 @pytest.fixture
-def sim(request):
+def sim(request: FixtureRequest) -> Iterator[AdeptController]:
     args = getattr(request, "param", ())
     with AdeptController("--state-period", "0.02", *args) as ctl:
         yield ctl
 
 
-def moving_sim(*extra):
+def moving_sim(*extra: str) -> AdeptController:
     # J1 at 10 % monitor speed: 25 deg/s, so a long move leaves time to interfere
     return AdeptController("--state-period", "0.02", "--monitor-speed", "10", *extra)
 
@@ -164,7 +173,7 @@ def moving_sim(*extra):
 # ---------------------------------------------------------------------------------
 
 
-def test_ready_line_and_clean_exit_on_sigterm_and_sigint():
+def test_ready_line_and_clean_exit_on_sigterm_and_sigint() -> None:
     for sig in (signal.SIGTERM, signal.SIGINT):
         ctl = AdeptController().start()
         assert ctl.motion is not None and ctl.state is not None and ctl.control is not None and ctl.proc is not None
@@ -182,7 +191,7 @@ def test_ready_line_and_clean_exit_on_sigterm_and_sigint():
 
 
 @pytest.mark.parametrize("byte_order", ["big", "little"])
-def test_streamed_points_are_acknowledged_and_executed(byte_order):
+def test_streamed_points_are_acknowledged_and_executed(byte_order: str) -> None:
     e = ORDER[byte_order]
     targets = [(10, -10, 20, 5, 10, -15), (20, -20, 30, 10, 20, -30), (25, -15, 35, 0, 30, -45)]
     with AdeptController("--state-period", "0.02", byte_order=byte_order) as ctl:
@@ -211,7 +220,7 @@ def test_streamed_points_are_acknowledged_and_executed(byte_order):
         state.close()
 
 
-def test_start_pose_follows_the_documented_joint_convention():
+def test_start_pose_follows_the_documented_joint_convention() -> None:
     with AdeptController("--start-pose", "10,-20,30,40,50,60") as ctl:
         st = ctl.status()
         assert close_to(st["position_controller_deg"], (-10, -20, 120, -40, 50, -60), 1e-9)
@@ -222,14 +231,14 @@ def test_start_pose_follows_the_documented_joint_convention():
         state.close()
 
 
-def test_start_pose_outside_the_limits_is_refused():
+def test_start_pose_outside_the_limits_is_refused() -> None:
     ctl = AdeptController("--start-pose", "0 0 200 0 0 0")
     with pytest.raises(RuntimeError, match="exited with code 2.*outside the controller range"):
         ctl.start()
     assert ctl.proc is not None and ctl.proc.returncode == 2
 
 
-def test_stop_decelerates_and_clears_the_queue():
+def test_stop_decelerates_and_clears_the_queue() -> None:
     with moving_sim() as ctl:
         motion = Motion(ctl.motion, ">")
         assert motion.point(0, (150, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
@@ -247,7 +256,7 @@ def test_stop_decelerates_and_clears_the_queue():
         ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
 
 
-def test_point_outside_a_joint_limit_is_refused_and_does_not_move(sim):
+def test_point_outside_a_joint_limit_is_refused_and_does_not_move(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     # rob6 q3 = 180 is 270 deg on the controller's J3 (range -29..259)
     assert motion.point(0, (0, 0, 180, 0, 0, 0)) == (FAILURE, 0)
@@ -263,7 +272,7 @@ def test_point_outside_a_joint_limit_is_refused_and_does_not_move(sim):
     sim.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
 
 
-def test_estop_mid_motion_stops_the_arm_and_refuses_points_until_released():
+def test_estop_mid_motion_stops_the_arm_and_refuses_points_until_released() -> None:
     with moving_sim() as ctl:
         state = State(ctl.state, ">")
         motion = Motion(ctl.motion, ">")
@@ -290,13 +299,13 @@ def test_estop_mid_motion_stops_the_arm_and_refuses_points_until_released():
         ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
 
 
-def test_drives_cannot_come_on_during_an_estop(sim):
+def test_drives_cannot_come_on_during_an_estop(sim: AdeptController) -> None:
     sim.estop()
     reply = sim.request({"cmd": "drives", "on": True})
     assert not reply["ok"] and "e-stop" in reply["error"]
 
 
-def test_drives_off_mid_motion():
+def test_drives_off_mid_motion() -> None:
     with moving_sim() as ctl:
         state = State(ctl.state, ">")
         motion = Motion(ctl.motion, ">")
@@ -313,7 +322,7 @@ def test_drives_off_mid_motion():
         assert motion.point(2, (0, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
 
 
-def test_status_is_sent_at_once_on_a_fault_not_only_every_period():
+def test_status_is_sent_at_once_on_a_fault_not_only_every_period() -> None:
     with AdeptController("--state-period", "60") as ctl:
         state = State(ctl.state, ">")
         state.wait("status", lambda s: True)  # the one sent on connection
@@ -323,7 +332,7 @@ def test_status_is_sent_at_once_on_a_fault_not_only_every_period():
         state.wait("status", lambda s: s["e_stopped"] == 1, since=mark, timeout=10)
 
 
-def test_injected_error_is_reported_and_refuses_points(sim):
+def test_injected_error_is_reported_and_refuses_points(sim: AdeptController) -> None:
     state = State(sim.state, ">")
     motion = Motion(sim.motion, ">")
     sim.error(-1021)
@@ -337,7 +346,7 @@ def test_injected_error_is_reported_and_refuses_points(sim):
     assert motion.point(1, (10, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
 
 
-def test_vplus_status_fields_send_what_the_v_plus_program_sends():
+def test_vplus_status_fields_send_what_the_v_plus_program_sends() -> None:
     with AdeptController("--state-period", "0.02", "--status-fields", "vplus") as ctl:
         state = State(ctl.state, ">")
         ctl.error(-1021)
@@ -349,7 +358,7 @@ def test_vplus_status_fields_send_what_the_v_plus_program_sends():
         assert ctl.status()["error_code"] == -1021
 
 
-def test_a_dropped_connection_is_accepted_again(sim):
+def test_a_dropped_connection_is_accepted_again(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     state = State(sim.state, ">")
     state.wait("joints", lambda j: True)
@@ -366,7 +375,7 @@ def test_a_dropped_connection_is_accepted_again(sim):
     assert sim.status()["clients"] == {"motion": True, "state": True, "io": 0}
 
 
-def test_a_second_client_is_refused_and_the_first_keeps_working(sim):
+def test_a_second_client_is_refused_and_the_first_keeps_working(sim: AdeptController) -> None:
     first = Motion(sim.motion, ">")
     assert first.point(0, (1, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
     second = socket.create_connection(sim.motion, timeout=10)
@@ -386,7 +395,7 @@ def test_a_second_client_is_refused_and_the_first_keeps_working(sim):
     s3.wait("joints", lambda j: True)
 
 
-def test_slow_ack_delays_every_acknowledgement(sim):
+def test_slow_ack_delays_every_acknowledgement(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     sim.slow_ack(300)
     t0 = time.monotonic()
@@ -397,7 +406,7 @@ def test_slow_ack_delays_every_acknowledgement(sim):
     assert sim.status()["slow_ack_ms"] == 0
 
 
-def test_malformed_frames_close_the_connection_or_fail_and_never_crash(sim):
+def test_malformed_frames_close_the_connection_or_fail_and_never_crash(sim: AdeptController) -> None:
     e = ">"
     # a request of the right size but another message type: failure reply, still connected
     motion = Motion(sim.motion, e)
@@ -421,11 +430,11 @@ def test_malformed_frames_close_the_connection_or_fail_and_never_crash(sim):
     st = sim.wait_for(lambda s: not s["clients"]["motion"], what="the half-frame client gone")
     assert st["malformed_frames"] == 6
     assert st["points_received"] == 1 and st["points_executed"] <= 1
-    assert sim.proc.poll() is None
+    assert sim.proc is not None and sim.proc.poll() is None
     assert Motion(sim.motion, e).point(1, (2, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
 
 
-def test_underrun_counted_when_the_stream_runs_dry_but_not_after_the_end(sim):
+def test_underrun_counted_when_the_stream_runs_dry_but_not_after_the_end(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     assert motion.point(0, (5, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
     sim.wait_for(lambda s: s["points_executed"] == 1, what="first point")
@@ -438,7 +447,7 @@ def test_underrun_counted_when_the_stream_runs_dry_but_not_after_the_end(sim):
     assert sim.status()["underruns"] == st["underruns"]  # the -3 ended the trajectory
 
 
-def test_topic_points_are_executed_without_a_reply(sim):
+def test_topic_points_are_executed_without_a_reply(sim: AdeptController) -> None:
     e = ">"
     motion = Motion(sim.motion, e)
     motion.send(traj_pt(e, -1, (5, 0, 0, 0, 0, 0), comm=TOPIC))
@@ -454,7 +463,7 @@ def test_topic_points_are_executed_without_a_reply(sim):
     assert motion.reply() == (SUCCESS, -4)
 
 
-def test_duration_is_ignored_like_v_plus_unless_asked_for():
+def test_duration_is_ignored_like_v_plus_unless_asked_for() -> None:
     # V+ moves at SPEED 100: a 10 deg move given 30 s is over long before that
     with AdeptController() as ctl:
         motion = Motion(ctl.motion, ">")
@@ -473,7 +482,7 @@ def test_duration_is_ignored_like_v_plus_unless_asked_for():
         assert motion.point(2, (0, 0, 0, 0, 0, 0), dur=float("inf")) == (FAILURE, 0)
 
 
-def test_control_channel_rejects_bad_requests_and_stays_up(sim):
+def test_control_channel_rejects_bad_requests_and_stays_up(sim: AdeptController) -> None:
     reply = sim.request("this is not json")
     assert reply["ok"] is False and "JSON" in reply["error"]
     assert sim.request("[1, 2]")["ok"] is False
@@ -485,7 +494,7 @@ def test_control_channel_rejects_bad_requests_and_stays_up(sim):
     assert sim.request({"cmd": "slow_ack", "ms": -1})["ok"] is False
     assert sim.status()["ok"] is True
     assert sim.request({"cmd": "quit"}) == {"ok": True}
-    assert sim.proc.wait(10) == 0
+    assert sim.proc is not None and sim.proc.wait(10) == 0
 
 
 def io_ask(io: socket.socket, mode: int, number: int) -> str:
@@ -497,7 +506,7 @@ def io_ask(io: socket.socket, mode: int, number: int) -> str:
     return io.recv(64).decode()
 
 
-def test_io_port_reads_and_writes_signals(sim):
+def test_io_port_reads_and_writes_signals(sim: AdeptController) -> None:
     assert sim.io is not None
     io = socket.create_connection(sim.io, timeout=10)
     assert io_ask(io, 1, 5) == "0"
@@ -514,7 +523,7 @@ def test_io_port_reads_and_writes_signals(sim):
     io.close()
 
 
-def test_io_port_reads_one_record_per_number_like_v_plus(sim):
+def test_io_port_reads_one_record_per_number_like_v_plus(sim: AdeptController) -> None:
     """Both numbers in one write are one record: the program takes the mode from its first
     four bytes, loses the rest and reads the number from the next record."""
     assert sim.io is not None
@@ -530,7 +539,7 @@ def test_io_port_reads_one_record_per_number_like_v_plus(sim):
     assert st["io_errors"] == 1 and st["clients"]["io"] == 0 and st["outputs"] == [8]
 
 
-def test_a_port_in_use_is_a_clear_error():
+def test_a_port_in_use_is_a_clear_error() -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()

@@ -19,42 +19,57 @@ NS = {"c": "RsiContext", "d": "RsiDriver"}
 
 
 @pytest.fixture(scope="module")
-def ethernet():
+def ethernet() -> ET.Element:
     return ET.parse(KUKA / "rob6_rsi_ethernet.xml").getroot()
 
 
-def rsix_objects():
+#: an RSI object of a signal-flow file: type, type id, parameters by name, inputs by index
+#: (the object and output each comes from)
+RsiObject = tuple[str, int, dict[str | None, ET.Element], dict[int, tuple[str | None, int]]]
+
+
+def rsix_objects() -> dict[str | None, RsiObject]:
     root = ET.parse(KUKA / "rob6_rsi.rsix").getroot()
     assert root.tag == "{RsiContext}RsiContext"
-    objects = {}
+    objects: dict[str | None, RsiObject] = {}
     for obj in root.iter("{RsiDriver}RsiObject"):
         params = {p.get("Name"): p for p in obj.iter("{RsiDriver}Parameter")}
         inputs = {int(i.attrib["InIdx"]): (i.get("OutObjId"), int(i.attrib["OutIdx"]))
                   for i in obj.iter("{RsiDriver}Input")}
-        objects[obj.get("ObjId")] = (obj.get("ObjType"), int(obj.attrib["ObjTypeId"]), params, inputs)
+        objects[obj.get("ObjId")] = (obj.attrib["ObjType"], int(obj.attrib["ObjTypeId"]), params, inputs)
     return objects
 
 
-def rsi3_objects():
+def rsi3_objects() -> dict[str | None, RsiObject]:
     root = ET.parse(KUKA / "rsi3" / "rob6_rsi.rsi.xml").getroot()
-    objects = {}
+    objects: dict[str | None, RsiObject] = {}
     for obj in root.iter("RSIObject"):
         params = {p.get("Name"): p for p in obj.iter("Parameter")}
         inputs = {int(i.attrib["InIdx"]): (i.get("OutObjID"), int(i.attrib["OutIdx"])) for i in obj.iter("Input")}
-        objects[obj.get("ObjID")] = (obj.get("ObjType"), int(obj.attrib["ObjTypeID"]), params, inputs)
+        objects[obj.get("ObjID")] = (obj.attrib["ObjType"], int(obj.attrib["ObjTypeID"]), params, inputs)
     return objects
 
 
-def test_ethernet_configuration(ethernet):
-    cfg = ethernet.find("CONFIG")
-    assert cfg.findtext("PORT").strip() == "49152"
-    assert cfg.findtext("SENTYPE").strip() == "ImFree"
-    assert cfg.findtext("ONLYSEND").strip().upper() == "FALSE"
-    assert re.fullmatch(r"\d+\.\d+\.\d+\.\d+", cfg.findtext("IP_NUMBER").strip())
-    sent = [e.get("TAG") for e in ethernet.find("SEND").iter("ELEMENT")]
+def _child(parent: ET.Element, tag: str) -> ET.Element:
+    found = parent.find(tag)
+    assert found is not None, f"no <{tag}> in <{parent.tag}>"
+    return found
+
+
+def _text(parent: ET.Element, tag: str) -> str:
+    return (_child(parent, tag).text or "").strip()
+
+
+def test_ethernet_configuration(ethernet: ET.Element) -> None:
+    cfg = _child(ethernet, "CONFIG")
+    assert _text(cfg, "PORT") == "49152"
+    assert _text(cfg, "SENTYPE") == "ImFree"
+    assert _text(cfg, "ONLYSEND").upper() == "FALSE"
+    assert re.fullmatch(r"\d+\.\d+\.\d+\.\d+", _text(cfg, "IP_NUMBER"))
+    sent = [e.get("TAG") for e in _child(ethernet, "SEND").iter("ELEMENT")]
     # the order of the simulator's packet (and of a KR C4's: the SEND order), IPOC appended
     assert sent == ["DEF_RIst", "DEF_RSol", "DEF_AIPos", "DEF_ASPos", "DEF_Delay"]
-    received = {e.get("TAG"): e for e in ethernet.find("RECEIVE").iter("ELEMENT")}
+    received = {e.get("TAG"): e for e in _child(ethernet, "RECEIVE").iter("ELEMENT")}
     assert received["Stop"].get("TYPE") == "BOOL" and received["Stop"].get("HOLDON") == "0"
     for n in range(1, 7):
         e = received[f"AK.A{n}"]
@@ -62,7 +77,7 @@ def test_ethernet_configuration(ethernet):
 
 
 @pytest.mark.parametrize("fmt", ["rsix", "rsi3"])
-def test_signal_flow_wiring(ethernet, fmt):
+def test_signal_flow_wiring(ethernet: ET.Element, fmt: str) -> None:
     objects = rsix_objects() if fmt == "rsix" else rsi3_objects()
     base = 0 if fmt == "rsix" else 1  # RSI 4.x counts from 0, RSI 3.x from 1
     by_type = {t.upper(): (oid, tid, params, inputs) for oid, (t, tid, params, inputs) in objects.items()}
@@ -72,7 +87,7 @@ def test_signal_flow_wiring(ethernet, fmt):
     assert params["ConfigFile"].get("IsRuntime") == "false"
     assert params["Timeout"].get("ParamValue") == "100" and params["Precision"].get("ParamValue") == "4"
     # ETHERNET output k carries the RECEIVE element with INDX k (RSI 3.x) / k + 1 (RSI 4.x)
-    indx = {int(e.get("INDX")): e.get("TAG") for e in ethernet.find("RECEIVE").iter("ELEMENT")}
+    indx = {int(e.attrib["INDX"]): e.get("TAG") for e in _child(ethernet, "RECEIVE").iter("ELEMENT")}
     out_tag = {k - 1 + base: tag for k, tag in indx.items()}
     _, tid, params, inputs = by_type["STOP"]
     assert tid == 18 and params["Mode"].get("ParamValue") == "4"  # leave RSI_MOVECORR
@@ -85,18 +100,18 @@ def test_signal_flow_wiring(ethernet, fmt):
     _, tid, mon, _ = by_type["AXISCORRMON"]
     assert tid == 82
     for n in range(1, 7):
-        lo = float(params[f"LowerLimA{n}"].get("ParamValue"))
-        hi = float(params[f"UpperLimA{n}"].get("ParamValue"))
-        mx = float(mon[f"MaxA{n}"].get("ParamValue"))
+        lo = float(params[f"LowerLimA{n}"].attrib["ParamValue"])
+        hi = float(params[f"UpperLimA{n}"].attrib["ParamValue"])
+        mx = float(mon[f"MaxA{n}"].attrib["ParamValue"])
         for machine in MACHINES.values():  # any correction inside the axis range, from any start
             width = machine.upper[n - 1] - machine.lower[n - 1]
             assert lo <= -width and hi >= width and mx >= width, (fmt, n, machine.name)
     # parameter ids: 0-based and contiguous in RSI 4.x; RSI 3.x keeps 7..12 for external axes
-    upper_a1 = int(params["UpperLimA1"].get("ParamId" if fmt == "rsix" else "ParamID"))
+    upper_a1 = int(params["UpperLimA1"].attrib["ParamId" if fmt == "rsix" else "ParamID"])
     assert upper_a1 == (6 if fmt == "rsix" else 13)
 
 
-def test_krl_program():
+def test_krl_program() -> None:
     src_bytes = (KUKA / "rob6_rsi.src").read_bytes()
     dat_bytes = (KUKA / "rob6_rsi.dat").read_bytes()
     for text in (src_bytes, dat_bytes):

@@ -16,6 +16,7 @@ import signal
 import socket
 import threading
 import time
+from collections.abc import Callable, Iterator, Sequence
 from itertools import pairwise
 from typing import Any
 
@@ -32,7 +33,13 @@ _ATTR = re.compile(rb'(\w+)="([^"]*)"')
 _IPOC = re.compile(rb"<IPOC>(-?\d+)</IPOC>")
 
 
-def parse_rob(data: bytes) -> dict:
+#: a <Rob> packet as the PC reads it: its elements' attributes, and IPOC, D, aipos, aspos, rist, rsol
+Packet = dict[str, Any]
+#: the PC's answer to a packet (None: no answer)
+Policy = Callable[[Packet], bytes | None]
+
+
+def parse_rob(data: bytes) -> Packet:
     assert data.startswith(b'<Rob TYPE="KUKA">') and data.endswith(b"</Rob>"), data
     text = {tag.decode(): {k.decode(): v.decode() for k, v in _ATTR.findall(attrs)}
             for tag, attrs in _ELEMENT.findall(data)}
@@ -51,17 +58,17 @@ def parse_rob(data: bytes) -> dict:
     return pkt
 
 
-def sen(ipoc: int, ak=(0.0,) * 6, stop: bool = False, sen_type: str = "ImFree") -> bytes:
+def sen(ipoc: int, ak: Sequence[float] = (0.0,) * 6, stop: bool = False, sen_type: str = "ImFree") -> bytes:
     axes = " ".join(f'A{i}="{v:.4f}"' for i, v in enumerate(ak, 1))
     return (f'<Sen Type="{sen_type}"><AK {axes}/>' + ("<Stop>1</Stop>" if stop else "")
             + f"<IPOC>{ipoc}</IPOC></Sen>").encode()
 
 
-def zero(pkt):
+def zero(pkt: Packet) -> bytes:
     return sen(pkt["IPOC"])
 
 
-def silent(pkt):
+def silent(pkt: Packet) -> None:
     return None
 
 
@@ -69,7 +76,7 @@ class Follow:
     """What a careful PC does: step AK towards `target` by at most `step` per cycle,
     counting as applied only answers the controller took (its Delay did not grow)."""
 
-    def __init__(self, target=(0.0,) * 6, step: float = 0.5, sen_type: str = "ImFree"):
+    def __init__(self, target: Sequence[float] = (0.0,) * 6, step: float = 0.5, sen_type: str = "ImFree") -> None:
         self.target = list(target)
         self.step = step
         self.sen_type = sen_type
@@ -79,7 +86,7 @@ class Follow:
         self.aspos: list[float] | None = None
         self.last_delay: int | None = None
 
-    def __call__(self, pkt):
+    def __call__(self, pkt: Packet) -> bytes:
         if pkt["aspos"] != self.aspos:  # a new run: AK counts from the new start pose
             self.aspos, self.applied, self.sent = pkt["aspos"], [0.0] * 6, None
         elif self.sent is not None and pkt["D"] == self.last_delay:
@@ -93,19 +100,19 @@ class Follow:
 class Responder:
     """The rob6 PC: a UDP server answering every packet with policy(packet)."""
 
-    def __init__(self, policy=zero):
+    def __init__(self, policy: Policy = zero) -> None:
         self.policy = policy
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.1)
         self.address = self.sock.getsockname()
-        self.packets: list[dict] = []
+        self.packets: list[Packet] = []
         self.raw: list[bytes] = []
         self._closed = False
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
-    def _run(self):
+    def _run(self) -> None:
         while not self._closed:
             try:
                 data, addr = self.sock.recvfrom(65535)
@@ -121,7 +128,8 @@ class Responder:
             if answer is not None:
                 self.sock.sendto(answer, addr)
 
-    def wait(self, predicate, timeout: float = 10.0, what: str = "packets"):
+    def wait(self, predicate: Callable[[list[Packet]], object], timeout: float = 10.0,
+             what: str = "packets") -> list[Packet]:
         deadline = time.monotonic() + timeout
         while True:
             try:
@@ -133,14 +141,14 @@ class Responder:
                 raise AssertionError(f"{what} not seen within {timeout} s ({len(self.packets)} packets)")
             time.sleep(0.01)
 
-    def close(self):
+    def close(self) -> None:
         self._closed = True
         self._thread.join(2)
         self.sock.close()
 
 
 @pytest.fixture
-def pc():
+def pc() -> Iterator[Responder]:
     r = Responder()
     yield r
     r.close()
@@ -150,12 +158,12 @@ def sim(pc: Responder, *args: str, robot: str = "kr16") -> RsiController:
     return RsiController(*args, rob6=pc.address, robot=robot)
 
 
-def close(a, b, tol=1e-4):
+def close(a: Sequence[float], b: Sequence[float], tol: float = 1e-4) -> bool:
     return all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
 # ---------------------------------------------------------------------------- start-up
-def test_first_packets_zero_correction(pc):
+def test_first_packets_zero_correction(pc: Responder) -> None:
     with sim(pc, robot="kr16") as kuka:
         assert kuka.cycle_ms == 12  # kr16: RSI_ON(#ABSOLUTE, #IPO)
         pkts = pc.wait(lambda p: len(p) >= 20)
@@ -174,7 +182,7 @@ def test_first_packets_zero_correction(pc):
         assert st["rtt_ms"]["n"] >= 19 and st["rtt_ms"]["p50"] > 0
 
 
-def test_fast_variant_cycle_and_options(pc):
+def test_fast_variant_cycle_and_options(pc: Responder) -> None:
     with sim(pc, "--start-pose", "0,-90,90,0,90,0", "--eipos", robot="kr3rt") as kuka:
         assert kuka.cycle_ms == 4  # #IPO_FAST
         first = pc.wait(lambda p: len(p) >= 3)[0]
@@ -183,13 +191,13 @@ def test_fast_variant_cycle_and_options(pc):
         assert close(first["rist"], [100 + 270, 0, 350 + 265 - 75, 0, 90, 0])
 
 
-def test_start_pose_outside_limits_refused(pc):
+def test_start_pose_outside_limits_refused(pc: Responder) -> None:
     with pytest.raises(RsiControllerError, match="A3 = 160 is outside"):
         sim(pc, "--start-pose", "0,-90,160,0,0,0", robot="kr3").start()
 
 
 # ---------------------------------------------------------------------------- corrections
-def test_smooth_ramp_moves_aipos_and_rist(pc):
+def test_smooth_ramp_moves_aipos_and_rist(pc: Responder) -> None:
     pc.policy = Follow(target=[10, 0, 0, 0, 0, 0], step=0.5)
     with sim(pc, *SLOW) as kuka:
         pc.wait(lambda p: p[-1]["aipos"][0] == 10.0, what="A1 at 10")
@@ -206,7 +214,7 @@ def test_smooth_ramp_moves_aipos_and_rist(pc):
         assert all(0 <= b - a <= 0.5 + 1e-9 for a, b in pairwise(a1))
 
 
-def test_rated_speed_step_accepted(pc):
+def test_rated_speed_step_accepted(pc: Responder) -> None:
     # kr16: 156 deg/s = 1.872 deg per 12 ms cycle; 98 % of it on every axis A1-A3
     pc.policy = Follow(target=[20, 20, 20, 0, 0, 0], step=0.98 * 1.872)
     with sim(pc) as kuka:
@@ -216,7 +224,7 @@ def test_rated_speed_step_accepted(pc):
         assert st["max_ak_step"][0] == pytest.approx(0.98 * 1.872, abs=1e-4)
 
 
-def test_too_fast_step_trips_command_velocity(pc):
+def test_too_fast_step_trips_command_velocity(pc: Responder) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"], [3.0, 0, 0, 0, 0, 0])  # 3 deg in 12 ms: 250 deg/s
     with sim(pc, "--restart-delay", "0.05") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
@@ -229,7 +237,7 @@ def test_too_fast_step_trips_command_velocity(pc):
         assert any("TRIP Command velocity A1" in line for line in kuka.stderr_lines)
 
 
-def test_software_limit_switch(pc):
+def test_software_limit_switch(pc: Responder) -> None:
     pc.policy = Follow(target=[5, 0, 0, 0, 0, 0], step=0.5)
     with sim(pc, "--start-pose", "183,-90,90,0,0,0") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
@@ -237,7 +245,7 @@ def test_software_limit_switch(pc):
         assert max(p["aipos"][0] for p in pc.packets) <= 185.0
 
 
-def test_correction_window(pc):
+def test_correction_window(pc: Responder) -> None:
     pc.policy = Follow(target=[0, 0, 0, 0, 0, -3], step=0.5)
     with sim(pc, "--corr-window", "1.5") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
@@ -245,7 +253,7 @@ def test_correction_window(pc):
         assert min(p["aipos"][5] for p in pc.packets) >= -1.5
 
 
-def test_stop_ends_run_and_next_run_starts_where_the_robot_stands(pc):
+def test_stop_ends_run_and_next_run_starts_where_the_robot_stands(pc: Responder) -> None:
     follow = Follow(target=[2, 0, 0, 0, 0, 0], step=0.5)
     pc.policy = follow
     with sim(pc, *SLOW, "--restart-delay", "0.2") as kuka:
@@ -262,7 +270,7 @@ def test_stop_ends_run_and_next_run_starts_where_the_robot_stands(pc):
 
 
 # ---------------------------------------------------------------------------- late packets
-def test_no_answer_counts_delay_and_stops_after_timeout(pc):
+def test_no_answer_counts_delay_and_stops_after_timeout(pc: Responder) -> None:
     pc.policy = silent
     with sim(pc, "--timeout", "5", "--restart-delay", "0.05") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
@@ -278,7 +286,7 @@ def test_no_answer_counts_delay_and_stops_after_timeout(pc):
 
 
 @pytest.mark.parametrize("offset", [1, -12], ids=["wrong", "stale"])
-def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc, offset):
+def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, offset: int) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"] + offset, [1.0, 0, 0, 0, 0, 0])
     with sim(pc, "--timeout", "6") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
@@ -290,28 +298,28 @@ def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc, offset):
             assert replies["stale_replies"] >= 4
 
 
-def test_timeout_counts_consecutive_late_packets(pc):
+def every_other() -> Policy:
+    """A policy answering the first packet, then every other one (the rest: no answer)."""
+    answered = 0
+
+    def policy(pkt: Packet) -> bytes | None:
+        nonlocal answered
+        answered += 1
+        return sen(pkt["IPOC"]) if answered % 2 else None
+
+    return policy
+
+
+def test_timeout_counts_consecutive_late_packets(pc: Responder) -> None:
     # every other answer missing: Delay grows past Timeout, but never 3 in a row
-    answered = [0]
-
-    def every_other(pkt):
-        answered[0] += 1
-        return sen(pkt["IPOC"]) if answered[0] % 2 else None
-
-    pc.policy = every_other
+    pc.policy = every_other()
     with sim(pc, *SLOW, "--timeout", "3") as kuka:
         st = kuka.wait_for(lambda s: s["delay"] >= 8, what="8 late packets")
         assert st["state"] == "running" and st["trips"] == [] and st["late_consecutive"] < 3
 
 
-def test_timeout_counts_total_when_asked(pc):
-    answered = [0]
-
-    def every_other(pkt):
-        answered[0] += 1
-        return sen(pkt["IPOC"]) if answered[0] % 2 else None
-
-    pc.policy = every_other
+def test_timeout_counts_total_when_asked(pc: Responder) -> None:
+    pc.policy = every_other()
     with sim(pc, "--timeout", "3", "--timeout-counts", "total") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
         assert st["stop_reason"] == "RSI timeout: 3 late packets (Timeout 3)"
@@ -319,7 +327,7 @@ def test_timeout_counts_total_when_asked(pc):
 
 
 # ---------------------------------------------------------------------------- Sen answers
-def test_wrong_sen_type_stops_rsi(pc):
+def test_wrong_sen_type_stops_rsi(pc: Responder) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"], sen_type="Other")
     with sim(pc) as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
@@ -327,14 +335,14 @@ def test_wrong_sen_type_stops_rsi(pc):
         assert st["replies_ok"] == 0 and all(p["aipos"] == HOME for p in pc.packets)
 
 
-def test_own_sentype(pc):
+def test_own_sentype(pc: Responder) -> None:
     pc.policy = Follow(target=[0, 1, 0, 0, 0, 0], sen_type="Rob6PC")
     with sim(pc, "--sentype", "Rob6PC") as kuka:
         pc.wait(lambda p: p[-1]["aipos"][1] == -89.0, what="A2 moved")
         assert kuka.status()["trips"] == []
 
 
-def test_answers_read_tolerantly(pc):
+def test_answers_read_tolerantly(pc: Responder) -> None:
     variants = [
         '<Sen TYPE="ImFree"><AK A6="0" A5="0" A4="0" A3="0" A2="0.5" A1="-0.25" /><IPOC>{ipoc}</IPOC></Sen>',
         '<Sen  Type = "ImFree" >\n  <IPOC> {ipoc} </IPOC>\n  <EStr>rob6</EStr><Tech T21="1"/>\n'
@@ -349,7 +357,7 @@ def test_answers_read_tolerantly(pc):
         assert st["delay"] == 0 and st["trips"] == [] and st["replies"]["bad_replies"] == 0
 
 
-def test_unreadable_answer_counts_late(pc):
+def test_unreadable_answer_counts_late(pc: Responder) -> None:
     pc.policy = lambda pkt: b'<Sen Type="ImFree"><AK A1="x"/><IPOC>%d</IPOC></Sen>' % pkt["IPOC"]
     with sim(pc, "--timeout", "4") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
@@ -358,11 +366,11 @@ def test_unreadable_answer_counts_late(pc):
 
 
 # ---------------------------------------------------------------------------- faults
-def ipoc_steps(pkts, cycle):
+def ipoc_steps(pkts: list[Packet], cycle: int) -> list[int]:
     return [(b["IPOC"] - a["IPOC"]) // cycle for a, b in pairwise(pkts)]
 
 
-def test_fault_drop_every(pc):
+def test_fault_drop_every(pc: Responder) -> None:
     with sim(pc, "--drop-every", "5") as kuka:
         pc.wait(lambda p: len(p) >= 20)
         st = kuka.status()
@@ -371,7 +379,7 @@ def test_fault_drop_every(pc):
         assert st["delay"] >= 3 and st["state"] == "running"  # unanswered, but never 100 in a row
 
 
-def test_fault_duplicate_every(pc):
+def test_fault_duplicate_every(pc: Responder) -> None:
     with sim(pc) as kuka:
         kuka.fault(duplicate_every=3)
         pc.wait(lambda p: len(p) >= 15)
@@ -381,7 +389,7 @@ def test_fault_duplicate_every(pc):
         assert st["replies"]["duplicate_replies"] >= 1  # the PC answered both; one counted
 
 
-def test_fault_reorder_every(pc):
+def test_fault_reorder_every(pc: Responder) -> None:
     with sim(pc) as kuka:
         kuka.fault(reorder_every=4)
         pc.wait(lambda p: len(p) >= 20)
@@ -391,7 +399,7 @@ def test_fault_reorder_every(pc):
         assert st["delay"] >= 1  # the held packet's answer comes after its cycle
 
 
-def test_fault_delay_for_a_while(pc):
+def test_fault_delay_for_a_while(pc: Responder) -> None:
     with sim(pc, *SLOW, "--timeout", "1000") as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.fault(delay_ms=100, for_s=0.6)  # 100 ms > 40 ms cycle: every answer late
@@ -404,7 +412,7 @@ def test_fault_delay_for_a_while(pc):
         assert st["state"] == "running" and st["delay"] - late <= 1  # on time again
 
 
-def test_fault_lose_both_directions(pc):
+def test_fault_lose_both_directions(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.fault(lose_s=0.3)  # 25 cycles of 12 ms: fewer than Timeout 100
@@ -415,14 +423,14 @@ def test_fault_lose_both_directions(pc):
         assert max(gaps) >= 0.2
 
 
-def test_fault_lose_longer_than_timeout_trips(pc):
+def test_fault_lose_longer_than_timeout_trips(pc: Responder) -> None:
     with sim(pc, "--lose-s", "5", "--timeout", "10") as kuka:
         st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
         assert st["stop_reason"].startswith("RSI timeout") and pc.packets == []
         assert st["fault_stats"]["lost_out"] == 10
 
 
-def test_vanish_for_a_while_then_new_run(pc):
+def test_vanish_for_a_while_then_new_run(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.vanish(0.5)
@@ -436,7 +444,7 @@ def test_vanish_for_a_while_then_new_run(pc):
         assert first["D"] == 0 and first["aspos"] == first["aipos"] == HOME
 
 
-def test_vanish_until_restart_with_new_start_pose(pc):
+def test_vanish_until_restart_with_new_start_pose(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.vanish(None)
@@ -453,7 +461,7 @@ def test_vanish_until_restart_with_new_start_pose(pc):
         assert first["aspos"] == first["aipos"] == pose  # the PTP happened while RSI was off
 
 
-def test_restart_mid_run_with_new_start_pose(pc):
+def test_restart_mid_run_with_new_start_pose(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.restart(start=[-30, -100, 100, 10, 20, 30])
@@ -462,7 +470,7 @@ def test_restart_mid_run_with_new_start_pose(pc):
         assert any("ended: restart requested" in line for line in kuka.stderr_lines)
 
 
-def test_clear_and_auto_ack(pc):
+def test_clear_and_auto_ack(pc: Responder) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"], [5.0, 0, 0, 0, 0, 0])
     with sim(pc, "--auto-ack", "0.1", "--drop-every", "7", "--delay-ms", "1") as kuka:
         st = kuka.wait_for(lambda s: len(s["trips"]) >= 2, what="auto acknowledge")
@@ -473,7 +481,7 @@ def test_clear_and_auto_ack(pc):
 
 
 # ---------------------------------------------------------------------------- control channel
-def test_control_channel_refuses_bad_requests_and_stays_up(pc):
+def test_control_channel_refuses_bad_requests_and_stays_up(pc: Responder) -> None:
     with sim(pc) as kuka:
         bad = [
             b"{not json",
@@ -500,7 +508,7 @@ def test_control_channel_refuses_bad_requests_and_stays_up(pc):
         assert kuka.status()["faults"]["lose_s"] == 0  # nothing half-applied
 
 
-def test_sigterm_exits_cleanly(pc):
+def test_sigterm_exits_cleanly(pc: Responder) -> None:
     kuka = sim(pc).start()
     assert kuka.proc is not None
     pc.wait(lambda p: len(p) >= 3)
@@ -511,7 +519,7 @@ def test_sigterm_exits_cleanly(pc):
 
 
 # ---------------------------------------------------------------------------- kinematics
-def test_forward_kinematics_known_poses():
+def test_forward_kinematics_known_poses() -> None:
     from kuka_rsi_sim.kinematics import Kinematics, euler_zyx, rotation_zyx
     from kuka_rsi_sim.machine import MACHINES
 

@@ -11,7 +11,7 @@ from typing import Any
 def run(cmd: list[str], *, timeout: float = 900, check: bool = True, **kw: Any) -> subprocess.CompletedProcess[str]:
     """``cmd`` with its output captured as text; with ``check``, a non-zero exit raises an
     AssertionError naming the command, its exit code and the tail of its output."""
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kw)
+    proc = subprocess.run(cmd, capture_output=True, check=False, text=True, timeout=timeout, **kw)
     if check and proc.returncode != 0:
         raise AssertionError(f"{' '.join(cmd)} -> {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
     return proc
@@ -20,7 +20,7 @@ def run(cmd: list[str], *, timeout: float = 900, check: bool = True, **kw: Any) 
 def compose_cmd() -> list[str] | None:
     """The compose command that works here: ``docker compose`` or ``docker-compose`` (None: neither)."""
     for cmd in (["docker", "compose"], ["docker-compose"]):
-        if shutil.which(cmd[0]) and subprocess.run([*cmd, "version"], capture_output=True).returncode == 0:
+        if shutil.which(cmd[0]) and subprocess.run([*cmd, "version"], capture_output=True, check=False).returncode == 0:
             return cmd
     return None
 

@@ -39,7 +39,7 @@ def docker_missing() -> str | None:
     """Why no image can be built here (None: it can)."""
     if not shutil.which("docker"):
         return "no docker command here"
-    if subprocess.run(["docker", "info"], capture_output=True, timeout=60).returncode != 0:
+    if subprocess.run(["docker", "info"], capture_output=True, check=False, timeout=60).returncode != 0:
         return "no Docker engine answers"
     return None
 
@@ -49,7 +49,7 @@ def build() -> Outcome:
     start = time.monotonic()
     env = {**os.environ, "ROB6_TAG": TAG, "ROB6_BASE_IMAGE": BASE_IMAGE}
     try:
-        proc = subprocess.run(["bash", str(SCRIPT)], capture_output=True, text=True, env=env, cwd=REPO,
+        proc = subprocess.run(["bash", str(SCRIPT)], capture_output=True, check=False, text=True, env=env, cwd=REPO,
                               timeout=BUILD_TIMEOUT_S)
     except subprocess.TimeoutExpired:
         return Outcome(time.monotonic() - start, error=f"{SCRIPT.name} did not finish in {BUILD_TIMEOUT_S} s")

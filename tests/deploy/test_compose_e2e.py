@@ -28,11 +28,13 @@ from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pytest
+from pytest import TempPathFactory
 
 from tests.conformance import load, same
-from tests.deploy import zenoh_probe
+from tests.deploy import images, zenoh_probe
 from tests.deploy.compose import compose_cmd, project_containers, run
 from tests.deploy.images import BASE_IMAGE, TAG
 from tests.system import CONFORMANCE, Client, free_port
@@ -51,7 +53,7 @@ REPORT: dict[str, object] = {}  # timings and sizes, printed at the end (pytest 
 # ---------------------------------------------------------------------- docker helpers
 def _docker_ok() -> bool:
     return bool(shutil.which("docker")) and subprocess.run(
-        ["docker", "info"], capture_output=True, timeout=30).returncode == 0
+        ["docker", "info"], capture_output=True, check=False, timeout=30).returncode == 0
 
 
 _compose = compose_cmd() if _docker_ok() else None
@@ -71,7 +73,7 @@ class Stack:
     zenoh_port: int = field(default_factory=free_port)
     profiles: tuple[str, ...] = ()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         # an empty env file: a developer's .env must not change the test
         self.env_file = Path(os.environ.get("TMPDIR", "/tmp")) / f"{self.project}.env"
         self.env_file.write_text("")
@@ -80,7 +82,7 @@ class Stack:
                     "ROB6_ZENOH_PORT": str(self.zenoh_port), "ROB6_HEALTH_INTERVAL": "3s",
                     **self.settings}
 
-    def compose(self, *args: str, timeout: float = 900, check: bool = True) -> subprocess.CompletedProcess:
+    def compose(self, *args: str, timeout: float = 900, check: bool = True) -> subprocess.CompletedProcess[str]:
         files = [a for f in self.files for a in ("-f", str(REPO / f))]
         profiles = [a for p in self.profiles for a in ("--profile", p)]
         return run([*COMPOSE, "-p", self.project, *files, "--env-file", str(self.env_file), *profiles, *args],
@@ -89,8 +91,9 @@ class Stack:
     def containers(self, service: str | None = None) -> list[str]:
         return project_containers(self.project, service)
 
-    def state(self, container: str) -> dict:
-        return json.loads(run(["docker", "inspect", "-f", "{{json .State}}", container]).stdout)
+    def state(self, container: str) -> dict[str, Any]:
+        state: dict[str, Any] = json.loads(run(["docker", "inspect", "-f", "{{json .State}}", container]).stdout)
+        return state
 
     def wait_healthy(self, services: tuple[str, ...], timeout: float = 180) -> float:
         """Seconds until every container of ``services`` is healthy; fails with the logs otherwise."""
@@ -144,7 +147,8 @@ def connect(port: int, *, handshake: bool = True, attempts: int = 50) -> Client:
 def fk_expected() -> str:
     for record in load(CONFORMANCE / ROBOT / "fk.jsonl"):
         if record.get("send", "").strip() == FK:
-            return record["reply"]
+            reply: str = record["reply"]
+            return reply
     raise AssertionError(f"{FK} not in fk.jsonl")
 
 
@@ -191,7 +195,7 @@ def image_report() -> dict[str, str]:
 
 # ---------------------------------------------------------------------- fixtures
 @pytest.fixture(scope="module")
-def built(rob6_images):
+def built(rob6_images: images.Outcome) -> Iterator[None]:
     """The images (built once per run by tests/conftest.py); their build times and sizes."""
     REPORT["build (deploy/build-images.sh)"] = [*rob6_images.steps, f"{rob6_images.seconds:.0f} s in all"]
     REPORT["images"] = image_report()
@@ -200,7 +204,7 @@ def built(rob6_images):
 
 
 @pytest.fixture(scope="module")
-def entry_points(built) -> None:
+def entry_points(built: None) -> None:
     """Every image imports its entry point, with everything it imports in turn: a module
     the image lacks (rob6-shared importing numpy, which the router, gateway, gripper and
     recorder images do not carry) fails here, before any stack is started."""
@@ -211,7 +215,7 @@ def entry_points(built) -> None:
 
 
 @pytest.fixture(scope="module")
-def plain(built, entry_points):
+def plain(built: None, entry_points: None) -> Iterator[Stack]:
     stack = Stack(f"rob6e2e{os.getpid()}")
     try:
         t = time.monotonic()
@@ -223,7 +227,7 @@ def plain(built, entry_points):
 
 
 @pytest.fixture(scope="module")
-def certs(tmp_path_factory):
+def certs(tmp_path_factory: TempPathFactory) -> tuple[Path, Path]:
     out = tmp_path_factory.mktemp("certs")
     make = DEPLOY / "certs" / "make-certs.sh"
     run(["bash", str(make), "--out", str(out), "router", *SERVICES, "intruder"])
@@ -233,7 +237,7 @@ def certs(tmp_path_factory):
 
 
 # ---------------------------------------------------------------------- tests: images
-def test_images_offline_minimal_non_root(built):
+def test_images_offline_minimal_non_root(built: None) -> None:
     heavy = {"numpy", "pinocchio", "ruckig", "mcap", "serial"}
     needs = {"router": set(), "gateway": set(), "kinematics": {"numpy", "pinocchio"},
              "planner": {"numpy", "ruckig"}, "driver": {"numpy", "ruckig"},
@@ -250,7 +254,7 @@ def test_images_offline_minimal_non_root(built):
         run(["docker", "run", "--rm", "--network", "none", image, "python", "-c", script], timeout=120)
 
 
-def test_router_container_tls_and_acl(built, certs):
+def test_router_container_tls_and_acl(built: None, certs: tuple[Path, Path]) -> None:
     """Infrastructure on its own: the router image with the secure profile, probed from here."""
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2erouter{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
@@ -268,7 +272,7 @@ def test_router_container_tls_and_acl(built, certs):
 
 
 # ---------------------------------------------------------------------- tests: the running system
-def test_conformance_subset(plain):
+def test_conformance_subset(plain: Stack) -> None:
     checked = conformance_subset(plain.port)
     REPORT["conformance subset (management.jsonl)"] = f"{checked} replies identical"
     with connect(plain.port) as client:  # the whole chain: gateway -> planner -> driver, kinematics
@@ -277,7 +281,7 @@ def test_conformance_subset(plain):
         assert client.ask("GetPositionJoints") == "10.000000 -60.000000 80.000000 20.000000 40.000000 30.000000\n"
 
 
-def test_kinematics_killed_mid_session(plain):
+def test_kinematics_killed_mid_session(plain: Stack) -> None:
     """The client gets `ERROR: ...` at once while kinematics is gone, and the same session
     works again when it is back; then a crash (SIGKILL inside) is restarted by the policy."""
     expected = fk_expected()
@@ -317,7 +321,7 @@ def test_kinematics_killed_mid_session(plain):
         assert same(FK, client.ask(FK, lines=2), expected)
 
 
-def test_two_kinematics_replicas_both_serve(plain):
+def test_two_kinematics_replicas_both_serve(plain: Stack) -> None:
     plain.compose("up", "-d", "--no-build", "--no-recreate", "--scale", "kinematics=2", "kinematics")
     plain.wait_healthy(("kinematics",), timeout=120)
     assert len(plain.containers("kinematics")) == 2
@@ -342,7 +346,7 @@ def test_two_kinematics_replicas_both_serve(plain):
     assert len(served) == 2 and min(served.values()) >= 3, served
 
 
-def test_replicas_from_outside_the_stack(plain, tmp_path):
+def test_replicas_from_outside_the_stack(plain: Stack, tmp_path: Path) -> None:
     """What deploy/MULTI_HOST.md describes, with this machine standing in for the other host:
     a kinematics container outside the compose network (docker run, env settings) and a
     plain process (deploy/zenoh/remote-client.json5), both reaching the router through its
@@ -382,7 +386,7 @@ def test_replicas_from_outside_the_stack(plain, tmp_path):
     assert any(i.startswith(remote_container) or i.startswith(hostname) for i in served), served
 
 
-def test_second_project_for_the_same_robot_is_refused(plain, tmp_path):
+def test_second_project_for_the_same_robot_is_refused(plain: Stack, tmp_path: Path) -> None:
     """One robot, one owner, in containers: a second compose project with the same robot id
     on the first one's Zenoh network (its network joined as external) gets a one-line
     refusal and exit 78 from each owner service; the first system is not disturbed."""
@@ -414,7 +418,7 @@ def test_second_project_for_the_same_robot_is_refused(plain, tmp_path):
         second.compose("down", "-t", "5", check=False)
 
 
-def test_recordings_readable_after_down(plain):
+def test_recordings_readable_after_down(plain: Stack) -> None:
     """Stop the stack (the recorder closes its files on SIGTERM); the MCAP files stay on the
     named volume and read back completely (summary, messages, kinematics traces)."""
     plain.compose("down", "-t", "10")  # keeps the volume
@@ -447,7 +451,7 @@ print(json.dumps(out))
 # ---------------------------------------------------------------------- stand-in controllers
 @contextmanager
 def controller_stack(profile: str, controller: str, *, robot: str, link: str,
-                     control_port_setting: str) -> Iterator[tuple[Stack, Callable[[], dict]]]:
+                     control_port_setting: str) -> Iterator[tuple[Stack, Callable[[], dict[str, Any]]]]:
     """The stack of compose profile ``profile`` with the driver on ``link`` to the stand-in
     controller container ``controller``: up and healthy. Yields the
     stack and the controller's status request (its control channel, published on the port
@@ -464,10 +468,11 @@ def controller_stack(profile: str, controller: str, *, robot: str, link: str,
         with socket.create_connection(("127.0.0.1", control_port), timeout=10) as sock, \
                 sock.makefile("rwb") as control:
 
-            def status() -> dict:
+            def status() -> dict[str, Any]:
                 control.write(b'{"cmd": "status"}\n')
                 control.flush()
-                return json.loads(control.readline())
+                reply: dict[str, Any] = json.loads(control.readline())
+                return reply
 
             yield stack, status
     finally:
@@ -475,7 +480,7 @@ def controller_stack(profile: str, controller: str, *, robot: str, link: str,
 
 
 # ---------------------------------------------------------------------- tests: rsi profile
-def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
+def test_rsi_profile_drives_the_kr_c4_container(built: None, entry_points: None) -> None:
     """`ROB6_LINK=rsi ROB6_ROBOT=kr16rt compose --profile rsi up`: the driver drives the
     stand-in KR C4 (its own container on the robot network) over RSI in real time; the
     controller's axes end where the client moved them, without a trip."""
@@ -498,7 +503,7 @@ def test_rsi_profile_drives_the_kr_c4_container(built, entry_points):
 
 
 # ---------------------------------------------------------------------- tests: adept profile
-def test_adept_profile_drives_the_adept_container(built, entry_points):
+def test_adept_profile_drives_the_adept_container(built: None, entry_points: None) -> None:
     """`ROB6_ROBOT=ad850 ROB6_LINK=simple_message compose --profile adept up`: the driver
     connects to the stand-in Adept controller (its own container on the robot network, found
     by the compose default ROB6_SM_HOST=adept-sm-sim) and streams a PTP motion to it over
@@ -586,7 +591,7 @@ def test_kawasaki_profile_drives_the_kawasaki_container(built, entry_points):
 
 
 # ---------------------------------------------------------------------- tests: secure profile
-def test_secure_profile_end_to_end(built, entry_points, certs):
+def test_secure_profile_end_to_end(built: None, entry_points: None, certs: tuple[Path, Path]) -> None:
     certs_dir, foreign = certs
     stack = Stack(f"rob6e2esec{os.getpid()}", ("docker-compose.yml", "docker-compose.secure.yml"),
                   {"ROB6_CERTS_DIR": str(certs_dir)})

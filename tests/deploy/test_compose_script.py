@@ -11,11 +11,13 @@ import pytest
 SCRIPT = Path(__file__).resolve().parents[2] / "deploy" / "compose"
 
 
-def test_without_any_compose_it_fails_with_one_clear_line(tmp_path):
+def test_without_any_compose_it_fails_with_one_clear_line(tmp_path: Path) -> None:
     # a PATH holding only the shell tools the script uses, no docker at all
     for tool in ("sh", "dirname"):
-        (tmp_path / tool).symlink_to(shutil.which(tool))
-    result = subprocess.run([str(SCRIPT), "version"], capture_output=True, text=True, env={"PATH": str(tmp_path)})
+        found = shutil.which(tool)
+        assert found is not None, f"no {tool} on this machine"
+        (tmp_path / tool).symlink_to(found)
+    result = subprocess.run([str(SCRIPT), "version"], capture_output=True, check=False, text=True, env={"PATH": str(tmp_path)})
     assert result.returncode == 127
     assert result.stderr.strip().splitlines() == [
         "deploy/compose: neither 'docker compose' nor 'docker-compose' is installed "
@@ -23,8 +25,8 @@ def test_without_any_compose_it_fails_with_one_clear_line(tmp_path):
 
 
 @pytest.mark.skipif(not shutil.which("docker"), reason="no docker here")
-def test_it_runs_the_installed_compose():
-    result = subprocess.run([str(SCRIPT), "version"], capture_output=True, text=True)
+def test_it_runs_the_installed_compose() -> None:
+    result = subprocess.run([str(SCRIPT), "version"], capture_output=True, check=False, text=True)
     if result.returncode == 127:
         pytest.skip("docker without compose here")
     assert result.returncode == 0, result.stderr

@@ -21,6 +21,7 @@ import json
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -91,7 +92,7 @@ def localize_config(src: Path, dest: Path, certs: Path, name: str, listen: str |
 
 
 @contextmanager
-def local_router(template: Path, certs: Path, port: int | None = None):
+def local_router(template: Path, certs: Path, port: int | None = None) -> Iterator[str]:
     """A router in this process from ``template``; yields its ``tls/127.0.0.1:<port>`` endpoint."""
     port = port or free_port()
     session = zenoh.open(router_config(template, certs, f"tls/127.0.0.1:{port}"))
@@ -119,7 +120,7 @@ def refused(config: zenoh.Config) -> bool:
 
 
 # ---------------------------------------------------------------------- primitives
-def serve(session: zenoh.Session, key: str, answer: bytes = b"probe-ok"):
+def serve(session: zenoh.Session, key: str, answer: bytes = b"probe-ok") -> zenoh.Queryable[None]:
     """A queryable answering every query on ``key`` (keep the returned object alive)."""
     def on_query(query: zenoh.Query) -> None:
         query.reply(query.key_expr, answer)
@@ -139,7 +140,7 @@ def ask(session: zenoh.Session, key: str, timeout: float = WAIT_S) -> list[bytes
 class Inbox:
     """Samples received by a subscriber (``declare`` it before publishing)."""
 
-    def __init__(self, session: zenoh.Session, key: str):
+    def __init__(self, session: zenoh.Session, key: str) -> None:
         self.samples: list[tuple[str, bytes]] = []
         self._lock = threading.Lock()
         # remote samples only: a session's own puts would otherwise reach its own subscriber

@@ -14,8 +14,10 @@ it) and the angles between flange orientations.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from rob6.robots import get_robot
@@ -30,7 +32,7 @@ from rob6_kinematics.calc import Kinematics
 ROBOT = get_robot("ad850")
 
 
-def test_the_documented_table():
+def test_the_documented_table() -> None:
     assert to_controller_deg([0.0] * 6).tolist() == [0.0, 0.0, 90.0, 0.0, 0.0, 0.0]
     assert to_controller_deg([10, 20, 30, 40, 50, 60]).tolist() == [-10.0, 20.0, 120.0, -40.0, 50.0, -60.0]
     wire = to_wire([10, 20, 30, 40, 50, 60])
@@ -41,13 +43,13 @@ def test_the_documented_table():
     assert np.allclose(from_controller_deg(to_controller_deg(q)), q, atol=1e-12)
 
 
-def test_positions_read_from_the_wire_carry_what_float32_carries():
+def test_positions_read_from_the_wire_carry_what_float32_carries() -> None:
     as_float32 = np.float32(math.radians(90.0))  # the controller's J3 at rob6's 0
     q = from_wire([0.0, 0.0, float(as_float32), 0.0, 0.0, 0.0])
     assert q.tolist() == [0.0] * 6 and not np.signbit(q).any()
 
 
-def test_the_ranges_map_onto_the_controllers():
+def test_the_ranges_map_onto_the_controllers() -> None:
     """rob6's hardware ranges of the ad850 are the controller's joint ranges (Adept's data)."""
     lo, hi = to_controller_deg(ROBOT.hw_min), to_controller_deg(ROBOT.hw_max)
     ranges = [(float(a), float(b)) for a, b in zip(np.minimum(lo, hi), np.maximum(lo, hi), strict=True)]
@@ -71,7 +73,7 @@ def _rot(axis: str, angle: float) -> np.ndarray:
     return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
 
 
-def urdf_flange(q_controller_deg) -> tuple[np.ndarray, np.ndarray]:
+def urdf_flange(q_controller_deg: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     rotation, position = np.eye(3), np.zeros(3)
     for (origin, axis), angle in zip(URDF_CHAIN, np.radians(q_controller_deg), strict=True):
         position = position + rotation @ np.array(origin, float)
@@ -79,12 +81,12 @@ def urdf_flange(q_controller_deg) -> tuple[np.ndarray, np.ndarray]:
     return rotation, position
 
 
-def rob6_flange(kin: Kinematics, q_deg) -> tuple[np.ndarray, np.ndarray]:
+def rob6_flange(kin: Kinematics, q_deg: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     pose = kin.fk(np.asarray(q_deg, float))[0]
     return pose[:, :3], pose[:, 3]
 
 
-def invariants(flanges) -> list[float]:
+def invariants(flanges: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[float]:
     """Distances, the signed volume and the angles between orientations of four flanges."""
     (r0, p0), *rest = flanges
     values = [float(np.linalg.norm(p - p0)) for _, p in rest]
@@ -93,7 +95,7 @@ def invariants(flanges) -> list[float]:
     return values
 
 
-def test_forward_kinematics_agree_through_the_convention():
+def test_forward_kinematics_agree_through_the_convention() -> None:
     kin = Kinematics(ROBOT)
     rng = np.random.default_rng(15)
     lo, hi = np.array(ROBOT.turn_min), np.array(ROBOT.turn_max)
@@ -111,7 +113,7 @@ def test_forward_kinematics_agree_through_the_convention():
     ((-1, -1, 1, -1, 1, -1), (0, 0, 90, 0, 0, 0)),  # q2
     ((-1, 1, 1, -1, 1, -1), (0, 0, -90, 0, 0, 0)),  # the J3 offset the other way
 ])
-def test_the_check_would_catch_another_convention(sign, offset):
+def test_the_check_would_catch_another_convention(sign: tuple[int, ...], offset: tuple[int, ...]) -> None:
     kin = Kinematics(ROBOT)
     rng = np.random.default_rng(1)
     qs = rng.uniform(-100, 100, (4, 6))

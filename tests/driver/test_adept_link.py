@@ -15,14 +15,17 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Callable, Iterator, Sequence
+from typing import TypedDict
 
 import numpy as np
 import pytest
+from pytest import FixtureRequest
 
 from rob6.messages import LinkEvent
 from rob6.robots import get_robot
 from rob6_driver.links.simple_message import RATED_SPEED_DEG_S, AdeptLink, AdeptSettings, from_wire, to_wire
-from rob6_driver.motion import MotionCore
+from rob6_driver.motion import Motion, MotionCore
 from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
@@ -32,16 +35,23 @@ STATE_PERIOD_S = 0.02
 
 
 class Point:
-    def __init__(self, sequence, comm, joints, velocity, duration):
+    def __init__(self, sequence: int, comm: int, joints: Sequence[float], velocity: float, duration: float) -> None:
         self.sequence, self.comm, self.velocity, self.duration = sequence, comm, velocity, duration
         self.joints = list(joints)  # ten, radians
         self.q = from_wire(self.joints)  # rob6 degrees
 
 
+class Ports(TypedDict):
+    """The fake controller's ports, as ``AdeptSettings`` takes them."""
+
+    motion_port: int
+    state_port: int
+
+
 class FakeController:
     """Both ports of a simple_message controller, scripted by the test."""
 
-    def __init__(self, order: str = "big"):
+    def __init__(self, order: str = "big") -> None:
         self.e = ORDERS[order]
         self.motion_server = socket.create_server(("127.0.0.1", 0))
         self.state_server = socket.create_server(("127.0.0.1", 0))
@@ -61,8 +71,10 @@ class FakeController:
             threading.Thread(target=self._accept, args=(server, serve), daemon=True).start()
 
     @property
-    def settings(self) -> dict:
-        return {"motion_port": self.motion_server.getsockname()[1], "state_port": self.state_server.getsockname()[1]}
+    def settings(self) -> Ports:
+        motion: int = self.motion_server.getsockname()[1]
+        state: int = self.state_server.getsockname()[1]
+        return {"motion_port": motion, "state_port": state}
 
     def close(self) -> None:
         self._closing = True
@@ -78,7 +90,7 @@ class FakeController:
                 sock.shutdown(socket.SHUT_RDWR)
         self._sockets.clear()
 
-    def _accept(self, server, serve) -> None:
+    def _accept(self, server: socket.socket, serve: Callable[[socket.socket], None]) -> None:
         while not self._closing:
             try:
                 conn, _ = server.accept()
@@ -87,11 +99,11 @@ class FakeController:
             self._sockets.append(conn)
             threading.Thread(target=serve, args=(conn,), daemon=True).start()
 
-    def _frame(self, msg_type, comm, reply, body) -> bytes:
-        e = self.e
+    def _frame(self, msg_type: int, comm: int, reply: int, body: bytes) -> bytes:
+        e: str = self.e
         return struct.pack(e + "i", 12 + len(body)) + struct.pack(e + "3i", msg_type, comm, reply) + body
 
-    def _motion(self, conn) -> None:
+    def _motion(self, conn: socket.socket) -> None:
         self.connections["motion"] += 1
         e = self.e
         try:
@@ -114,7 +126,7 @@ class FakeController:
         except (OSError, ConnectionError):
             pass
 
-    def _state(self, conn) -> None:
+    def _state(self, conn: socket.socket) -> None:
         self.connections["state"] += 1
         e = self.e
         try:
@@ -130,7 +142,7 @@ class FakeController:
             pass
 
 
-def _exact(conn, n) -> bytes:
+def _exact(conn: socket.socket, n: int) -> bytes:
     data = b""
     while len(data) < n:
         chunk = conn.recv(n - len(data))
@@ -140,14 +152,14 @@ def _exact(conn, n) -> bytes:
     return data
 
 
-def wait(predicate, timeout=15.0, what="condition"):
+def wait(predicate: Callable[[], object], timeout: float = 15.0, what: str = "condition") -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, f"timed out waiting for {what}"
         time.sleep(0.005)
 
 
-def ptp(core, target, config=None):
+def ptp(core: MotionCore, target: Sequence[float], config: MotionSettings | None = None) -> tuple[Motion, int]:
     plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), list(target),
                                                   config or MotionSettings(core.robot))
     assert plan.ok, plan.reason
@@ -156,12 +168,16 @@ def ptp(core, target, config=None):
     return core.execute(t.q, t.dt, t.qd, t.qdd), len(t.q)
 
 
-def online(core, link):
+def online(core: MotionCore, link: AdeptLink) -> None:
     wait(lambda: link.state == "connected" and not core.offline_reason, what="the link to be up")
 
 
+#: the fixture: the fake controller, core, link and the link's events
+Rig = tuple[FakeController, MotionCore, AdeptLink, list[LinkEvent]]
+
+
 @pytest.fixture(params=["big", "little"])
-def rig(request):
+def rig(request: FixtureRequest) -> Iterator[Rig]:
     fake = FakeController(request.param)
     core = MotionCore(ROBOT)
     events: list[LinkEvent] = []
@@ -172,7 +188,7 @@ def rig(request):
     fake.close()
 
 
-def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig):
+def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig: Rig) -> None:
     fake, core, link, events = rig
     port, state_port = fake.settings["motion_port"], fake.settings["state_port"]
     refused = core.execute([[0.0] * 6] * 2, core.dt)
@@ -183,6 +199,7 @@ def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig):
     target = [10.0, -20.0, 15.0, 5.0, 20.0, -30.0]
     motion, samples = ptp(core, target)
     assert motion.wait(20) and motion.ok
+    assert motion.final is not None
     assert link.settle(motion.final.q) == ""
     points = fake.points
     assert all(p.comm == 2 for p in points) and fake.pipelined == 0
@@ -204,7 +221,7 @@ def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig):
     assert [e.event for e in events][:2] == ["waiting", "connected"]
 
 
-def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig):
+def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -226,13 +243,14 @@ def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig):
     fake.follow = True
     sent = len(fake.points)
     motion, _ = ptp(core, [0.0] * 6)
-    assert motion.wait(20) and motion.ok and link.settle(motion.final.q) == ""
+    assert motion.wait(20) and motion.ok
+    assert motion.final is not None and link.settle(motion.final.q) == ""
     assert np.array_equal(fake.points[sent].q, stood)  # the new stream starts there: no jump
     kinds = [e.event for e in events]
     assert "fault" in kinds and kinds[-1] == "back"
 
 
-def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_words(rig):
+def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_words(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -249,11 +267,12 @@ def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_wo
     fake.reply_code = 1
     online(core, link)  # resynchronized once the robot is at rest
     motion, _ = ptp(core, [0.0] * 6)
-    assert motion.wait(20) and motion.ok and link.settle(motion.final.q) == ""
+    assert motion.wait(20) and motion.ok
+    assert motion.final is not None and link.settle(motion.final.q) == ""
     assert "refused" in [e.event for e in events]
 
 
-def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig):
+def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -271,11 +290,12 @@ def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig):
     online(core, link)
     assert np.allclose(core.state().q, from_wire(fake.position), atol=1e-9)
     motion, _ = ptp(core, [5.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    assert motion.wait(20) and motion.ok and link.settle(motion.final.q) == ""
+    assert motion.wait(20) and motion.ok
+    assert motion.final is not None and link.settle(motion.final.q) == ""
     assert [e.event for e in events].count("back") >= 1
 
 
-def test_a_silent_state_port_is_a_lost_link(rig):
+def test_a_silent_state_port_is_a_lost_link(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
     online(core, link)
@@ -293,26 +313,28 @@ def test_a_silent_state_port_is_a_lost_link(rig):
                m.endswith(" closed the state connection") for m in lost), lost
 
 
-def test_late_acknowledgements_merge_points_and_keep_the_timing(rig):
+def test_late_acknowledgements_merge_points_and_keep_the_timing(rig: Rig) -> None:
     fake, core, link, _ = rig
     link.start()
     online(core, link)
     fake.ack_delay = 0.15  # three periods: the points made meanwhile go as one
     motion, samples = ptp(core, [8.0, 0.0, 4.0, 0.0, 0.0, 0.0])
-    assert motion.wait(20) and motion.ok and link.settle(motion.final.q) == ""
+    assert motion.wait(20) and motion.ok
+    assert motion.final is not None and link.settle(motion.final.q) == ""
     assert link.late > 0 and len(fake.points) + link.late == link.late + link.packets
     assert sum(p.duration for p in fake.points) == pytest.approx((samples - 1) * core.dt + link.period_s + link.lead_s + core.dt,
                                                                  abs=core.dt + 1e-6)
     assert np.allclose(fake.points[-1].q, [8.0, 0.0, 4.0, 0.0, 0.0, 0.0], atol=1e-4)
 
 
-def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig):
+def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig: Rig) -> None:
     fake, core, link, _ = rig
     link.start()
     online(core, link)
     fake.follow = False
     motion, _ = ptp(core, [3.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     assert motion.wait(10) and motion.ok  # the setpoints are done ...
+    assert motion.final is not None
     failed = link.settle(motion.final.q)  # ... the robot is not there
     assert failed == "robot stopped short of the target (joint 1 at 0.000, target 3.000)"
     assert core.offline_reason == failed
@@ -320,7 +342,7 @@ def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig)
     assert core.state().q.tolist() == [0.0] * 6
 
 
-def test_a_point_beyond_the_robots_range_is_never_sent():
+def test_a_point_beyond_the_robots_range_is_never_sent() -> None:
     config = MotionSettings(ROBOT)
     fake = FakeController()
     core = MotionCore(ROBOT)
@@ -342,7 +364,7 @@ def test_a_point_beyond_the_robots_range_is_never_sent():
         fake.close()
 
 
-def test_stopping_the_link_mid_motion_sends_a_stop():
+def test_stopping_the_link_mid_motion_sends_a_stop() -> None:
     fake = FakeController()
     core = MotionCore(ROBOT)
     link = AdeptLink(core, ROBOT, AdeptSettings(**fake.settings), lambda s: None, retry_s=0.1)
@@ -357,7 +379,7 @@ def test_stopping_the_link_mid_motion_sends_a_stop():
     assert fake.points[-1].sequence == -4
 
 
-def test_only_the_adept_and_sensible_settings():
+def test_only_the_adept_and_sensible_settings() -> None:
     with pytest.raises(ValueError, match=r"drives the Adept Viper s850 \(ad850\), not kr16"):
         AdeptLink(MotionCore("kr16"), get_robot("kr16"), AdeptSettings(), lambda s: None)
     for settings, text in ((AdeptSettings(motion_port=0), "ROB6_SM_MOTION_PORT=0"),

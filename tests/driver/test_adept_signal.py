@@ -7,22 +7,24 @@ state agree afterwards. A port that cannot be reached fails with ``ERROR: driver
 
 from __future__ import annotations
 
+from contextlib import AbstractContextManager
+
 import pytest
 
 from tests.controllers.adept_controller import AdeptController
-from tests.system import Client, driver_state, free_port, running
+from tests.system import Client, System, driver_state, free_port, running
 
 pytestmark = pytest.mark.slow
 
 
-def adept_system(ctl: AdeptController, io_port: int):
+def adept_system(ctl: AdeptController, io_port: int) -> AbstractContextManager[System]:
     assert ctl.motion is not None and ctl.state is not None
     return running("ad850", dummy=False, extra_env={
         "ROB6_LINK": "simple_message", "ROB6_SM_HOST": "127.0.0.1", "ROB6_SM_MOTION_PORT": str(ctl.motion[1]),
         "ROB6_SM_STATE_PORT": str(ctl.state[1]), "ROB6_SM_IO_PORT": str(io_port)})
 
 
-def test_signal_switches_the_controllers_outputs():
+def test_signal_switches_the_controllers_outputs() -> None:
     with AdeptController("--state-period", "0.02") as ctl:
         assert ctl.io is not None
         with adept_system(ctl, ctl.io[1]) as system, Client(system.port) as client:
@@ -44,7 +46,7 @@ def test_signal_switches_the_controllers_outputs():
             assert client.read_quiet(0.3) == ""
 
 
-def test_an_unreachable_io_port_fails_and_switches_nothing():
+def test_an_unreachable_io_port_fails_and_switches_nothing() -> None:
     closed = free_port()
     with (AdeptController("--state-period", "0.02") as ctl, adept_system(ctl, closed) as system,
           Client(system.port) as client):

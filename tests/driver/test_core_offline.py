@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rob6_driver.motion import MotionCore, Offline
+from rob6_driver.motion import Motion, MotionCore, Offline
 from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
 
 
-def ptp(core, target):
+def ptp(core: MotionCore, target: list[float]) -> Motion:
     plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), target, MotionSettings(core.robot))
     assert plan.ok, plan.reason
     t = plan.trajectory
@@ -21,7 +21,7 @@ def ptp(core, target):
     return core.execute(t.q, t.dt, t.qd, t.qdd)
 
 
-def test_a_core_waiting_for_its_robot_refuses_motion_with_the_reason():
+def test_a_core_waiting_for_its_robot_refuses_motion_with_the_reason() -> None:
     core = MotionCore("kr16rt", offline="robot not connected (waiting for RSI on 0.0.0.0:49152)")
     motion = core.execute([[0.0] * 6, [0.0] * 6], core.dt)
     assert motion.done.is_set() and motion.ok is False
@@ -31,7 +31,7 @@ def test_a_core_waiting_for_its_robot_refuses_motion_with_the_reason():
     assert core.stop().wait(0.1)  # stopping what does not move is fine
 
 
-def test_link_lost_mid_motion_ends_it_and_the_robot_resumes_where_it_really_is():
+def test_link_lost_mid_motion_ends_it_and_the_robot_resumes_where_it_really_is() -> None:
     core = MotionCore("kr16rt", q0=HOME)
     motion = ptp(core, [30.0, -90.0, 90.0, 0.0, 0.0, 0.0])
     core.run(200)
@@ -52,7 +52,7 @@ def test_link_lost_mid_motion_ends_it_and_the_robot_resumes_where_it_really_is()
     assert np.abs(states[0].q - actual).max() < 1e-3
 
 
-def test_alter_mode_survives_a_lost_link_holding_the_actual_position():
+def test_alter_mode_survives_a_lost_link_holding_the_actual_position() -> None:
     core = MotionCore("kr16rt", q0=HOME)
     assert core.enable_alter() == (True, "")
     assert core.set_target([5.0, -90.0, 90.0, 0.0, 0.0, 0.0]) == (True, "")
@@ -70,7 +70,7 @@ def test_alter_mode_survives_a_lost_link_holding_the_actual_position():
     assert np.allclose(core.state().q, [1.0, -90.0, 90.0, 0.0, 0.0, 0.0])
 
 
-def test_online_under_a_running_motion_ends_it_with_the_restart_reason():
+def test_online_under_a_running_motion_ends_it_with_the_restart_reason() -> None:
     core = MotionCore("kr16rt", q0=HOME)
     motion = ptp(core, [10.0, -90.0, 90.0, 0.0, 0.0, 0.0])
     core.run(10)

@@ -21,7 +21,7 @@ def limits(vmax: float = 100.0, amax: float = 1000.0, turn: float = 10.0) -> Lim
     return Limits(-turn * six, turn * six, vmax * six, amax * six, amax / 0.048 * six, 5.0 * six)
 
 
-def monitor(**kw) -> LimitMonitor:
+def monitor(**kw: float) -> LimitMonitor:
     return LimitMonitor(limits(**kw), DT)
 
 
@@ -32,7 +32,7 @@ def joint(j: int, value: float, base: np.ndarray = ZERO) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- one setpoint
-def test_a_setpoint_within_every_limit_passes():
+def test_a_setpoint_within_every_limit_passes() -> None:
     mon = monitor()
     assert mon.check(joint(2, 0.05), ZERO, ZERO) is None
     # cruising at 90 deg/s, one more step at the same speed
@@ -40,7 +40,7 @@ def test_a_setpoint_within_every_limit_passes():
     assert mon.check(q + 0.9, q, np.full(6, 90.0)) is None
 
 
-def test_a_setpoint_beyond_a_turn_limit_is_caught():
+def test_a_setpoint_beyond_a_turn_limit_is_caught() -> None:
     mon = monitor()
     q = np.full(6, 9.95)
     assert mon.check(joint(3, 10.05, q), q, ZERO) == Breach("turn", 3, 10.05, 10.0)
@@ -48,14 +48,14 @@ def test_a_setpoint_beyond_a_turn_limit_is_caught():
     assert mon.check(joint(1, -10.05, q), q, ZERO) == Breach("turn", 1, -10.05, -10.0)
 
 
-def test_turn_limits_are_strict():
+def test_turn_limits_are_strict() -> None:
     mon = monitor()
     q = np.full(6, 9.95)
     breach = mon.check(joint(0, 10.0, q), q, ZERO)
     assert breach is not None and breach.kind == "turn" and breach.joint == 0
 
 
-def test_a_joint_already_outside_may_only_move_back_in():
+def test_a_joint_already_outside_may_only_move_back_in() -> None:
     mon = monitor()
     outside = joint(4, 10.5)  # the limits were narrowed while it stood there
     assert mon.check(outside, outside, ZERO) is None  # standing still
@@ -64,7 +64,7 @@ def test_a_joint_already_outside_may_only_move_back_in():
     assert breach is not None and breach.kind == "turn" and breach.joint == 4
 
 
-def test_a_setpoint_too_fast_is_caught():
+def test_a_setpoint_too_fast_is_caught() -> None:
     mon = monitor(amax=1e9)  # acceleration out of the way
     breach = mon.check(joint(5, 1.5), ZERO, ZERO)  # 150 deg/s
     assert breach is not None and breach.kind == "speed" and breach.joint == 5
@@ -74,7 +74,7 @@ def test_a_setpoint_too_fast_is_caught():
     assert mon.check(joint(5, 1.0), ZERO, ZERO) is None  # exactly the limit
 
 
-def test_a_setpoint_accelerating_too_hard_is_caught():
+def test_a_setpoint_accelerating_too_hard_is_caught() -> None:
     mon = monitor()
     breach = mon.check(joint(2, 0.2), ZERO, ZERO)  # 0 -> 20 deg/s in one cycle: 2000 deg/s^2
     assert breach is not None and breach.kind == "acceleration" and breach.joint == 2
@@ -85,7 +85,7 @@ def test_a_setpoint_accelerating_too_hard_is_caught():
     assert breach is not None and breach.kind == "acceleration" and breach.value == pytest.approx(-5000.0)
 
 
-def test_the_turn_limit_is_reported_before_speed():
+def test_the_turn_limit_is_reported_before_speed() -> None:
     mon = monitor()
     q = np.full(6, 9.0)
     breach = mon.check(joint(0, 12.0, q), q, ZERO)  # too far and too fast: turn first
@@ -93,7 +93,7 @@ def test_the_turn_limit_is_reported_before_speed():
 
 
 # ---------------------------------------------------------------- a whole trajectory
-def test_a_trajectory_is_checked_up_front_including_the_stop_at_its_end():
+def test_a_trajectory_is_checked_up_front_including_the_stop_at_its_end() -> None:
     mon = monitor()
     ramp = np.cumsum([0.0, 0.1, 0.2, 0.3, 0.3, 0.2, 0.1, 0.0])
     good = np.outer(ramp, np.ones(6))
@@ -108,14 +108,14 @@ def test_a_trajectory_is_checked_up_front_including_the_stop_at_its_end():
 
 
 # ---------------------------------------------------------------- last resorts
-def test_clamp_gives_the_admissible_sample_closest_to_a_bad_one():
+def test_clamp_gives_the_admissible_sample_closest_to_a_bad_one() -> None:
     mon = monitor()
     q_new = mon.clamp(joint(0, 0.5), ZERO, ZERO)
     assert mon.check(q_new, ZERO, ZERO) is None
     assert q_new[0] == pytest.approx(0.1) and np.all(q_new[1:] == 0)
 
 
-def test_brake_slows_down_as_hard_as_allowed():
+def test_brake_slows_down_as_hard_as_allowed() -> None:
     mon = monitor()
     v = np.full(6, 50.0)
     q = np.zeros(6)
@@ -127,7 +127,7 @@ def test_brake_slows_down_as_hard_as_allowed():
 
 
 # ---------------------------------------------------------------- limit changes
-def test_slower_limits_under_a_motion_are_enforced_once_the_state_is_within_them():
+def test_slower_limits_under_a_motion_are_enforced_once_the_state_is_within_them() -> None:
     mon = monitor()
     slow = limits(vmax=20.0)
     mon.loosen(slow)
@@ -145,14 +145,14 @@ def test_slower_limits_under_a_motion_are_enforced_once_the_state_is_within_them
     assert breach is not None and breach.kind == "speed"
 
 
-def test_loosened_limits_close_at_rest():
+def test_loosened_limits_close_at_rest() -> None:
     mon = monitor()
     mon.loosen(limits(vmax=20.0))
     mon.update(limits(vmax=20.0), moving=False, on_current_plan=False, v_prev=ZERO, qd=ZERO, qdd=ZERO)
     assert mon.enforced.vmax[0] == 20.0
 
 
-def test_turn_limits_crossed_by_a_stop_are_widened_just_enough_then_close_at_rest():
+def test_turn_limits_crossed_by_a_stop_are_widened_just_enough_then_close_at_rest() -> None:
     mon = monitor()
     lo, hi = -10.0 * np.ones(6), joint(2, 3.0, 10.0 * np.ones(6))
     start = joint(2, 2.0)
@@ -168,7 +168,7 @@ def test_turn_limits_crossed_by_a_stop_are_widened_just_enough_then_close_at_res
 
 
 # ---------------------------------------------------------------- the core cannot go around it
-def test_the_motion_core_checks_every_sample_with_its_monitor():
+def test_the_motion_core_checks_every_sample_with_its_monitor() -> None:
     core = MotionCore("kr16")
     lim = Limits.defaults(get_robot("kr16"))
     assert np.array_equal(core.enforced_limits().vmax, lim.vmax)

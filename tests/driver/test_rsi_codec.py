@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from rob6_driver.links.rsi_codec import RsiParseError, format_sen, ipoc_of, parse_rob
+from rob6_driver.links.rsi_codec import RobPacket, RsiParseError, format_sen, ipoc_of, parse_rob
 
 AXES = 'A1="1.5" A2="-90.25" A3="90" A4="0.0001" A5="-0.5" A6="180"'
 START = 'A1="0" A2="-90" A3="90" A4="0" A5="0" A6="0"'
@@ -15,13 +15,13 @@ STANDARD = (f'<Rob TYPE="KUKA"><RIst X="1" Y="2" Z="3" A="4" B="5" C="6"/><RSol 
             f'B="5" C="6"/><AIPos {AXES}/><ASPos {START}/><Delay D="7"/><IPOC>4208105428</IPOC></Rob>').encode()
 
 
-def check(packet):
+def check(packet: RobPacket) -> None:
     assert packet.aipos == (1.5, -90.25, 90.0, 0.0001, -0.5, 180.0)
     assert packet.aspos == (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
     assert packet.ipoc == b"4208105428" and packet.stamp == 4208105428
 
 
-def test_the_controllers_packet():
+def test_the_controllers_packet() -> None:
     packet = parse_rob(STANDARD)
     check(packet)
     assert packet.delay == 7 and packet.robot_type == "KUKA"
@@ -39,11 +39,11 @@ def test_the_controllers_packet():
     # elements written with an end tag, no Delay element at all, lower-case attribute names
     f'<Rob><AIPos {AXES.lower()}></AIPos><ASPos {START}></ASPos><IPOC>4208105428</IPOC></Rob>',
 ])
-def test_variants_of_other_rsi_versions(text):
+def test_variants_of_other_rsi_versions(text: str) -> None:
     check(parse_rob(text.encode()))
 
 
-def test_a_missing_delay_counts_as_zero():
+def test_a_missing_delay_counts_as_zero() -> None:
     packet = parse_rob(f"<Rob><AIPos {AXES}/><ASPos {START}/><IPOC>1</IPOC></Rob>".encode())
     assert packet.delay == 0
 
@@ -65,12 +65,12 @@ def test_a_missing_delay_counts_as_zero():
     # the packet cut off by a too small buffer
     (STANDARD[:150], "no <IPOC>"),
 ])
-def test_garbage_gives_a_clear_error(text, message):
+def test_garbage_gives_a_clear_error(text: bytes, message: str) -> None:
     with pytest.raises(RsiParseError, match=message.replace("(", r"\(").replace("[", r"\[")):
         parse_rob(text)
 
 
-def test_random_bytes_never_crash_the_parser():
+def test_random_bytes_never_crash_the_parser() -> None:
     rng = random.Random(7)
     for _ in range(3000):
         data = bytearray(STANDARD)
@@ -90,7 +90,7 @@ def test_random_bytes_never_crash_the_parser():
         assert len(packet.aipos) == len(packet.aspos) == 6
 
 
-def test_the_answer():
+def test_the_answer() -> None:
     sen = format_sen(b"ImFree", [0.1, -2.0, 0.0, 1e-7, 123.456789, -0.0000004], b"4208105428")
     assert sen == (b'<Sen Type="ImFree"><AK A1="0.100000" A2="-2.000000" A3="0.000000" A4="0.000000" '
                    b'A5="123.456789" A6="-0.000000"/><IPOC>4208105428</IPOC></Sen>')
@@ -98,6 +98,6 @@ def test_the_answer():
     assert stop.endswith(b"/><Stop>1</Stop><IPOC>17</IPOC></Sen>")
 
 
-def test_ipoc_of():
+def test_ipoc_of() -> None:
     assert ipoc_of(STANDARD) == 4208105428
     assert ipoc_of(b"<Rob></Rob>") == -1

@@ -8,6 +8,8 @@ from __future__ import annotations
 import re
 import socket
 import time
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 import pytest
@@ -15,7 +17,7 @@ import pytest
 from rob6.messages import LinkEvent
 from rob6.robots import get_robot
 from rob6_driver.links.rsi import RsiLink
-from rob6_driver.motion import CoreState, MotionCore
+from rob6_driver.motion import CoreState, Motion, MotionCore
 from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
 
@@ -24,14 +26,14 @@ SEN = re.compile(rb'<Sen Type="ImFree"><AK A1="([^"]+)" A2="([^"]+)" A3="([^"]+)
                  rb'A5="([^"]+)" A6="([^"]+)"/>(<Stop>1</Stop>)?<IPOC>(\d+)</IPOC></Sen>$')
 
 
-def axes(name, q):
+def axes(name: str, q: Sequence[float]) -> str:
     return f"<{name} " + " ".join(f'A{i + 1}="{v:.4f}"' for i, v in enumerate(q)) + "/>"
 
 
 class Controller:
     """Sends hand-made <Rob> packets to the link and reads its answers."""
 
-    def __init__(self, address):
+    def __init__(self, address: str) -> None:
         host, port = address.rsplit(":", 1)
         self.target = (host, int(port))
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -39,7 +41,8 @@ class Controller:
         self.sock.settimeout(2.0)
         self.ipoc = 1000
 
-    def send(self, aipos=HOME, aspos=HOME, delay=0, ipoc=None, raw=None):
+    def send(self, aipos: Sequence[float] = HOME, aspos: Sequence[float] = HOME, delay: int = 0,
+             ipoc: int | None = None, raw: bytes | None = None) -> int:
         if ipoc is None:
             self.ipoc += 4
             ipoc = self.ipoc
@@ -48,7 +51,7 @@ class Controller:
         self.sock.sendto(data, self.target)
         return ipoc
 
-    def answer(self, timeout=2.0):
+    def answer(self, timeout: float = 2.0) -> tuple[np.ndarray, bool, int] | None:
         """(AK, stop, ipoc) of the next answer, or None if none comes within timeout."""
         self.sock.settimeout(timeout)
         try:
@@ -59,15 +62,21 @@ class Controller:
         assert m, data
         return np.array([float(x) for x in m.groups()[:6]]), m.group(7) is not None, int(m.group(8))
 
-    def cycle(self, **kw):
+    def cycle(self, **kw: Any) -> np.ndarray:
         ipoc = self.send(**kw)
-        ak, stop, echoed = self.answer()
+        answer = self.answer()
+        assert answer is not None, "no answer"
+        ak, stop, echoed = answer
         assert echoed == ipoc
         return ak
 
 
+#: the fixture: core, link, the fake controller, the states published, the link's events
+Rig = tuple[MotionCore, RsiLink, Controller, list[CoreState], list[LinkEvent]]
+
+
 @pytest.fixture
-def rig():
+def rig() -> Iterator[Rig]:
     robot = get_robot("kr16rt")
     core = MotionCore(robot)
     states: list[CoreState] = []
@@ -80,21 +89,21 @@ def rig():
     controller.sock.close()
 
 
-def wait(predicate, timeout=5.0):
+def wait(predicate: Callable[[], object], timeout: float = 5.0) -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, "timed out"
         time.sleep(0.005)
 
 
-def ptp(core, target):
+def ptp(core: MotionCore, target: Sequence[float]) -> Motion:
     plan = TrajectoryPlanner(core.robot).plan_ptp(core.state().q.tolist(), list(target), MotionSettings(core.robot))
     t = plan.trajectory
     assert t is not None, plan.reason
     return core.execute(t.q, t.dt, t.qd, t.qdd)
 
 
-def test_start_steps_and_late_answers(rig):
+def test_start_steps_and_late_answers(rig: Rig) -> None:
     core, link, ctl, states, events = rig
     assert link.state == "waiting"
     assert core.execute([list(HOME)] * 2, core.dt).error.startswith("robot not connected (waiting for RSI on 127.0.0.1:")
@@ -118,8 +127,10 @@ def test_start_steps_and_late_answers(rig):
     wait(lambda: [e.event for e in events if e.event == "late"] == ["late", "late"])  # published after the answers
     # a duplicate of the last packet, an older one, garbage and a stranger get no answer
     stranger = Controller(link.address)
-    for send in (lambda: ctl.send(delay=2, ipoc=ctl.ipoc), lambda: ctl.send(delay=2, ipoc=ctl.ipoc - 8),
-                 lambda: ctl.send(raw=b"<Rob><IPOC>12</IPOC>"), lambda: stranger.send(delay=2, ipoc=ctl.ipoc + 4)):
+    sends: tuple[Callable[[], int], ...] = (
+        lambda: ctl.send(delay=2, ipoc=ctl.ipoc), lambda: ctl.send(delay=2, ipoc=ctl.ipoc - 8),
+        lambda: ctl.send(raw=b"<Rob><IPOC>12</IPOC>"), lambda: stranger.send(delay=2, ipoc=ctl.ipoc + 4))
+    for send in sends:
         send()
         time.sleep(0.01)  # one at a time (several waiting at once: only the newest is looked at)
     assert ctl.answer(timeout=0.05) is None and stranger.answer(timeout=0.05) is None
@@ -130,7 +141,7 @@ def test_start_steps_and_late_answers(rig):
     assert ctl.cycle(delay=2)[0] == pytest.approx(20.0, abs=1e-6)
 
 
-def test_lost_and_back_in_the_same_run_continues_from_aipos(rig):
+def test_lost_and_back_in_the_same_run_continues_from_aipos(rig: Rig) -> None:
     core, link, ctl, states, events = rig
     ctl.cycle()
     motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
@@ -152,7 +163,7 @@ def test_lost_and_back_in_the_same_run_continues_from_aipos(rig):
     assert abs(first[0] - back[0]) < 0.01
 
 
-def test_a_restart_rebases_on_the_new_start_pose(rig):
+def test_a_restart_rebases_on_the_new_start_pose(rig: Rig) -> None:
     core, link, ctl, states, events = rig
     ctl.cycle()
     motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
@@ -167,7 +178,7 @@ def test_a_restart_rebases_on_the_new_start_pose(rig):
     assert np.array_equal(ctl.cycle(aipos=new_start, aspos=new_start), np.zeros(6))
 
 
-def test_stop_ends_the_correction_run():
+def test_stop_ends_the_correction_run() -> None:
     robot = get_robot("kr16rt")
     core = MotionCore(robot)
     link = RsiLink(core, robot, "127.0.0.1:0", lambda s: None)
@@ -180,7 +191,9 @@ def test_stop_ends_the_correction_run():
         stopper.start()
         time.sleep(0.05)
         ipoc = ctl.send()
-        ak, stop, echoed = ctl.answer()
+        answer = ctl.answer()
+        assert answer is not None
+        ak, stop, echoed = answer
         assert stop and echoed == ipoc and np.array_equal(ak, np.zeros(6))
         stopper.join(5)
         assert not stopper.is_alive()

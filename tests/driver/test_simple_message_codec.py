@@ -18,7 +18,7 @@ def packed(e: str, msg_type: int, comm: int, reply: int, body: bytes) -> bytes:
 
 
 @pytest.mark.parametrize("order", ["big", "little"])
-def test_a_trajectory_point_request_is_68_bytes_in_the_protocols_layout(order):
+def test_a_trajectory_point_request_is_68_bytes_in_the_protocols_layout(order: str) -> None:
     e = ORDERS[order]
     joints = [0.1, -0.2, 1.5, 0.0, 2.0, -3.0]
     frame = sm.Codec(order).traj_pt(7, joints, velocity=0.25, duration=0.048)
@@ -28,7 +28,7 @@ def test_a_trajectory_point_request_is_68_bytes_in_the_protocols_layout(order):
 
 
 @pytest.mark.parametrize("order", ["big", "little"])
-def test_state_messages_and_replies_are_read(order):
+def test_state_messages_and_replies_are_read(order: str) -> None:
     e = ORDERS[order]
     codec = sm.Codec(order)
     joints = [0.5, -1.0, 1.5707964, 0.25, -0.75, 3.0, 0, 0, 0, 0]
@@ -55,7 +55,7 @@ def test_state_messages_and_replies_are_read(order):
 
 
 @pytest.mark.parametrize("order", ["big", "little"])
-def test_what_the_codec_packs_it_reads_back(order):
+def test_what_the_codec_packs_it_reads_back(order: str) -> None:
     codec = sm.Codec(order)
     status = sm.RobotStatus(0, 1, 42, 1, 0, sm.MODE_MANUAL, -1)
     point = codec.decode(codec.split(bytearray(codec.traj_pt(-3, [1.0, 2.0], 0.5, 1.25)))[0]).value
@@ -65,7 +65,7 @@ def test_what_the_codec_packs_it_reads_back(order):
     assert reply.header.reply_code == sm.FAILURE
 
 
-def test_the_wrong_byte_order_is_named():
+def test_the_wrong_byte_order_is_named() -> None:
     little = packed("<", 10, 1, 0, struct.pack("<i10f", 0, *[0.0] * 10))
     with pytest.raises(sm.SimpleMessageError, match=r"read little-endian it would be 56: is the byte order"):
         sm.Codec("big").split(bytearray(little))
@@ -73,7 +73,7 @@ def test_the_wrong_byte_order_is_named():
         sm.Codec("big").split(bytearray(struct.pack(">i", -5) + b"x" * 8))
 
 
-def test_a_known_message_with_the_wrong_body_is_refused():
+def test_a_known_message_with_the_wrong_body_is_refused() -> None:
     short = packed(">", 13, 1, 0, struct.pack(">6i", 1, 0, 0, 0, 0, 2))
     codec = sm.Codec("big")
     with pytest.raises(sm.SimpleMessageError, match="STATUS body of 24 bytes, expected 28"):
@@ -83,7 +83,7 @@ def test_a_known_message_with_the_wrong_body_is_refused():
     assert other.value is None and other.body == b"abcd"
 
 
-def test_settings_are_checked():
+def test_settings_are_checked() -> None:
     with pytest.raises(ValueError, match="byte order 'middle'"):
         sm.Codec("middle")
     with pytest.raises(ValueError, match="at most 10 joints"):

@@ -15,9 +15,8 @@ import numpy as np
 from tests.controllers.adept_controller import AdeptController
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import wait_until
-from tests.motion.test_adept_realtime import link_status as adept_link
-from tests.motion.test_rsi_realtime import link_status as rsi_link, rsi_system
-from tests.system import System, driver_state, free_port, running
+from tests.motion.test_rsi_realtime import rsi_system
+from tests.system import System, driver_state, free_port, link_status, running
 
 #: where each robot's flows start (a pose the clients home to; inside every limit)
 STARTS = {"kr16rt": [0.0, -80.0, 100.0, 0.0, 30.0, 0.0], "ad850": [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]}
@@ -69,7 +68,7 @@ def rig(robot: str, link: str, log_dir: Path) -> Iterator[Rig]:
             port = free_port(socket.SOCK_DGRAM)
             system = stack.enter_context(rsi_system(port, log_dir=str(log_dir)))
             kuka = stack.enter_context(RsiController(rob6=("127.0.0.1", port), robot=robot))
-            wait_until(lambda: rsi_link(system).state == "connected", what="the RSI link to be up")
+            wait_until(lambda: link_status(system).state == "connected", what="the RSI link to be up")
             wait_until(lambda: np.allclose(driver_state(system).q, kuka.status()["aipos"], atol=2e-4),
                        what="rob6 to follow the KR C4")
         elif link == "simple_message":
@@ -79,7 +78,7 @@ def rig(robot: str, link: str, log_dir: Path) -> Iterator[Rig]:
                 "ROB6_LINK": "simple_message", "ROB6_SM_HOST": "127.0.0.1",
                 "ROB6_SM_MOTION_PORT": str(adept.motion[1]), "ROB6_SM_STATE_PORT": str(adept.state[1]),
                 "ROB6_SM_IO_PORT": str(adept.io[1])}))
-            wait_until(lambda: adept_link(system).state == "connected", what="the simple_message link to be up")
+            wait_until(lambda: link_status(system).state == "connected", what="the simple_message link to be up")
             wait_until(lambda: np.allclose(driver_state(system).q, adept.status()["position_rob6_deg"], atol=2e-4),
                        what="rob6 to follow the Adept")
         else:

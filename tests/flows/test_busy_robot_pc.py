@@ -5,6 +5,8 @@ move, Alter target and mode change ``true``, as on a quiet machine. Nothing is t
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from bench.workload import cpu_hogs, mixed_session
@@ -14,7 +16,7 @@ from tests.system import running
 pytestmark = pytest.mark.slow
 
 
-def test_a_mixed_client_on_a_busy_machine_gets_no_error(tmp_path):
+def test_a_mixed_client_on_a_busy_machine_gets_no_error(tmp_path: Path) -> None:
     with running("kr16rt", dummy=False, log_dir=str(tmp_path)) as system, system.client(timeout=60) as client:
         with cpu_hogs(4):
             result = mixed_session(client, STARTS["kr16rt"], 20.0)

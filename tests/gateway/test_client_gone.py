@@ -7,6 +7,8 @@ real Zenoh, the recorder writing MCAP."""
 from __future__ import annotations
 
 import time
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,14 +32,14 @@ def _accepted(port: int, within: float) -> tuple[Client, float]:
         time.sleep(0.02)
 
 
-def _close_events(directory) -> list[dict]:
-    events = []
+def _close_events(directory: Path) -> list[dict[str, Any]]:
+    events: list[dict[str, Any]] = []
     for path in directory.glob("*.mcap"):
         events += [r.data for r in read_records(path) if r.topic.endswith("/event") and r.data.get("event") == "close"]
     return events
 
 
-def _recorded_at_zero_and_closed(directory, timeout: float = 20.0) -> None:
+def _recorded_at_zero_and_closed(directory: Path, timeout: float = 20.0) -> None:
     """Until the recorder has written the arm at rest at zero and the first session's close
     event (the traces reach it in batches, a little after the replies)."""
     deadline = time.monotonic() + timeout
@@ -50,7 +52,7 @@ def _recorded_at_zero_and_closed(directory, timeout: float = 20.0) -> None:
         time.sleep(0.2)
 
 
-def test_client_gone_mid_move_frees_the_server_and_stops_the_arm(tmp_path):
+def test_client_gone_mid_move_frees_the_server_and_stops_the_arm(tmp_path: Path) -> None:
     robot = get_robot("ad850")
     with running("ad850", dummy=False, log_dir=str(tmp_path)) as system:
         with system.client(timeout=30) as client:

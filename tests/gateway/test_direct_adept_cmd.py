@@ -9,6 +9,7 @@ back from the driver's state over Zenoh, as the live view and the recorder see t
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import cast
 
 from rob6.bus import Bus
@@ -33,11 +34,11 @@ def driver_outputs(system: System) -> list[int]:
     return list(driver_state(system).outputs)
 
 
-def test_raw_v_plus_allowed_says_no_link_carries_it():
+def test_raw_v_plus_allowed_says_no_link_carries_it() -> None:
     assert ask("ad850", "DirectAdeptCmd SPEED 50", allow_direct_adept_cmd=True) == REFUSED_RAW
 
 
-def test_raw_v_plus_off_by_default_and_false_on_other_robots():
+def test_raw_v_plus_off_by_default_and_false_on_other_robots() -> None:
     reply = ask("ad850", "DirectAdeptCmd SPEED 50")
     assert reply is not None and reply.startswith("ERROR: DirectAdeptCmd is disabled on this server")
     assert ask("ad850", "DirectAdeptCmd") == reply.replace("SPEED 50", "")  # bare: the same refusal
@@ -45,7 +46,7 @@ def test_raw_v_plus_off_by_default_and_false_on_other_robots():
     assert ask("kr16", "DirectAdeptCmd signal 5") == "false\n"  # the original: false, not read
 
 
-def test_a_malformed_signal_line_is_refused_before_any_bus_request():
+def test_a_malformed_signal_line_is_refused_before_any_bus_request() -> None:
     """_DeadBus fails every request loudly: these never reach the driver."""
     for line, why in (("signal", "SIGNAL needs at least one signal number"),
                       ("signal 5,,6", "SIGNAL 5,,6: an empty place between commas"),
@@ -60,7 +61,7 @@ def test_a_malformed_signal_line_is_refused_before_any_bus_request():
         assert ask("ad850", "DirectAdeptCmd " + line) == f"ERROR: DirectAdeptCmd: {why}; nothing was switched\nfalse\n"
 
 
-def test_signal_switches_the_simulated_arms_outputs_by_default():
+def test_signal_switches_the_simulated_arms_outputs_by_default() -> None:
     with running("ad850", dummy=True) as system, Client(system.port) as client:
         assert driver_outputs(system) == []
         assert client.ask("DirectAdeptCmd signal 5, -6") == "true\n"
@@ -84,7 +85,7 @@ def test_signal_switches_the_simulated_arms_outputs_by_default():
         assert driver_outputs(system) == [3, -5, 6, 7, 2001]
 
 
-def test_robpraktikum_reading_one_line_per_command_stays_in_step(tmp_path):
+def test_robpraktikum_reading_one_line_per_command_stays_in_step(tmp_path: Path) -> None:
     """The Java client reads one line per command: switching the cup between motions never
     leaves it a reply behind. The recording has each change of the outputs."""
     script = [("DirectAdeptCmd signal 5, -6", "true"), ("GetRobot", "ad850"),

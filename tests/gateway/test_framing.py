@@ -1,19 +1,19 @@
 """Line framing: terminators, NUL, several commands per read, bounded lines."""
 
-from rob6_gateway.framing import Framer
+from rob6_gateway.framing import Framer, Line
 
 
-def texts(lines):
+def texts(lines: list[Line]) -> list[str]:
     return [line.text for line in lines]
 
 
-def test_terminators():
+def test_terminators() -> None:
     framer = Framer()
     assert texts(framer.feed(b"GetRobot\r\nFoo\nBar\r\r\n")) == ["GetRobot", "Foo", "Bar\r"]
     assert not framer.pending()
 
 
-def test_unterminated_chunk_waits_for_the_pause():
+def test_unterminated_chunk_waits_for_the_pause() -> None:
     framer = Framer()
     assert framer.feed(b"GetRo") == []
     assert framer.pending()
@@ -22,15 +22,15 @@ def test_unterminated_chunk_waits_for_the_pause():
     assert texts(framer.flush()) == ["GetRobot"]  # the pause passed: a command
 
 
-def test_nul_ends_the_line():
+def test_nul_ends_the_line() -> None:
     assert texts(Framer().feed(b"Get\0Robot\n\0GetRobot\nGetRobot\0GetVersion\n")) == ["Get", "", "GetRobot"]
 
 
-def test_latin1_passes_through():
+def test_latin1_passes_through() -> None:
     assert texts(Framer().feed("GetRobot\xe4\n".encode("latin-1"))) == ["GetRobot\xe4"]
 
 
-def test_overlong_lines_are_reported_and_dropped():
+def test_overlong_lines_are_reported_and_dropped() -> None:
     framer = Framer(max_line=100)
     lines = framer.feed(b"A" * 250 + b"\nGetRobot\n")
     assert lines[0].too_long == 251 and texts(lines[1:]) == ["GetRobot"]

@@ -6,41 +6,42 @@ import os
 import signal
 import socket
 import time
+from collections.abc import Iterator
 
 import pytest
 
-from tests.system import Client, running
+from tests.system import Client, System, running
 
 GATEWAY_AND_DRIVER = ("driver", "gateway")
 
 
 @pytest.fixture(scope="module")
-def system():
+def system() -> Iterator[System]:
     with running("kr16", services=GATEWAY_AND_DRIVER) as system:
         yield system
 
 
-def test_separate_processes(system):
+def test_separate_processes(system: System) -> None:
     pids = system.pids()
     assert {"router", "driver", "gateway"} <= set(pids)
     assert len(set(pids.values())) == len(pids)
 
 
 @pytest.mark.parametrize("terminator", [b"\n", b"\r\n"])
-def test_terminated_commands(system, terminator):
+def test_terminated_commands(system: System, terminator: bytes) -> None:
     with system.client() as client:
         client.send(b"GetRobot" + terminator)
         assert client.read_lines(1) == "kr16\n"
 
 
-def test_unterminated_commands_one_per_write(system):
+def test_unterminated_commands_one_per_write(system: System) -> None:
     with system.client() as client:
         for command, reply in ((b"GetRobot", "kr16\n"), (b"CM_PING", "PONG\n"), (b"GetVersion", "0.1.01\n")):
             client.send(command)
             assert client.read_lines(1) == reply
 
 
-def test_client_that_reads_one_recv_per_reply(system):
+def test_client_that_reads_one_recv_per_reply(system: System) -> None:
     """A multi-line reply arrives in one segment, so one recv() gets all of it."""
     with system.client() as client:
         client.send(b"SetVerbosity x\n")
@@ -48,20 +49,20 @@ def test_client_that_reads_one_recv_per_reply(system):
         assert client.sock.recv(4096) == b"ERROR: incorrect value\nfalse\n"
 
 
-def test_several_commands_in_one_write_answered_in_order(system):
+def test_several_commands_in_one_write_answered_in_order(system: System) -> None:
     with system.client() as client:
         client.send(b"GetRobot\nCM_PING\r\nGetVersion\nFoo\n")
         assert client.read_lines(4) == "kr16\nPONG\n0.1.01\nERROR: Foo\n"
 
 
-def test_command_split_across_writes_is_reassembled(system):
+def test_command_split_across_writes_is_reassembled(system: System) -> None:
     with system.client() as client:
         client.send(b"GetRo")
         client.send(b"bot\n")  # well within the pause: one line
         assert client.read_lines(1) == "kr16\n"
 
 
-def test_missing_arguments_are_answered_at_once(system):
+def test_missing_arguments_are_answered_at_once(system: System) -> None:
     with system.client() as client:
         start = time.monotonic()
         assert client.ask("MovePTPJoints", 2) == "ERROR: incorrect joints\nfalse\n"
@@ -71,7 +72,7 @@ def test_missing_arguments_are_answered_at_once(system):
         assert client.ask("GetRobot") == "kr16\n"  # the next command is a command, not arguments
 
 
-def test_unknown_and_malformed_commands_keep_the_connection(system):
+def test_unknown_and_malformed_commands_keep_the_connection(system: System) -> None:
     with system.client() as client:
         assert client.ask("getrobot") == "ERROR: getrobot\n"
         assert client.ask("MovePTPJoints 1 2 3", 2) == "ERROR: incorrect joints\nfalse\n"
@@ -83,7 +84,7 @@ def test_unknown_and_malformed_commands_keep_the_connection(system):
         assert client.ask("CM_PING") == "PONG\n"
 
 
-def test_second_client_is_refused_without_disturbing_the_first(system):
+def test_second_client_is_refused_without_disturbing_the_first(system: System) -> None:
     with system.client() as first:
         with Client(system.port, handshake=False) as second:
             assert second.greeting == "ERROR: server busy, another client is connected\n"
@@ -94,7 +95,7 @@ def test_second_client_is_refused_without_disturbing_the_first(system):
         assert third.ask("GetRobot") == "kr16\n"
 
 
-def test_next_client_accepted_right_after_a_disconnect(system):
+def test_next_client_accepted_right_after_a_disconnect(system: System) -> None:
     client = system.client()
     client.close()
     deadline = time.monotonic() + 1.0
@@ -106,7 +107,7 @@ def test_next_client_accepted_right_after_a_disconnect(system):
         time.sleep(0.01)
 
 
-def test_ping_robot_measures_the_driver(system):
+def test_ping_robot_measures_the_driver(system: System) -> None:
     with system.client() as client:
         numbers = client.ask("PingRobot 5 1").split()
         assert len(numbers) == 5
@@ -114,7 +115,7 @@ def test_ping_robot_measures_the_driver(system):
         assert client.ask("PingRobot 0 0") == "-1\n"  # cannot be measured: the original's answer
 
 
-def test_a_killed_service_gives_an_error_reply_not_a_hang():
+def test_a_killed_service_gives_an_error_reply_not_a_hang() -> None:
     with running("kr16", services=GATEWAY_AND_DRIVER) as system:
         with system.client() as client:
             assert client.ask("PingRobot 1 0").count(" ") == 4
@@ -128,7 +129,7 @@ def test_a_killed_service_gives_an_error_reply_not_a_hang():
         assert any("driver exited with code" in line for line in system.output)
 
 
-def test_shutdown_stops_the_whole_system():
+def test_shutdown_stops_the_whole_system() -> None:
     with running("kr16", services=GATEWAY_AND_DRIVER) as system:
         pids = system.pids()
         with system.client() as client:
@@ -143,7 +144,7 @@ def test_shutdown_stops_the_whole_system():
             socket.create_connection(("127.0.0.1", system.port), timeout=1)
 
 
-def test_ctrl_c_stops_everything_within_two_seconds():
+def test_ctrl_c_stops_everything_within_two_seconds() -> None:
     with running("kr16", services=GATEWAY_AND_DRIVER) as system:
         pids = system.pids()
         start = time.monotonic()
@@ -155,7 +156,7 @@ def test_ctrl_c_stops_everything_within_two_seconds():
                 os.kill(pid, 0)
 
 
-def test_configuration_reads_follow_every_set_and_a_restarted_planner():
+def test_configuration_reads_follow_every_set_and_a_restarted_planner() -> None:
     """Configuration reads are answered from the gateway's mirror of the planner's state:
     a read right after a Set shows it, and after a planner restart the reads show the new
     planner's (default) configuration, never the dead one's."""

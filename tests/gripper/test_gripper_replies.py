@@ -37,7 +37,7 @@ def assert_failure(lines: list[str], command: str, reason: str, info: str) -> No
     assert lines[:-2] == [info] * (LINES[command] - 2), lines
 
 
-def test_success_and_failure_line_counts_with_the_simulated_gripper():
+def test_success_and_failure_line_counts_with_the_simulated_gripper() -> None:
     # an object 30 mm wide between the jaws: closing onto it works, moving to 10 mm is blocked
     with (running("ad850", dummy=True, extra_env={"ROB6_GRIPPER_OBJECT": "0.03"}) as system,
           Client(system.port) as client):
@@ -63,7 +63,7 @@ def test_success_and_failure_line_counts_with_the_simulated_gripper():
         assert reply(client, "GetRobot") == ["ad850"]  # the session goes on, in step
 
 
-def test_a_silent_serial_gripper_fails_with_the_same_line_counts():
+def test_a_silent_serial_gripper_fails_with_the_same_line_counts() -> None:
     """The real backend (Schunk SMP over a serial port; here the fake module on a pty):
     a module that stops answering fails every motion, the position then unknown."""
     with FakeSmpDevice(module_id=12, time_scale=5.0) as dev:
@@ -90,7 +90,7 @@ def _gateway_saw_go(system: System, service: str, timeout: float = 10.0) -> None
         time.sleep(0.05)
 
 
-def test_no_gripper_service_fails_with_the_same_line_counts():
+def test_no_gripper_service_fails_with_the_same_line_counts() -> None:
     with running("ad850", dummy=True) as system, Client(system.port) as client:
         assert reply(client, "HasGripper") == ["true"]
         os.kill(system.pids()["gripper"], signal.SIGKILL)
@@ -102,7 +102,7 @@ def test_no_gripper_service_fails_with_the_same_line_counts():
         assert reply(client, "GetRobot") == ["ad850"]
 
 
-def test_a_client_reading_a_fixed_count_never_falls_behind():
+def test_a_client_reading_a_fixed_count_never_falls_behind() -> None:
     """rob-chess style: ``command(name, n)`` reads exactly n lines and judges the last;
     successes and failures interleaved, then a GetRobot must be answered ad850."""
     script = [("GripperGoHome", True), ("GripperMoveToPosition 0.01", False),
@@ -119,7 +119,7 @@ def test_a_client_reading_a_fixed_count_never_falls_behind():
         assert client.read_quiet(0.3) == ""
 
 
-def test_other_robots_answer_false_in_one_line_as_the_original():
+def test_other_robots_answer_false_in_one_line_as_the_original() -> None:
     with running("kr16", dummy=True) as system, Client(system.port) as client:
         for line in ("HasGripper", "GripperGoHome", "GripperMove -1", "GripperMoveToPosition 0.02",
                      "GripperMoveToPosition x"):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import struct
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
 
@@ -18,30 +19,30 @@ SCALE = 5.0  # the fake's simulated time runs 5x faster than the wall clock
 
 
 @pytest.fixture
-def dev():
+def dev() -> Iterator[FakeSmpDevice]:
     d = FakeSmpDevice(module_id=12, object_width=0.030, time_scale=SCALE).start()
     yield d
     d.close()
 
 
 @pytest.fixture
-def grip(dev):
+def grip(dev: FakeSmpDevice) -> Iterator[SchunkGripper]:
     g = SchunkGripper(dev.port, 9600, 12, response_timeout=RT, retries=1, poll_interval=0.01)
     yield g
     g.close()
 
 
-def commands(dev, code):
+def commands(dev: FakeSmpDevice, code: int) -> list[smp.Frame]:
     return [f for f in dev.received if f.command == code]
 
 
-def test_has_gripper_and_state(grip):
+def test_has_gripper_and_state(grip: SchunkGripper) -> None:
     assert grip.has_gripper()
     s = grip.state()
     assert (s.position, s.velocity, s.current, s.mode, s.error) == (0.040, 0.0, 0.0, IDLE, "")
 
 
-def test_reference_then_move(dev, grip):
+def test_reference_then_move(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.model.referenced = False
     r = grip.move_to_position(0.05)
     assert not r and "module refused MOVE POS: NOT REFERENCED (0x06)" in r.error
@@ -52,7 +53,7 @@ def test_reference_then_move(dev, grip):
     assert grip.move_to_position(0.05)
 
 
-def test_move_to_position(dev, grip):
+def test_move_to_position(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     t0 = time.monotonic()
     r = grip.move_to_position(0.060, timeout=3)
     assert r.ok and r.position == pytest.approx(0.060, abs=1e-6)
@@ -63,20 +64,20 @@ def test_move_to_position(dev, grip):
     assert grip.state().mode == IDLE
 
 
-def test_move_outside_stroke_rejected_without_sending(dev, grip):
+def test_move_outside_stroke_rejected_without_sending(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     for target in (-0.001, 0.0701, 1.0):
         r = grip.move_to_position(target)
         assert not r and "outside the stroke 0.000..0.070 m" in r.error
     assert commands(dev, smp.MOVE_POS) == []
 
 
-def test_move_to_position_blocked_by_object(grip):
+def test_move_to_position_blocked_by_object(grip: SchunkGripper) -> None:
     r = grip.move_to_position(0.020, timeout=3)
     assert not r and "blocked at 0.0300 m" in r.error
     assert grip.state().mode == GRIPPING
 
 
-def test_current_move_grips_object(dev, grip):
+def test_current_move_grips_object(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     r = grip.move_current(-1.0, timeout=3)
     assert r.ok and r.position == pytest.approx(0.030, abs=1e-6)
     [cmd] = commands(dev, smp.MOVE_CUR)
@@ -86,18 +87,18 @@ def test_current_move_grips_object(dev, grip):
     assert dev.model.force == pytest.approx(40.0)
 
 
-def test_current_move_opens_to_stroke_end(grip):
+def test_current_move_opens_to_stroke_end(grip: SchunkGripper) -> None:
     r = grip.move_current(2.0, timeout=3)
     assert r and r.position == pytest.approx(0.070)
     assert grip.state().mode == IDLE
 
 
-def test_current_refused_by_module(grip):
+def test_current_refused_by_module(grip: SchunkGripper) -> None:
     r = grip.move_current(-9.0)
     assert not r and "module refused MOVE CUR: INFO WRONG PARAMETER (0x1E)" in r.error
 
 
-def test_state_observable_while_moving_and_stop(dev, grip):
+def test_state_observable_while_moving_and_stop(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.time_scale = 1.0
     dev.model.w = 0.0
     res: dict[str, Result] = {}
@@ -113,7 +114,7 @@ def test_state_observable_while_moving_and_stop(dev, grip):
     assert commands(dev, smp.CMD_STOP)
 
 
-def test_error_and_acknowledge(dev, grip):
+def test_error_and_acknowledge(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.inject_error(0xDA)
     s = grip.state()
     assert s.mode == ERROR and s.error == "ERROR TOW (0xDA)"
@@ -124,7 +125,7 @@ def test_error_and_acknowledge(dev, grip):
     assert grip.move_current(-1.0, timeout=3)
 
 
-def test_error_during_motion_fails_the_motion(dev, grip):
+def test_error_during_motion_fails_the_motion(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.time_scale = 1.0
     threading.Timer(0.15, dev.inject_error, args=(0xDE,)).start()
     r = grip.move_current(-0.5, timeout=3)
@@ -132,27 +133,27 @@ def test_error_during_motion_fails_the_motion(dev, grip):
 
 
 @pytest.mark.parametrize("split", [1, 3])
-def test_framing_split_across_reads(dev, grip, split):
+def test_framing_split_across_reads(dev: FakeSmpDevice, grip: SchunkGripper, split: int) -> None:
     dev.split = split
     assert grip.has_gripper()
     assert grip.move_current(-1.0, timeout=3)
     assert grip.state().position == pytest.approx(0.030)
 
 
-def test_fragmented_replies(dev, grip):
+def test_fragmented_replies(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.fragment_size = 4
     s = grip.state()
     assert s.mode == IDLE and s.position == pytest.approx(0.040)
     assert grip.move_to_position(0.05, timeout=3)
 
 
-def test_garbage_before_replies(dev, grip):
+def test_garbage_before_replies(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.garbage = b"\x00\xff\x07\x0c\xf0\x55"  # includes a false frame start
     assert grip.has_gripper()
     assert grip.move_to_position(0.035, timeout=3)
 
 
-def test_bad_crc(dev, grip):
+def test_bad_crc(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.corrupt_crc = True
     t0 = time.monotonic()
     assert not grip.has_gripper()
@@ -165,7 +166,7 @@ def test_bad_crc(dev, grip):
     assert grip.has_gripper()
 
 
-def test_slow_reply_within_timeout_ok_beyond_timeout_fails(dev, grip):
+def test_slow_reply_within_timeout_ok_beyond_timeout_fails(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.delay = RT / 4
     assert grip.has_gripper()
     dev.delay = RT * 2.5  # the retry's window closes before the first reply comes
@@ -174,7 +175,7 @@ def test_slow_reply_within_timeout_ok_beyond_timeout_fails(dev, grip):
     dev.delay = 0.0
 
 
-def test_silent_module(dev, grip):
+def test_silent_module(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.silent = True
     t0 = time.monotonic()
     assert not grip.has_gripper()
@@ -185,7 +186,7 @@ def test_silent_module(dev, grip):
     assert grip.has_gripper()
 
 
-def test_module_stops_answering_mid_motion(dev, grip):
+def test_module_stops_answering_mid_motion(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.time_scale = 1.0
     threading.Timer(0.2, setattr, args=(dev, "silent", True)).start()
     t0 = time.monotonic()
@@ -194,7 +195,7 @@ def test_module_stops_answering_mid_motion(dev, grip):
     assert time.monotonic() - t0 < 0.2 + 2 * RT + 0.5
 
 
-def test_unplugged_mid_motion(dev, grip):
+def test_unplugged_mid_motion(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.time_scale = 1.0
     threading.Timer(0.2, dev.unplug).start()
     t0 = time.monotonic()
@@ -206,7 +207,7 @@ def test_unplugged_mid_motion(dev, grip):
     assert not grip.stop()
 
 
-def test_motion_timeout_sends_stop(dev, grip):
+def test_motion_timeout_sends_stop(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.time_scale = 0.2
     t0 = time.monotonic()
     r = grip.move_to_position(0.010, timeout=0.3)
@@ -215,7 +216,7 @@ def test_motion_timeout_sends_stop(dev, grip):
     assert commands(dev, smp.CMD_STOP)
 
 
-def test_no_such_port():
+def test_no_such_port() -> None:
     g = SchunkGripper("/dev/does-not-exist", response_timeout=RT)
     assert not g.has_gripper()
     r = g.move_current(-1)
@@ -223,13 +224,13 @@ def test_no_such_port():
     assert g.state().mode == ERROR
 
 
-def test_wrong_module_id(dev):
+def test_wrong_module_id(dev: FakeSmpDevice) -> None:
     g = SchunkGripper(dev.port, module_id=13, response_timeout=RT)
     assert not g.has_gripper()
     g.close()
 
 
-def test_go_home_with_explicit_home_position():
+def test_go_home_with_explicit_home_position() -> None:
     from rob6_gripper.sim import GripperParams
 
     # a module whose reference run ends at 0 mm; home_position adds the move to 4 cm

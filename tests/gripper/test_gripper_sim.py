@@ -34,7 +34,7 @@ def position_move_time(distance: float, p: GripperParams = P) -> float:
 
 
 # ---------------------------------------------------------------- figures
-def test_documented_figures():
+def test_documented_figures() -> None:
     assert (P.stroke_min, P.stroke_max, P.home_position) == (0.0, 0.070, 0.040)
     assert P.max_velocity == 0.082 and P.max_acceleration == 0.32
     assert P.force(5.0) == pytest.approx(200.0)  # PG 70 class maximum gripping force
@@ -44,7 +44,7 @@ def test_documented_figures():
 
 
 # ---------------------------------------------------------------- closing onto an object
-def test_close_from_home_onto_30mm_object_at_minus_1A():
+def test_close_from_home_onto_30mm_object_at_minus_1A() -> None:
     m = GripperModel(object_width=0.030)
     mid = m.command_current(-1.0)
     expected = current_move_time(-1.0, 0.010)
@@ -59,7 +59,7 @@ def test_close_from_home_onto_30mm_object_at_minus_1A():
     assert m.current == -1.0 and m.force == pytest.approx(40.0)
 
 
-def test_stepping_in_small_steps_matches_one_big_step():
+def test_stepping_in_small_steps_matches_one_big_step() -> None:
     a = GripperModel(object_width=0.030)
     b = GripperModel(object_width=0.030)
     a.command_current(-1.0)
@@ -73,7 +73,7 @@ def test_stepping_in_small_steps_matches_one_big_step():
 
 @settings(max_examples=60, deadline=None)
 @given(amps=st.floats(0.25, 5.0), width=st.floats(0.0005, 0.039))
-def test_close_time_is_what_the_model_implies(amps, width):
+def test_close_time_is_what_the_model_implies(amps: float, width: float) -> None:
     m = GripperModel(object_width=width)
     mid = m.command_current(-amps)
     expected = current_move_time(amps, 0.040 - width)
@@ -87,7 +87,7 @@ def test_close_time_is_what_the_model_implies(amps, width):
     assert m.force == pytest.approx(P.force_constant * amps)
 
 
-def test_state_observable_while_moving():
+def test_state_observable_while_moving() -> None:
     m = GripperModel(object_width=0.030)
     m.command_current(-1.0)
     m.advance(0.05)  # in the run-up: v = a t, w = w0 - a t^2 / 2
@@ -101,7 +101,7 @@ def test_state_observable_while_moving():
 
 
 @pytest.mark.parametrize("amps", [-0.5, -1.0, -2.0, -3.0, -5.0])
-def test_gripping_force_proportional_to_current(amps):
+def test_gripping_force_proportional_to_current(amps: float) -> None:
     m = GripperModel(object_width=0.030)
     m.command_current(amps)
     m.advance(2.0)
@@ -110,7 +110,7 @@ def test_gripping_force_proportional_to_current(amps):
     assert m.force / abs(amps) == pytest.approx(P.force_constant)
 
 
-def test_opening_runs_to_the_stroke_end_object_does_not_block():
+def test_opening_runs_to_the_stroke_end_object_does_not_block() -> None:
     m = GripperModel(object_width=0.030)
     mid = m.command_current(+1.0)
     expected = current_move_time(1.0, 0.030)
@@ -120,7 +120,7 @@ def test_opening_runs_to_the_stroke_end_object_does_not_block():
     assert out is not None and out.ok and out.status == "end_stop" and m.w == P.stroke_max and m.mode == IDLE
 
 
-def test_closing_without_object_stops_at_zero():
+def test_closing_without_object_stops_at_zero() -> None:
     m = GripperModel()
     mid = m.command_current(-2.0)
     m.advance(5.0)
@@ -128,14 +128,14 @@ def test_closing_without_object_stops_at_zero():
     assert out is not None and out.status == "end_stop" and m.w == 0.0 and m.force == 0.0
 
 
-def test_object_narrower_than_jaws_only():
+def test_object_narrower_than_jaws_only() -> None:
     m = GripperModel(position=0.020, object_width=0.030)  # object not between the jaws
     m.command_current(-1.0)
     m.advance(5.0)
     assert m.w == 0.0
 
 
-def test_current_limits():
+def test_current_limits() -> None:
     g = SimGripper(clock=VirtualClock())
     r = g.move_current(-0.1)
     assert not r and "cannot move" in r.error and "0.200 A" in r.error
@@ -148,7 +148,7 @@ def test_current_limits():
 
 # ---------------------------------------------------------------- position moves
 @pytest.mark.parametrize("target", [0.025, 0.039, 0.0, 0.070, 0.06])
-def test_move_to_position_reaches_target_in_trapezoid_time(target):
+def test_move_to_position_reaches_target_in_trapezoid_time(target: float) -> None:
     m = GripperModel()
     mid = m.command_position(target)
     expected = position_move_time(abs(target - 0.040))
@@ -158,7 +158,7 @@ def test_move_to_position_reaches_target_in_trapezoid_time(target):
     assert out is not None and out.status == "reached" and m.w == target and m.v == 0 and m.mode == IDLE
 
 
-def test_speed_and_acceleration_limits_respected():
+def test_speed_and_acceleration_limits_respected() -> None:
     m = GripperModel(position=0.0)
     m.command_position(0.070)
     prev_v, dt = 0.0, 0.001
@@ -171,7 +171,7 @@ def test_speed_and_acceleration_limits_respected():
 
 
 @pytest.mark.parametrize("target", [-0.001, 0.0701, 0.5, -1.0])
-def test_move_outside_stroke_rejected(target):
+def test_move_outside_stroke_rejected(target: float) -> None:
     g = SimGripper(clock=VirtualClock())
     r = g.move_to_position(target)
     assert not r.ok
@@ -179,7 +179,7 @@ def test_move_outside_stroke_rejected(target):
     assert g.state().position == 0.040 and g.state().mode == IDLE  # nothing moved
 
 
-def test_position_move_blocked_by_object_fails_and_grips():
+def test_position_move_blocked_by_object_fails_and_grips() -> None:
     g = SimGripper(clock=VirtualClock(), object_width=0.030)
     r = g.move_to_position(0.020)
     assert not r and "blocked by an object at 0.0300 m" in r.error and r.position == 0.030
@@ -187,7 +187,7 @@ def test_position_move_blocked_by_object_fails_and_grips():
     assert s.mode == GRIPPING and s.current == -P.position_current
 
 
-def test_go_home_references_and_returns_to_40mm():
+def test_go_home_references_and_returns_to_40mm() -> None:
     clock = VirtualClock()
     g = SimGripper(clock=clock, referenced=False, position=0.010)
     r = g.move_to_position(0.02)
@@ -199,7 +199,7 @@ def test_go_home_references_and_returns_to_40mm():
 
 
 # ---------------------------------------------------------------- backend behaviour
-def test_virtual_clock_fast_forwards():
+def test_virtual_clock_fast_forwards() -> None:
     clock = VirtualClock()
     g = SimGripper(clock=clock, object_width=0.030)
     t0 = time.monotonic()
@@ -210,7 +210,7 @@ def test_virtual_clock_fast_forwards():
     assert g.state().mode == GRIPPING
 
 
-def test_timeout_stops_and_fails():
+def test_timeout_stops_and_fails() -> None:
     clock = VirtualClock()
     g = SimGripper(clock=clock, position=0.0)
     r = g.move_to_position(0.070, timeout=0.5)
@@ -221,11 +221,11 @@ def test_timeout_stops_and_fails():
 
 
 @pytest.mark.parametrize("timeout", [0, -1, float("nan")])
-def test_bad_timeout(timeout):
+def test_bad_timeout(timeout: float) -> None:
     assert "invalid timeout" in SimGripper(clock=VirtualClock()).go_home(timeout).error
 
 
-def test_stop_from_another_thread_ends_blocking_call_real_time():
+def test_stop_from_another_thread_ends_blocking_call_real_time() -> None:
     g = SimGripper(position=0.0)  # real clock: a full-stroke move takes ~1.1 s
     result: dict[str, Result] = {}
     th = threading.Thread(target=lambda: result.setdefault("r", g.move_to_position(0.070)))
@@ -243,7 +243,7 @@ def test_stop_from_another_thread_ends_blocking_call_real_time():
     assert g.state().mode == IDLE
 
 
-def test_fault_and_acknowledge():
+def test_fault_and_acknowledge() -> None:
     g = SimGripper(clock=VirtualClock())
     g.fault("ERROR TOW")
     s = g.state()
@@ -254,14 +254,14 @@ def test_fault_and_acknowledge():
     assert g.move_current(-1)
 
 
-def test_no_gripper():
+def test_no_gripper() -> None:
     g = SimGripper(clock=VirtualClock(), present=False)
     assert not g.has_gripper()
     assert not g.go_home() and "no gripper" in g.go_home().error
     assert g.state().mode == "error"
 
 
-def test_reversing_current_keeps_velocity_continuous():
+def test_reversing_current_keeps_velocity_continuous() -> None:
     m = GripperModel()
     m.command_current(-2.0)
     m.advance(0.2)

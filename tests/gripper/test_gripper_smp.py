@@ -38,17 +38,17 @@ def h(text: str) -> bytes:
 
 
 @pytest.mark.parametrize(("body", "crc"), MANUAL_VECTORS)
-def test_crc16_matches_manual(body, crc):
+def test_crc16_matches_manual(body: str, crc: str) -> None:
     assert smp.crc16(h(body)).to_bytes(2, "little") == h(crc)
 
 
-def test_crc16_is_crc16_arc():
+def test_crc16_is_crc16_arc() -> None:
     assert smp.crc16(b"123456789") == 0xBB3D  # the CRC catalogue's check value of CRC-16/ARC
     assert smp.crc16(b"") == 0
 
 
 @pytest.mark.parametrize(("body", "crc"), MANUAL_VECTORS)
-def test_encode_decode_manual_frames(body, crc):
+def test_encode_decode_manual_frames(body: str, crc: str) -> None:
     raw = h(body) + h(crc)
     group, mid, dlen, cmd = raw[:4]
     frame = smp.Frame(group, mid, cmd, raw[4:3 + dlen])
@@ -57,7 +57,7 @@ def test_encode_decode_manual_frames(body, crc):
     assert dec.feed(raw) == [frame]
 
 
-def test_encode_commands():
+def test_encode_commands() -> None:
     assert smp.encode(1, smp.CMD_REFERENCE) == h("05 01 01 92 D1 31")
     assert smp.encode(1, smp.MOVE_POS, smp.f32(10.0)) == h("05 01 05 B0 00 00 20 41 48 80")
     assert smp.encode(1, smp.GET_STATE, smp.get_state_payload(0x01, 1.0)) == \
@@ -68,7 +68,7 @@ def test_encode_commands():
     assert smp.encode(12, smp.CMD_STOP)[:4] == h("05 0C 01 91")
 
 
-def test_failure_frame():
+def test_failure_frame() -> None:
     [f] = smp.FrameDecoder().feed(h("03 01 02 88 74 82 1B"))
     assert f.is_failure and f.error_code == 0x74
     assert smp.error_name(f.error_code) == "ERROR MOTOR VOLTAGE LOW (0x74)"
@@ -76,21 +76,21 @@ def test_failure_frame():
     assert not ok.is_failure and ok.payload == smp.OK
 
 
-def test_parse_get_state_from_manual():
+def test_parse_get_state_from_manual() -> None:
     [f] = smp.FrameDecoder().feed(h("07 01 07 95 36 89 81 3F 02 00 F9 BC"))
     s = smp.parse_state(f.payload, mode=0x01)
     assert s.position == pytest.approx(1.011, abs=2e-3)  # the manual rounds 1.01200
     assert s.moving and not s.referenced and not s.in_error and s.error == 0
 
 
-def test_state_payload_roundtrip_and_length_check():
+def test_state_payload_roundtrip_and_length_check() -> None:
     s = smp.ModuleState(12.5, -32.0, -1.0, smp.ST_REFERENCED | smp.ST_MOVING, 0)
     assert smp.parse_state(smp.state_payload(s)) == s
     with pytest.raises(smp.SmpProtocolError):
         smp.parse_state(b"\x00" * 7)
 
 
-def test_decoder_byte_by_byte():
+def test_decoder_byte_by_byte() -> None:
     raw = smp.encode(12, smp.GET_STATE, smp.get_state_payload(), group=smp.GROUP_FROM_MODULE)
     dec = smp.FrameDecoder()
     out = []
@@ -101,7 +101,7 @@ def test_decoder_byte_by_byte():
     assert len(out) == 1 and out[0].command == smp.GET_STATE
 
 
-def test_decoder_skips_garbage_and_bad_crc():
+def test_decoder_skips_garbage_and_bad_crc() -> None:
     good = smp.Frame(7, 12, smp.CMD_STOP, smp.OK).encode()
     bad = bytearray(good)
     bad[-1] ^= 0xFF
@@ -111,20 +111,20 @@ def test_decoder_skips_garbage_and_bad_crc():
     assert dec.crc_errors == 1 and dec.garbage_bytes > 0
 
 
-def test_decoder_false_header_with_long_dlen_does_not_swallow_next_frame():
+def test_decoder_false_header_with_long_dlen_does_not_swallow_next_frame() -> None:
     good = smp.Frame(7, 12, smp.CMD_STOP, smp.OK).encode()
     dec = smp.FrameDecoder(module_id=12)
     # "07 0C F0 ..." looks like the start of a 240-byte frame
     assert dec.feed(h("07 0C F0 91") + good) == [smp.Frame(7, 12, smp.CMD_STOP, smp.OK)]
 
 
-def test_decoder_module_id_filter():
+def test_decoder_module_id_filter() -> None:
     other = smp.Frame(7, 11, smp.CMD_STOP, smp.OK).encode()
     mine = smp.Frame(7, 12, smp.CMD_STOP, smp.OK).encode()
     assert smp.FrameDecoder(module_id=12).feed(other + mine) == [smp.Frame(7, 12, 0x91, b"OK")]
 
 
-def test_fragments_reassembled():
+def test_fragments_reassembled() -> None:
     frame = smp.Frame(7, 12, smp.GET_STATE, bytes(range(14)))
     pieces = frame.encode_fragments(4)
     assert [p[3] for p in pieces] == [smp.FRAG_START, smp.FRAG_MIDDLE, smp.FRAG_MIDDLE,
@@ -137,7 +137,7 @@ def test_fragments_reassembled():
     assert dec.feed(b"".join(small.encode_fragments(10))) == [small]
 
 
-def test_fragment_errors_counted():
+def test_fragment_errors_counted() -> None:
     frame = smp.Frame(7, 12, smp.GET_STATE, bytes(range(14)))
     start, *rest = frame.encode_fragments(5)
     dec = smp.FrameDecoder()
@@ -158,7 +158,8 @@ FRAMES = st.builds(
 @given(frames=st.lists(FRAMES, min_size=1, max_size=6),
        garbage=st.lists(st.binary(max_size=6), min_size=7, max_size=7),
        cuts=st.lists(st.integers(0, 400), max_size=12))
-def test_decoder_recovers_every_frame_whatever_the_chunking(frames, garbage, cuts):
+def test_decoder_recovers_every_frame_whatever_the_chunking(frames: list[smp.Frame], garbage: list[bytes],
+                                                            cuts: list[int]) -> None:
     stream = b""
     for i, f in enumerate(frames):
         stream += garbage[i] + f.encode()
@@ -172,5 +173,5 @@ def test_decoder_recovers_every_frame_whatever_the_chunking(frames, garbage, cut
     assert out == frames
 
 
-def test_float_encoding_little_endian():
+def test_float_encoding_little_endian() -> None:
     assert smp.f32(-1.0) == struct.pack("<f", -1.0) == h("00 00 80 BF")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Iterable, Set
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -63,7 +64,7 @@ def leading_numbers(text: str, limit: int) -> tuple[list[float], str, bool]:
     return out, text[pos:], False
 
 
-def fmt(values) -> str:
+def fmt(values: Iterable[float]) -> str:
     return " ".join("%f" % v for v in values)
 
 
@@ -75,15 +76,15 @@ class State:
     turn_max: np.ndarray | None = None
     max_change: np.ndarray | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.reset_turn()
         self.reset_change()
 
-    def reset_turn(self):
+    def reset_turn(self) -> None:
         self.turn_min = self.kin.turn_min.copy()
         self.turn_max = self.kin.turn_max.copy()
 
-    def reset_change(self):
+    def reset_change(self) -> None:
         self.max_change = self.kin.max_change.copy()
 
 
@@ -208,7 +209,7 @@ class Result:
         return None
 
 
-def replay(kin: Kinematics, path: Path, judge=JUDGED) -> list[Result]:
+def replay(kin: Kinematics, path: Path, judge: Set[str] = JUDGED) -> list[Result]:
     st = State(kin)
     records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     out: list[Result] = []

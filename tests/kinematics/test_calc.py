@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from rob6.robots import get_robot
@@ -14,7 +16,8 @@ P1_KR16 = [-0.788518, 0.399854, -0.467285, 1272.955930, -0.568459, -0.763835, 0.
 ZERO = np.zeros(6)
 
 
-def fmt(xs):
+def fmt(xs: Iterable[float] | None) -> str:
+    assert xs is not None, "no solution"
     return " ".join("%f" % x for x in xs)
 
 
@@ -26,14 +29,14 @@ def forward(k: Kinematics, q: list[float]) -> tuple[list[float], str]:
 
 
 # ------------------------------------------------------------------ ForwardCalc
-def test_forward_calc_reference_example():
+def test_forward_calc_reference_example() -> None:
     mat, status = forward(K["kr16"], [10, 0, 0, 0, 0, 0])
     assert fmt(mat) == ("0.000000 -0.173648 -0.984808 1741.140107 0.000000 -0.984808 0.173648 "
                         "-307.009978 -1.000000 -0.000000 -0.000000 640.000000")
     assert status == "noflip up lefty"
 
 
-def test_forward_calc_number_counts():
+def test_forward_calc_number_counts() -> None:
     k = K["kr16"]
     assert k.forward_calc([]) is None
     assert k.forward_calc([10, 0, 0, 0, 0, 0, 7, 8]) == k.forward_calc([10, 0, 0, 0, 0, 0])
@@ -45,7 +48,7 @@ def test_forward_calc_number_counts():
     assert K["kaw_fs"].forward_calc([10, -20]) is not None
 
 
-def test_forward_calc_strict_limits():
+def test_forward_calc_strict_limits() -> None:
     k = K["kr16"]
     assert k.forward_calc([0, 20, 0, 0, 0, 0]) is None  # J2 max 20 is not allowed
     assert k.forward_calc([0, 19.999999, 0, 0, 0, 0]) is not None
@@ -54,14 +57,14 @@ def test_forward_calc_strict_limits():
     assert k.forward_calc([float("nan"), 0, 0, 0, 0, 0]) is None
 
 
-def test_kaw_fs_forward_calc_is_plus_250():
+def test_kaw_fs_forward_calc_is_plus_250() -> None:
     mat, status = forward(K["kaw_fs"], [0, 0, 0, 0, 0, 0])
     assert np.allclose(np.array(mat)[[3, 7, 11]], [700, 0, 250])
     assert status == "noflip down lefty"
 
 
 # ------------------------------------------------------------------ patterns
-def test_no_toggle_keeps_current_status():
+def test_no_toggle_keeps_current_status() -> None:
     k = K["kr16"]
     cur = [-84, -75, -41, -60, 27, 38]  # noflip down lefty
     assert k.resolve_pattern("noToggleHand noToggleElbow noToggleArm", cur) == [BRANCHES.index("noflip down lefty")]
@@ -70,7 +73,7 @@ def test_no_toggle_keeps_current_status():
 
 
 # ------------------------------------------------------------------ BackwardCalc
-def test_backward_calc_reference_examples():
+def test_backward_calc_reference_examples() -> None:
     k = K["kr16"]
     assert fmt(k.backward_calc(P1_KR16, "noflip up lefty", ZERO)) == \
         "9.999998 -60.000000 80.000005 20.000037 39.999982 29.999977"
@@ -85,7 +88,7 @@ def test_backward_calc_reference_examples():
     assert k.backward_calc(mat, "flip up lefty", ZERO) == a
 
 
-def test_backward_calc_failures():
+def test_backward_calc_failures() -> None:
     k = K["kr16"]
     far = list(P1_KR16)
     far[3] = 5000.0
@@ -97,7 +100,7 @@ def test_backward_calc_failures():
     assert k.backward_calc(P1_KR16, "noflip up lefty", ZERO, turn_max=[1] * 6) is None
 
 
-def test_max_change_is_inclusive():
+def test_max_change_is_inclusive() -> None:
     k = K["kr16"]
     q = np.array(k.backward_calc(P1_KR16, "noflip up lefty", ZERO))
     cur = np.array([0.0, -50, 70, 10, 30, 20])
@@ -109,7 +112,7 @@ def test_max_change_is_inclusive():
     assert not k.is_possible(P1_KR16, "noflip up lefty", cur, max_change=tighter)
 
 
-def test_shift_by_360_into_the_limits():
+def test_shift_by_360_into_the_limits() -> None:
     k = K["ad850"]  # J2 -190 .. 20
     q = np.array([5.0, -185.0, 30.0, 10.0, 30.0, 10.0])
     T = k.fk(q)[0].ravel()
@@ -117,7 +120,7 @@ def test_shift_by_360_into_the_limits():
     assert got is not None and np.allclose(got, q, atol=1e-9)
 
 
-def test_stretched_elbow_up_equals_down():
+def test_stretched_elbow_up_equals_down() -> None:
     k = K["kr3"]  # q3 = 0 is stretched (a3 = 0)
     T = k.fk([10, -30, 0, 20, 40, 30])[0].ravel()
     up = k.backward_calc(T, "noflip up lefty", ZERO)
@@ -125,7 +128,7 @@ def test_stretched_elbow_up_equals_down():
     assert up is not None and down is not None and np.allclose(up, down)
 
 
-def test_toggle_rule_examples():
+def test_toggle_rule_examples() -> None:
     """The selection rule documented in Kinematics.backward_calc (ik.jsonl cases)."""
     k = K["kr16"]
     p2 = [-0.409282, 0.838520, 0.359683, -51.974354, 0.909251, 0.342075, 0.237164,
@@ -147,7 +150,7 @@ def test_toggle_rule_examples():
         "-87.999989 -77.999998 -38.000008 116.000047 -23.000014 -146.000053"  # flip down lefty
 
 
-def test_ik_shapes_and_batch():
+def test_ik_shapes_and_batch() -> None:
     k = K["kr16"]
     q = np.random.default_rng(3).uniform(-150, 150, size=(50, 6))
     T = k.fk(q)
@@ -159,14 +162,14 @@ def test_ik_shapes_and_batch():
     assert k.BRANCHES == BRANCHES and len(set(BRANCHES)) == 8
 
 
-def test_status():
+def test_status() -> None:
     assert K["kr16"].status(ZERO) == "noflip up lefty"
     assert K["kr3"].status(ZERO) == "noflip down lefty"
     assert K["ad850"].status([0, 0, 12.6, 0, -1, 0]) == "flip up lefty"
     assert K["kr16"].status_batch([[0, 0, 0, 0, 0, 0], [0, 0, -10, 0, -1, 0]]).tolist() == [0, 6]
 
 
-def test_bench_smoke():
+def test_bench_smoke() -> None:
     from rob6_kinematics.bench import bench_ik
 
     r = bench_ik("kr3", n_batch=200, n_single=10, n_clik=2, repeat=1)

@@ -15,6 +15,7 @@ from contextlib import contextmanager
 from typing import Any
 
 import pytest
+from pytest import MonkeyPatch
 
 from rob6.bus import HEDGE_DELAY_S, Bus, BusError, Context, call as bus_call
 from rob6.config import BusSettings
@@ -30,7 +31,7 @@ class _Replica:
     gives the handling time of each call in turn (None: never answers), then 0."""
 
     def __init__(self, settings: BusSettings, service: str, op: str, name: str,
-                 delays: Callable[[int], float | None], reply: Any):
+                 delays: Callable[[int], float | None], reply: Any) -> None:
         self.calls = 0
         self.release = threading.Event()
         self._lock = threading.Lock()
@@ -83,7 +84,7 @@ def _kinematics(*replicas: tuple[str, Callable[[int], float | None]]) -> Iterato
                 replica.close()
 
 
-def test_single_pose_ops_are_hedged_with_a_longer_deadline():
+def test_single_pose_ops_are_hedged_with_a_longer_deadline() -> None:
     for op in ("fk", "forward_calc", "backward_calc", "select"):
         assert OPS[("kinematics", op)].hedged and OPS[("kinematics", op)].timeout == REMOTE_POSE_S
     assert not OPS[("kinematics", "ik_batch")].hedged
@@ -91,7 +92,7 @@ def test_single_pose_ops_are_hedged_with_a_longer_deadline():
     assert HEDGE_DELAY_S < 0.2 < REMOTE_POSE_S  # out before TCP's retransmission timeout
 
 
-def test_a_never_answering_replica_costs_the_hedge_delay_not_the_timeout():
+def test_a_never_answering_replica_costs_the_hedge_delay_not_the_timeout() -> None:
     with _kinematics(("hung", _never), ("fast", _fast)) as (client, (hung, fast)):
         times = []
         for _ in range(8):
@@ -104,7 +105,7 @@ def test_a_never_answering_replica_costs_the_hedge_delay_not_the_timeout():
         assert max(times) >= HEDGE_DELAY_S  # (that one waited for the hedge delay)
 
 
-def test_the_hedge_goes_to_the_same_replica_when_it_is_the_only_one():
+def test_the_hedge_goes_to_the_same_replica_when_it_is_the_only_one() -> None:
     # the first copy sits in a slow handler (or behind a lost packet): the second, served
     # by another worker of the same replica, answers
     with _kinematics(("only", lambda n: 3.0 if n == 1 else 0.0)) as (client, (only,)):
@@ -115,7 +116,7 @@ def test_the_hedge_goes_to_the_same_replica_when_it_is_the_only_one():
         assert only.calls == 3  # the warm-up, the slow copy and the hedge
 
 
-def test_the_hedge_goes_to_another_host():
+def test_the_hedge_goes_to_another_host() -> None:
     # two replicas of one host hang (say, behind the same lost TCP segment): the second copy
     # goes to the other host's replica, not to its hung neighbour (instance ids are host-suffix)
     with _kinematics(("c1-aaaa", _never), ("c1-bbbb", _never), ("c2-cccc", _fast)) as (client, served):
@@ -129,7 +130,7 @@ def test_the_hedge_goes_to_another_host():
         assert first_c1 >= 2  # calls did go to c1 first, and the hedge never did
 
 
-def test_a_fast_answer_sends_no_second_copy():
+def test_a_fast_answer_sends_no_second_copy() -> None:
     with _kinematics(("a", _fast), ("b", _fast)) as (client, (a, b)):
         before = a.calls + b.calls
         for _ in range(20):
@@ -137,7 +138,7 @@ def test_a_fast_answer_sends_no_second_copy():
         assert a.calls + b.calls - before == 20
 
 
-def test_when_every_copy_is_lost_the_call_times_out_at_its_deadline():
+def test_when_every_copy_is_lost_the_call_times_out_at_its_deadline() -> None:
     with _kinematics(("hung", _never), ("fast", _fast)) as (client, (hung, fast)):
         with pytest.raises(BusError) as error:
             started = time.monotonic()
@@ -148,7 +149,7 @@ def test_when_every_copy_is_lost_the_call_times_out_at_its_deadline():
         assert hung.calls == 1  # a call for one named instance is never hedged
 
 
-def test_an_owner_service_is_never_sent_a_request_twice(monkeypatch):
+def test_an_owner_service_is_never_sent_a_request_twice(monkeypatch: MonkeyPatch) -> None:
     # even if its operation were marked hedged and idempotent by mistake: one robot, one owner
     monkeypatch.setitem(OPS, ("driver", "ping"), Op(Empty, PingReply, timeout=1.0, hedged=True))
     monkeypatch.setattr(bus_call, "IDEMPOTENT_SERVICES", frozenset({"kinematics", "driver"}))

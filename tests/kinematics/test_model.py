@@ -19,7 +19,7 @@ ZERO_POS = {"kr16": (1768, 0, 640), "kr3": (710, 0, 350), "ad850": (925, 0, 425)
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_committed_urdf_is_generated(robot):
+def test_committed_urdf_is_generated(robot: str) -> None:
     path = urdf_dir() / f"{robot}.urdf"
     assert path.read_text() == generate(get_robot(GEOMETRIES[robot]), robot), (
         "regenerate with: python -m rob6_kinematics.urdf"
@@ -27,7 +27,7 @@ def test_committed_urdf_is_generated(robot):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_urdf_structure(robot):
+def test_urdf_structure(robot: str) -> None:
     path = urdf_dir() / f"{robot}.urdf"
     root = ET.parse(path).getroot()
     assert root.tag == "robot" and root.get("name") == robot
@@ -52,7 +52,7 @@ def test_urdf_structure(robot):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_flange_convention_at_zero(robot):
+def test_flange_convention_at_zero(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     for T in (k.fk(np.zeros(6))[0], k.pin.fk(np.zeros(6))):
         assert np.allclose(T[:, :3], [[0, 0, -1], [0, -1, 0], [-1, 0, 0]], atol=1e-12)
@@ -62,7 +62,7 @@ def test_flange_convention_at_zero(robot):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_fk_variants_agree_with_pinocchio(robot):
+def test_fk_variants_agree_with_pinocchio(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     q = np.random.default_rng(7).uniform(-180, 180, size=(300, 6))
     T = k.fk(q)
@@ -72,7 +72,7 @@ def test_fk_variants_agree_with_pinocchio(robot):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_jacobian_matches_finite_differences(robot):
+def test_jacobian_matches_finite_differences(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     q = np.array([10.0, -60.0, 80.0, 20.0, 40.0, 30.0])
     J = k.jacobian(q)
@@ -90,7 +90,7 @@ def test_jacobian_matches_finite_differences(robot):
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_manipulability_vanishes_at_singularities(robot):
+def test_manipulability_vanishes_at_singularities(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     generic = k.manipulability([10, -60, 80, 20, 40, 30])
     assert generic > 1e-4

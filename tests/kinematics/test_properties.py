@@ -15,12 +15,13 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
 from rob6.robots import get_robot
 from rob6_kinematics.calc import Kinematics
-from rob6_kinematics.opw import BRANCHES
+from rob6_kinematics.opw import BRANCHES, FloatArray
 
 ROBOTS = ["kr16", "kr3", "ad850", "kaw_fs"]
 KIN = {r: Kinematics(get_robot(r)) for r in ROBOTS}
@@ -30,26 +31,27 @@ angle = st.floats(-179.5, 179.5, allow_nan=False)
 positive = st.floats(0.5, 179.5, allow_nan=False)
 
 
-def adiff(a, b):
+def adiff(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     d = np.abs(np.asarray(a, float) - np.asarray(b, float)) % 360.0
-    return np.minimum(d, 360.0 - d)
+    out: FloatArray = np.minimum(d, 360.0 - d)
+    return out
 
 
-def beta(k):
-    return np.degrees(np.arctan2(k.g.a3, k.g.d4))
+def beta(k: Kinematics) -> float:
+    return float(np.degrees(np.arctan2(k.g.a3, k.g.d4)))
 
 
-def reach(k, q):
-    q2, q3 = np.radians(q[1]), np.radians(q[2])
+def reach(k: Kinematics, q: npt.ArrayLike) -> float:
+    q2, q3 = np.radians(np.asarray(q, float)[1:3])
     g = k.g
-    return g.a1 + g.a2 * np.cos(q2) + g.d4 * np.cos(q2 + q3) + g.a3 * np.sin(q2 + q3)
+    return float(g.a1 + g.a2 * np.cos(q2) + g.d4 * np.cos(q2 + q3) + g.a3 * np.sin(q2 + q3))
 
 
-def elbow_sin(k, q):
-    return np.sin(np.radians(q[2] - beta(k)))
+def elbow_sin(k: Kinematics, q: npt.ArrayLike) -> float:
+    return float(np.sin(np.radians(np.asarray(q, float)[2] - beta(k))))
 
 
-def check_pose(k, T, Q):
+def check_pose(k: Kinematics, T: FloatArray, Q: FloatArray) -> None:
     """Every finite branch of Q reaches T and carries its own status."""
     finite = np.isfinite(Q).all(axis=-1)
     for b in np.flatnonzero(finite):
@@ -67,7 +69,8 @@ def check_pose(k, T, Q):
 @pytest.mark.parametrize("branch", range(8), ids=BRANCHES)
 @SETTINGS
 @given(q1=angle, t=st.floats(0.0, 1.0), phi=positive, q4=angle, q5=positive, q6=angle)
-def test_ik_roundtrip_all_branches(robot, branch, q1, t, phi, q4, q5, q6):
+def test_ik_roundtrip_all_branches(robot: str, branch: int, q1: float, t: float, phi: float, q4: float, q5: float,
+                                   q6: float) -> None:
     k = KIN[robot]
     g = k.g
     hand, elbow, arm = branch // 4, (branch // 2) % 2, branch % 2
@@ -98,7 +101,7 @@ def test_ik_roundtrip_all_branches(robot, branch, q1, t, phi, q4, q5, q6):
 
 # ---------------------------------------------------------------- BackwardCalc, limits
 @functools.cache
-def joint_pool(robot, n=300000):
+def joint_pool(robot: str, n: int = 300000) -> tuple[FloatArray, npt.NDArray[np.intp]]:
     """Random joints strictly inside the default limits, away from singularities,
     with their status index (computed once per robot)."""
     k = KIN[robot]
@@ -114,7 +117,7 @@ def joint_pool(robot, n=300000):
     return q[ok], k.status_batch(q[ok])
 
 
-def sample_with_status(robot, branch, seed):
+def sample_with_status(robot: str, branch: int, seed: int) -> FloatArray | None:
     """Joints inside the default limits with the given status (None if the status
     does not occur inside the limits); ``seed`` picks one of the pool."""
     q, st = joint_pool(robot)
@@ -131,7 +134,7 @@ UNREACHABLE = {("kaw_fs", "noflip up righty"), ("kaw_fs", "flip up righty")}
 @pytest.mark.parametrize("branch", range(8), ids=BRANCHES)
 @SETTINGS
 @given(seed=st.integers(0, 2**32 - 1))
-def test_backward_calc_with_limits(robot, branch, seed):
+def test_backward_calc_with_limits(robot: str, branch: int, seed: int) -> None:
     k = KIN[robot]
     status = BRANCHES[branch]
     q = sample_with_status(robot, branch, seed)
@@ -165,7 +168,8 @@ def test_backward_calc_with_limits(robot, branch, seed):
     max_change=st.lists(st.floats(0.0, 400.0), min_size=6, max_size=6),
     branch=st.integers(0, 7),
 )
-def test_limits_and_max_change_respected(robot, seed, shrink, max_change, branch):
+def test_limits_and_max_change_respected(robot: str, seed: int, shrink: list[float], max_change: list[float],
+                                         branch: int) -> None:
     k = KIN[robot]
     rng = np.random.default_rng(seed)
     span = k.turn_max - k.turn_min
@@ -186,11 +190,11 @@ def test_limits_and_max_change_respected(robot, seed, shrink, max_change, branch
 @pytest.mark.parametrize("robot", ROBOTS)
 @SETTINGS
 @given(q=st.lists(st.floats(-400, 400, allow_nan=False), min_size=6, max_size=6))
-def test_forward_calc_strict_limits(robot, q):
+def test_forward_calc_strict_limits(robot: str, q: list[float]) -> None:
     k = KIN[robot]
-    q = np.array(q)
+    joints = np.array(q)
     r = k.forward_calc(q)
-    inside = np.all((k.turn_min < q) & (q < k.turn_max))
+    inside = np.all((k.turn_min < joints) & (joints < k.turn_max))
     assert (r is not None) == inside
     if r is not None:
         assert np.allclose(np.array(r[0]).reshape(3, 4), k.fk(q)[0])
@@ -211,7 +215,8 @@ PATTERN_WORDS = [
     words=st.tuples(*(st.sampled_from(w) for w in PATTERN_WORDS)),
     weights=st.lists(st.sampled_from([0.5, 1.0, 4.0, 100.0]), min_size=6, max_size=6),
 )
-def test_backward_calc_agrees_with_selection_module(robot, seed, words, weights):
+def test_backward_calc_agrees_with_selection_module(robot: str, seed: int, words: tuple[str, ...],
+                                                    weights: list[float]) -> None:
     """calc.backward_calc == selection.select in its BackwardCalc mode (one rule)."""
     from rob6_kinematics import selection
 

@@ -24,7 +24,7 @@ import pytest
 from rob6.robots import get_robot
 from rob6_kinematics.calc import Kinematics
 from rob6_kinematics.opw import Geometry
-from tests.kinematics.kin_replay import JUDGED, replay
+from tests.kinematics.kin_replay import JUDGED, Result, replay
 from tests.system import CONFORMANCE
 
 # every kinematics transcript there is (kr3's fk/ik were recorded as kr3rt, the same
@@ -37,7 +37,7 @@ FK_CMDS = {"ForwardCalc", "GetPositionHomRowWise"}
 SUMMARY: dict[str, tuple[int, int, dict[str, int]]] = {}
 
 
-def run(robot, folder, name):
+def run(robot: str, folder: str, name: str) -> tuple[Kinematics, list[Result]]:
     path = CONFORMANCE / folder / f"{name}.jsonl"
     kin = Kinematics(get_robot(robot))
     if robot != "kaw_fs":
@@ -48,7 +48,7 @@ def run(robot, folder, name):
 
 
 @pytest.mark.parametrize("robot,folder,name", FILES, ids=[f"{f}/{n}" for _, f, n in FILES])
-def test_replay(robot, folder, name):
+def test_replay(robot: str, folder: str, name: str) -> None:
     kin, res = run(robot, folder, name)
     assert res, "no judged lines"
     known: Counter[str] = Counter()

@@ -12,23 +12,20 @@ import time
 
 import msgspec
 
-from rob6.bus import Bus, trace_records
-from rob6.config import BusSettings
+from rob6.bus import trace_records
 from rob6.messages import FkRequest, IkBatchRequest
-from tests.system import running
+from tests.system import System, running
 
 
-def _replica(system) -> subprocess.Popen:
+def _replica(system: System) -> subprocess.Popen[bytes]:
     env = dict(os.environ, ROB6_ROBOT=system.robot, ROB6_ROBOT_ID=system.robot_id,
                ROB6_ZENOH_CONNECT=f"tcp/127.0.0.1:{system.router_port}")
     return subprocess.Popen([sys.executable, "-m", "rob6_kinematics"], env=env)
 
 
-def test_requests_spread_over_replicas_and_survive_a_killed_one():
+def test_requests_spread_over_replicas_and_survive_a_killed_one() -> None:
     with running("kr16", services=("kinematics",)) as system:
-        settings = BusSettings(robot="kr16", robot_id=system.robot_id,
-                               connect=(f"tcp/127.0.0.1:{system.router_port}",))
-        bus = Bus(settings, "test")
+        bus = system.bus()
         served: collections.Counter[str] = collections.Counter()
         bus.subscribe("trace/kinematics", lambda _k, batch: served.update(
             msgspec.json.decode(record)["instance"] for _suffix, record in trace_records(batch)))
@@ -42,7 +39,7 @@ def test_requests_spread_over_replicas_and_survive_a_killed_one():
             request = IkBatchRequest(poses=poses)
             answers, errors = [], []
 
-            def client():
+            def client() -> None:
                 for _ in range(150):
                     try:
                         answers.append(bus.request("kinematics", "ik_batch", request, timeout=5.0))

@@ -21,14 +21,17 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from functools import cache
-from typing import Literal, TypedDict
+from typing import Any, Literal, TypedDict
 
+import numpy.typing as npt
 import pytest
 
 from rob6.robots import get_robot
 from rob6.status import PTP_HOM_PATTERN, TOGGLE_ALL, Status, parse_status, status_matches
 from rob6_kinematics import opw
+from rob6_kinematics.opw import FloatArray
 from rob6_kinematics.selection import (
     STATUS_ORDER,
     _nearest_in_limits,
@@ -91,20 +94,20 @@ KAW_FS_EXPECTED_DIFFERENCES = {
 class _OpwKin:
     """The closed-form IK (all 8 raw branches, no limits) of one robot."""
 
-    def __init__(self, robot: str):
+    def __init__(self, robot: str) -> None:
         self.geometry = opw.Geometry.of(get_robot(robot))
 
-    def ik(self, T):
+    def ik(self, T: npt.ArrayLike) -> FloatArray:
         return opw.ik(self.geometry, T)
 
 
 @cache
-def _branches(robot: str, pose: tuple[float, ...]) -> dict:
+def _branches(robot: str, pose: tuple[float, ...]) -> dict[Status, list[float] | None]:
     return branches_of(_OpwKin(robot), pose)
 
 
 # ---------------------------------------------------------------- replay
-def _records(robot: str, name: str) -> list[dict]:
+def _records(robot: str, name: str) -> list[dict[str, Any]]:
     recs = [json.loads(line) for line in (CONFORMANCE / robot / f"{name}.jsonl").open()]
     return [r for r in recs if "send" in r]
 
@@ -135,7 +138,7 @@ class _Tracked(TypedDict):
 Mismatch = tuple[int, str, list[str], bool, "list[float] | None", "bool | list[float] | None"]
 
 
-def _accepted(values: list[float] | None, rec: dict) -> list[float]:
+def _accepted(values: list[float] | None, rec: dict[str, Any]) -> list[float]:
     """The numbers of a command the original accepted (answered ``true``)."""
     assert values is not None, f"the original accepted {rec['send']!r}"
     return values
@@ -272,14 +275,14 @@ EXPECTED_COUNTS = {
 
 @pytest.mark.parametrize("name", FILES)
 @pytest.mark.parametrize("robot", ["kr16", "ad850", "kr3rt"])
-def test_replay_matches_original(robot, name):
+def test_replay_matches_original(robot: str, name: str) -> None:
     matched, mismatches = replay(robot, name)
     assert mismatches == []
     assert matched == EXPECTED_COUNTS[name]
 
 
 @pytest.mark.parametrize("name", FILES)
-def test_replay_kaw_fs_differs_only_where_documented(name):
+def test_replay_kaw_fs_differs_only_where_documented(name: str) -> None:
     matched, mismatches = replay("kaw_fs", name)
     differing = {(name, m[0]) for m in mismatches}
     expected = {d for d in KAW_FS_EXPECTED_DIFFERENCES if d[0] == name}
@@ -288,11 +291,15 @@ def test_replay_kaw_fs_differs_only_where_documented(name):
 
 
 # ---------------------------------------------------------------- the rule in small
-def _sols(**by_status):
-    return {tuple(k.split("_")): v for k, v in by_status.items()}
+def _sols(**by_status: list[float] | None) -> dict[Status, Sequence[float] | None]:
+    sols: dict[Status, Sequence[float] | None] = {}
+    for key, q in by_status.items():
+        hand, elbow, arm = key.split("_")
+        sols[(hand, elbow, arm)] = q
+    return sols
 
 
-def test_weighted_max_not_sum_and_tie_goes_to_earlier_branch():
+def test_weighted_max_not_sum_and_tie_goes_to_earlier_branch() -> None:
     status = get_robot("kr16").status
     cur = [-84.0, -75.0, -41.0, -60.0, 27.0, 38.0]
     # two righty branches: J1 change 176 dominates both (4*176 = 704) -> tie -> "up" first,
@@ -307,7 +314,7 @@ def test_weighted_max_not_sum_and_tie_goes_to_earlier_branch():
     assert got == sols[("noflip", "up", "righty")]
 
 
-def test_wrist_joints_take_nearest_turn():
+def test_wrist_joints_take_nearest_turn() -> None:
     lim = get_robot("kr16")
     cur = [-84.0, -75.0, -41.0, -60.0, 27.0, 38.0]
     q = [-87.999989, -77.999998, -38.000008, 116.000047, -23.000014, -146.000053]
@@ -321,7 +328,7 @@ def test_wrist_joints_take_nearest_turn():
     assert got[3] == pytest.approx(116.000047)
 
 
-def test_nearest_in_limits():
+def test_nearest_in_limits() -> None:
     assert _nearest_in_limits(-146.0, 38.0, -350.0, 350.0) == 214.0
     assert _nearest_in_limits(-178.0, 179.0, -185.0, 185.0) == 182.0  # kr16 J1
     assert _nearest_in_limits(170.0, -170.0, -185.0, 185.0) == 170.0  # -190 is outside
@@ -333,11 +340,11 @@ def test_nearest_in_limits():
     assert _nearest_in_limits(60.5, -119.5, -360.0, 360.0) == 60.5
 
 
-def test_status_order():
+def test_status_order() -> None:
     assert len(set(STATUS_ORDER)) == 8 and STATUS_ORDER[0] == ("flip", "up", "lefty")
 
 
-def test_joint_move_allowed_limits_and_status():
+def test_joint_move_allowed_limits_and_status() -> None:
     m = get_robot("kr16")
     args = (m.turn_min, m.turn_max, [10.0] * 6)
     z = [0.0] * 6
@@ -351,7 +358,7 @@ def test_joint_move_allowed_limits_and_status():
 
 
 # ---------------------------------------------------------------- BackwardCalc
-def replay_backward_calc(robot: str):
+def replay_backward_calc(robot: str) -> tuple[int, list[tuple[int, str, list[str], str, list[float] | None]]]:
     """ik.jsonl: BackwardCalc/GetJointsRowWise/IsPossible (explicit and toggle words) by the
     same rule without the ±360° variants and without the allowed status."""
     model = get_robot(robot)
@@ -400,13 +407,13 @@ def replay_backward_calc(robot: str):
 
 
 @pytest.mark.parametrize("robot", ["kr16", "ad850", "kr3rt", "kaw_fs"])
-def test_backward_calc_uses_the_same_rule_without_turns(robot):
+def test_backward_calc_uses_the_same_rule_without_turns(robot: str) -> None:
     matched, mismatches = replay_backward_calc(robot)
     assert mismatches == []
     assert matched == 83
 
 
-def test_select_wrapper_with_the_kinematics_service_class():
+def test_select_wrapper_with_the_kinematics_service_class() -> None:
     """``select`` = IK + rule; the REFERENCE 6.6 examples on kr16 (start noflip down lefty)."""
     from rob6_kinematics.calc import Kinematics
 
@@ -417,7 +424,8 @@ def test_select_wrapper_with_the_kinematics_service_class():
     start = [-84.0, -75.0, -41.0, -60.0, 27.0, 38.0]
     lim = (m.turn_min, m.turn_max, m.default_max_change)
 
-    def run(pattern, weights=DEFAULT_WEIGHTS, allowed=TOGGLE_ALL):
+    def run(pattern: Sequence[str], weights: Sequence[float] = DEFAULT_WEIGHTS,
+            allowed: Sequence[str] = TOGGLE_ALL) -> Status | None:
         q = select(kin, target, pattern, start, *lim, weights, allowed)
         return None if q is None else m.status(q)
 

@@ -9,13 +9,16 @@ of J4 / J5 / J6 at +-180, which numpy's rounding noise decides.  ForwardCalc's
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from rob6.robots import ROBOT_TYPES, get_robot
 from rob6_kinematics import opw
 from rob6_kinematics.calc import TIE_EPS, TIE_ORDER, Kinematics, apply_limits
+from rob6_kinematics.opw import FloatArray
 
 TOL = 1e-9
 SPECIAL = [0.0, 90.0, -90.0, 180.0, -180.0, 45.0, 10.0]
@@ -43,7 +46,7 @@ def all_poses(k: Kinematics, seed: int) -> np.ndarray:
     return np.concatenate([T, np.round(T, 6), far])
 
 
-def assert_same(one, ref, ctx):
+def assert_same(one: Sequence[Sequence[float] | None], ref: FloatArray, ctx: object) -> None:
     assert len(one) == 8
     for b in range(8):
         r = ref[b]
@@ -55,7 +58,7 @@ def assert_same(one, ref, ctx):
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_ik_one_equals_ik(robot):
+def test_ik_one_equals_ik(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     T = all_poses(k, seed=sum(map(ord, robot)))
     Q = opw.ik(k.g, T)
@@ -64,7 +67,7 @@ def test_ik_one_equals_ik(robot):
     assert len(T) > 4000
 
 
-def test_ik_one_needs_the_exact_wrist_at_180():
+def test_ik_one_needs_the_exact_wrist_at_180() -> None:
     """Without the exact (fma) wrist rotation some J4/J6 come out at -180 where
     numpy says +180 (or the reverse): the case the exact recomputation is for."""
     k = Kinematics(get_robot("kr16"))
@@ -77,7 +80,7 @@ def test_ik_one_needs_the_exact_wrist_at_180():
     assert hits > 0
 
 
-def test_ik_one_degenerate_input():
+def test_ik_one_degenerate_input() -> None:
     g = opw.Geometry.of(get_robot("kr16"))
     assert opw.ik_one(g, [0.0] * 12) == [None] * 8  # zero rotation
     t = k16_pose = Kinematics(get_robot("kr16")).fk([10, -60, 80, 20, 40, 30])[0]
@@ -98,7 +101,7 @@ def test_ik_one_degenerate_input():
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_fk_compiled_one_equals_fk_compiled(robot):
+def test_fk_compiled_one_equals_fk_compiled(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     q = poses_joints(k, seed=7 + len(robot), n=200)
     q = np.concatenate([q, np.round(q, 3)])
@@ -111,7 +114,8 @@ def test_fk_compiled_one_equals_fk_compiled(robot):
 
 
 # ------------------------------------------------------------------ Kinematics commands
-def backward_reference(k, T, words, cur, lo, hi, mc, w):
+def backward_reference(k: Kinematics, T: npt.ArrayLike, words: Sequence[str], cur: FloatArray, lo: FloatArray,
+                       hi: FloatArray, mc: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray | None]:
     """The vectorised BackwardCalc (before the single-pose path)."""
     Q = apply_limits(opw.ik(k.g, np.asarray(T).reshape(1, 12))[0], lo, hi)
     with np.errstate(invalid="ignore"):
@@ -127,7 +131,7 @@ def backward_reference(k, T, words, cur, lo, hi, mc, w):
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_commands_equal_vectorised(robot):
+def test_commands_equal_vectorised(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     rng = np.random.default_rng(99)
     qs = poses_joints(k, seed=3, n=40)
@@ -160,7 +164,7 @@ BRANCH_WORDS = list(opw.BRANCHES)
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_forward_calc_text_equals_vectorised(robot):
+def test_forward_calc_text_equals_vectorised(robot: str) -> None:
     k = Kinematics(get_robot(robot))
     qs = poses_joints(k, seed=5, n=30)
     mid = (np.asarray(k.robot.hw_min, float) + np.asarray(k.robot.hw_max, float)) / 2
@@ -181,17 +185,17 @@ def test_forward_calc_text_equals_vectorised(robot):
 class _VectorisedOnly:
     """A kin without ik_one: selection.branches_of takes the vectorised path."""
 
-    def __init__(self, k):
+    def __init__(self, k: Kinematics) -> None:
         self.k = k
         self.BRANCHES = k.BRANCHES
         self.robot_status = k.robot_status
 
-    def ik(self, T):
+    def ik(self, T: npt.ArrayLike) -> FloatArray:
         return self.k.ik(T)
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_select_single_pose_equals_vectorised(robot):
+def test_select_single_pose_equals_vectorised(robot: str) -> None:
     from rob6_kinematics import selection
 
     k = Kinematics(get_robot(robot))

@@ -5,6 +5,8 @@ log, and the arm move when a client drives it through the gateway."""
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
 
 from rob6.robots import get_robot
 from rob6_recorder.service import URDF_DIR
@@ -26,7 +28,7 @@ def _links(robot: str) -> tuple[str, set[str]]:
     return base, links - {base}
 
 
-def test_live_view_follows_the_arm(tmp_path, live_port):
+def test_live_view_follows_the_arm(tmp_path: Path, live_port: int) -> None:
     with running("kr16", log_dir=str(tmp_path), extra_env={"ROB6_LIVE_PORT": str(live_port)}) as system:
         url = f"ws://127.0.0.1:{live_port}"
         assert any(f"live view: {url}" in line for line in system.output), system.output
@@ -61,7 +63,7 @@ def test_live_view_follows_the_arm(tmp_path, live_port):
             assert client.ask("MovePTPJoints " + " ".join(f"{q:g}" for q in TARGET)) == "true\n"
             assert client.ask("GetPositionJoints").split() == [f"{q:.6f}" for q in TARGET]
 
-            def at_target(state) -> bool:
+            def at_target(state: dict[str, Any]) -> bool:
                 return all(abs(a - b) < 1e-6 for a, b in zip(state["q"], TARGET, strict=True))
 
             assert fox.wait(lambda: any(at_target(s) for _, s in fox.received("/driver/joint_state")))

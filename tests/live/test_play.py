@@ -52,11 +52,11 @@ def _connect(port: int, process: subprocess.Popen[str]) -> FoxgloveClient:
 
 
 @pytest.fixture
-def recording(tmp_path) -> tuple[Path, int]:
+def recording(tmp_path: Path) -> tuple[Path, int]:
     return _recording(tmp_path)
 
 
-def test_play_seek_and_pause(recording, live_port):
+def test_play_seek_and_pause(recording: tuple[Path, int], live_port: int) -> None:
     path, t0 = recording
     process = serve(path, live_port, "--paused")
     try:
@@ -96,7 +96,7 @@ def test_play_seek_and_pause(recording, live_port):
         process.wait(10)
 
 
-def test_play_a_system_recording(tmp_path, live_port):
+def test_play_a_system_recording(tmp_path: Path, live_port: int) -> None:
     """A file recorded by the real system plays back: the joints reach the commanded pose."""
     from tests.system import running
     with running("kr16", log_dir=str(tmp_path), extra_env={"ROB6_LIVE_PORT": "0"}) as system:

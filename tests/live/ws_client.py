@@ -11,6 +11,7 @@ import struct
 import threading
 import time
 from collections import defaultdict
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from websockets.sync.client import connect
@@ -20,7 +21,7 @@ SUBPROTOCOLS = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.
 
 
 class FoxgloveClient:
-    def __init__(self, url: str, timeout: float = 10.0):
+    def __init__(self, url: str, timeout: float = 10.0) -> None:
         self._connection = connect(url, subprotocols=SUBPROTOCOLS, open_timeout=timeout, max_size=None)
         self.ws = self._connection.__enter__()  # websockets wants it used as a context manager
         self.server_info: dict[str, Any] = {}
@@ -81,7 +82,7 @@ class FoxgloveClient:
             status, t, speed, seek = struct.unpack_from("<BQfB", frame, 1)
             self.playback_states.append((status, t, speed, bool(seek)))
 
-    def wait(self, predicate, timeout: float = 10.0) -> bool:
+    def wait(self, predicate: Callable[[], object], timeout: float = 10.0) -> bool:
         deadline = time.monotonic() + timeout
         with self._changed:
             while not predicate():
@@ -95,7 +96,7 @@ class FoxgloveClient:
         with self._lock:
             return {ch["topic"]: ch for ch in self.channels.values()}
 
-    def wait_topics(self, topics, timeout: float = 10.0) -> dict[str, dict[str, Any]]:
+    def wait_topics(self, topics: Iterable[str], timeout: float = 10.0) -> dict[str, dict[str, Any]]:
         self.wait(lambda: set(topics) <= {ch["topic"] for ch in self.channels.values()}, timeout)
         return self.topics()
 

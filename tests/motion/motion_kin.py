@@ -10,9 +10,11 @@ from __future__ import annotations
 from functools import cache
 
 import numpy as np
+import numpy.typing as npt
 
 from rob6.robots import RobotModel
 from rob6_kinematics.calc import Kinematics
+from rob6_planner.lin_planner import IkFn
 
 
 @cache
@@ -20,19 +22,19 @@ def _kinematics(robot: RobotModel) -> Kinematics:
     return Kinematics(robot)
 
 
-def fk(robot: RobotModel, q) -> np.ndarray:
+def fk(robot: RobotModel, q: npt.ArrayLike) -> np.ndarray:
     """q (N,6) deg -> poses (N,3,4)."""
     return _kinematics(robot).fk(q)
 
 
-def make_ik(robot: RobotModel, q_ref, max_err_mm: float = 1e-6):
+def make_ik(robot: RobotModel, q_ref: npt.ArrayLike, max_err_mm: float = 1e-6) -> IkFn:
     """ik_fn for plan_lin: the solution in the configuration of q_ref, nearest to q_ref."""
-    q_ref = np.asarray(q_ref, float)
-    status_ref = robot.status(tuple(q_ref))
+    ref = np.asarray(q_ref, float)
+    status_ref = robot.status(tuple(ref))
     kin = _kinematics(robot)
 
-    def ik_fn(poses):
-        poses = np.asarray(poses, float)
+    def ik_fn(poses_in: np.ndarray) -> np.ndarray:
+        poses = np.asarray(poses_in, float)
         sols = kin.ik(poses)
         out = np.full((len(poses), 6), np.nan)
         for n in range(len(poses)):
@@ -40,7 +42,7 @@ def make_ik(robot: RobotModel, q_ref, max_err_mm: float = 1e-6):
             for s in sols[n]:
                 if np.isnan(s).any() or robot.status(tuple(s)) != status_ref:
                     continue
-                d = np.abs(((s - q_ref) + 180) % 360 - 180).sum()
+                d = np.abs(((s - ref) + 180) % 360 - 180).sum()
                 if d < best_d:
                     best, best_d = s, d
             if best is not None:

@@ -14,20 +14,20 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
-from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import running
+from tests.system import Client, System, link_status, running
 
 pytestmark = pytest.mark.slow
 
@@ -48,7 +48,7 @@ def free_tcp_ports(n: int) -> list[int]:
             sock.close()
 
 
-def adept_system(motion: int, state: int, order: str = "big", **kwargs):
+def adept_system(motion: int, state: int, order: str = "big", **kwargs: Any) -> AbstractContextManager[System]:
     return running("ad850", dummy=False, extra_env={
         "ROB6_LINK": "simple_message", "ROB6_SM_HOST": "127.0.0.1", "ROB6_SM_MOTION_PORT": str(motion),
         "ROB6_SM_STATE_PORT": str(state), "ROB6_SM_BYTE_ORDER": order}, **kwargs)
@@ -58,46 +58,36 @@ def controller(motion: int, state: int, *args: str, order: str = "big") -> Adept
     return AdeptController("--motion-port", str(motion), "--state-port", str(state), *args, byte_order=order)
 
 
-def link_status(system):
-    bus = Bus(BusSettings(robot="ad850", robot_id=system.robot_id,
-                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
-    try:
-        bus.wait_for(["driver"], 10)
-        return bus.request("driver", "link", LinkQuery())
-    finally:
-        bus.close()
-
-
-def robot_at(ctl) -> np.ndarray:
+def robot_at(ctl: AdeptController) -> np.ndarray:
     return np.array(ctl.status()["position_rob6_deg"])
 
 
-def connected(client, ctl, system) -> np.ndarray:
+def connected(client: Client, ctl: AdeptController, system: System) -> np.ndarray:
     """Wait until rob6 can move the robot again and follows it: a motion to where the robot
     stands is accepted (it sends nothing), and rob6's position is the robot's."""
-    def ready():
+    def ready() -> np.ndarray | None:
         here = robot_at(ctl)
         if reply(client, "MovePTPJoints " + fmt(here)) != "true\n":
             return None
         q = joints(client)
         return q if np.allclose(q, robot_at(ctl), atol=POSITION_TOL) else None
-    q = wait_until(ready, what="rob6 to follow the controller")
+    q: np.ndarray = wait_until(ready, what="rob6 to follow the controller")
     assert link_status(system).state == "connected"
     return q
 
 
-def arrived(ctl, target) -> dict:
+def arrived(ctl: AdeptController, target: Sequence[float] | np.ndarray) -> dict[str, Any]:
     """The controller at rest on target (rob6's degrees)."""
     return ctl.wait_for(lambda st: not st["in_motion"] and np.allclose(st["position_rob6_deg"], target,
                                                                        atol=POSITION_TOL),
                         timeout=20, what=f"the robot at {target}")
 
 
-def fmt(q) -> str:
+def fmt(q: Iterable[float]) -> str:
     return " ".join(f"{x:f}" for x in q)
 
 
-def session(client, ctl) -> None:
+def session(client: Client, ctl: AdeptController) -> None:
     """PTP, LIN and Alter (EnableAdeptAlter, MoveRTJoints every 16 ms)."""
     for ptp_target in (START, [30.0, -50.0, 50.0, 10.0, 20.0, -20.0], START):
         assert reply(client, "MovePTPJoints " + fmt(ptp_target)) == "true\n"
@@ -138,7 +128,7 @@ def recorded_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize("order, timing", [("big", "vplus"), ("little", "duration")])
-def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path, order, timing):
+def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path: Path, order: str, timing: str) -> None:
     motion, state = free_tcp_ports(2)
     with adept_system(motion, state, order, log_dir=str(tmp_path)) as system, system.client() as client:
         waiting = f"ERROR: driver: robot not connected (waiting for simple_message at 127.0.0.1:{motion}/{state})\n"
@@ -165,14 +155,14 @@ def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path, order, timing
 
 
 @pytest.fixture(scope="module")
-def adept():
+def adept() -> Iterator[tuple[System, int, int]]:
     """One rob6 system on simple_message for the fault tests; each test brings its own controller."""
     motion, state = free_tcp_ports(2)
     with adept_system(motion, state) as system:
         yield system, motion, state
 
 
-def long_move(client, ctl) -> None:
+def long_move(client: Client, ctl: AdeptController) -> None:
     """Start a PTP of ~3 s (J1 0 -> 60) without waiting for its reply."""
     assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
     target = list(START)
@@ -181,14 +171,14 @@ def long_move(client, ctl) -> None:
     wait_until(lambda: float(robot_at(ctl)[0]) > 5.0, what="the robot to move")
 
 
-def back_home(client, ctl, system) -> None:
+def back_home(client: Client, ctl: AdeptController, system: System) -> None:
     here = connected(client, ctl, system)
     assert 5.0 < here[0] < 60.0  # where the fault caught it: rob6 continues from there
     assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
     assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
-def test_estop_mid_motion_then_released_and_drives_on(adept):
+def test_estop_mid_motion_then_released_and_drives_on(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -209,7 +199,7 @@ def test_estop_mid_motion_then_released_and_drives_on(adept):
         assert ctl.status()["points_refused"] == refused_at_fault  # nothing sent while it could not move
 
 
-def test_drives_off_mid_motion(adept):
+def test_drives_off_mid_motion(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -220,7 +210,7 @@ def test_drives_off_mid_motion(adept):
         back_home(client, ctl, system)
 
 
-def test_controller_error_mid_motion(adept):
+def test_controller_error_mid_motion(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -233,7 +223,7 @@ def test_controller_error_mid_motion(adept):
         back_home(client, ctl, system)
 
 
-def test_motion_connection_dropped_mid_motion_and_restored(adept):
+def test_motion_connection_dropped_mid_motion_and_restored(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -247,7 +237,7 @@ def test_motion_connection_dropped_mid_motion_and_restored(adept):
         assert link_status(system).runs >= 2
 
 
-def test_state_connection_dropped_mid_motion_and_restored(adept):
+def test_state_connection_dropped_mid_motion_and_restored(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -259,7 +249,7 @@ def test_state_connection_dropped_mid_motion_and_restored(adept):
         back_home(client, ctl, system)
 
 
-def test_slow_then_missing_acknowledgements(adept):
+def test_slow_then_missing_acknowledgements(adept: tuple[System, int, int]) -> None:
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -281,13 +271,13 @@ def test_slow_then_missing_acknowledgements(adept):
         assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
-def test_simple_message_on_a_robot_other_than_the_adept_is_refused_in_one_line():
+def test_simple_message_on_a_robot_other_than_the_adept_is_refused_in_one_line() -> None:
     result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kr16", "--link", "simple_message"],
-                            capture_output=True, text=True, timeout=60)
+                            capture_output=True, check=False, text=True, timeout=60)
     assert result.returncode == 78
     assert result.stderr == ("rob6-driver: --link simple_message drives the Adept Viper s850 (ad850), not kr16; "
                              "use --link sim\n")
     result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kaw_fs", "--link", "adept"],
-                            capture_output=True, text=True, timeout=60)
+                            capture_output=True, check=False, text=True, timeout=60)
     assert (result.returncode, result.stderr) == (
         78, "rob6-driver: --link adept drives the Adept Viper s850 (ad850), not kaw_fs; use --link sim\n")

@@ -11,7 +11,7 @@ from rob6_planner.config import MotionSettings
 
 
 @pytest.mark.parametrize("robot", ROBOT_TYPES)
-def test_defaults(robot):
+def test_defaults(robot: str) -> None:
     c = MotionSettings(robot)
     r = c.robot
     assert c.speed == list(r.default_speed)
@@ -22,7 +22,7 @@ def test_defaults(robot):
     assert c.rt_speed_control == 1
 
 
-def test_partial_update_speed_and_accel():
+def test_partial_update_speed_and_accel() -> None:
     c = MotionSettings("kr16")
     assert not c.set_speed([0.1, 0.1, 0.1, 0.1, 0.1, -0.1])
     assert c.speed == [0.1] * 5 + [0.7380]
@@ -33,7 +33,7 @@ def test_partial_update_speed_and_accel():
     assert c.set_single_accel(6, 0.02) and not c.set_single_accel(6, 0.020001)
 
 
-def test_max_change_all_or_nothing_and_single():
+def test_max_change_all_or_nothing_and_single() -> None:
     c = MotionSettings("kr16")
     assert c.set_max_change([0] * 6)
     assert not c.set_max_change([10, 10, 10, 10, 10, -10])
@@ -44,7 +44,7 @@ def test_max_change_all_or_nothing_and_single():
     assert not c.set_single_max_change(0, 5) and not c.set_single_max_change(7, 5)
 
 
-def test_turn_limits_unchecked_and_independent_of_max_change():
+def test_turn_limits_unchecked_and_independent_of_max_change() -> None:
     c = MotionSettings("kr16")
     assert c.set_turn_max([-200] * 6) and c.set_turn_min([1e9] * 6)
     assert c.max_change == list(c.robot.default_max_change)
@@ -55,7 +55,7 @@ def test_turn_limits_unchecked_and_independent_of_max_change():
     assert not c.set_single_turn_min(-1, 3)
 
 
-def test_weights_status_rt():
+def test_weights_status_rt() -> None:
     c = MotionSettings("kr16")
     assert not c.set_weights([1, 1, 1, 0, 1, 1]) and c.weights == [4, 1, 1, 1, 1, 1]
     assert not c.set_weights([-0.0] * 6)
@@ -71,14 +71,14 @@ def test_weights_status_rt():
     assert not c.apply("NoSuchCommand")
 
 
-def test_allowed_status():
+def test_allowed_status() -> None:
     cur = ("noflip", "up", "lefty")
     c = MotionSettings("kr16")
     c.set_allowed(["noflip", "up", "lefty"])
     assert not c.status_allowed(("noflip", "down", "lefty"), cur)
 
 
-def test_dict_roundtrip_and_bus_schema():
+def test_dict_roundtrip_and_bus_schema() -> None:
     c = MotionSettings("ad850")
     c.set_speed([0.2] * 6)
     c.set_allowed(["flip"])

@@ -13,9 +13,12 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
+from pytest import CaptureFixture
 
 from rob6.status import parse_status
 from rob6_planner.config import MotionSettings
@@ -50,25 +53,25 @@ class Cursor:
     def __init__(self, text: str):
         self.text, self.pos = text, 0
 
-    def _read(self, pattern):
+    def _read(self, pattern: re.Pattern[str]) -> str | None:
         m = pattern.match(self.text, self.pos)
         if not m:
             return None
         self.pos = m.end()
         return m.group(1)
 
-    def double(self):
+    def double(self) -> float | None:
         s = self._read(_DOUBLE)
         if s is None or math.isinf(float(s)):
             return None
         return float(s)
 
-    def integer(self):
+    def integer(self) -> int | None:
         s = self._read(_INT)
         return None if s is None else int(s)
 
 
-def parse(cmd: str, rest: str):
+def parse(cmd: str, rest: str) -> tuple[list[Any], list[str]] | None:
     """-> (args, words) or None when the gateway would answer ``ERROR: incorrect …``."""
     c = Cursor(rest)
     if cmd in SIX or cmd == "SetKukaRTSpeed":
@@ -91,11 +94,11 @@ def parse(cmd: str, rest: str):
     return [], []
 
 
-def fmt(values) -> str:
+def fmt(values: Iterable[float]) -> str:
     return " ".join(f"{v:f}" for v in values) + "\n"
 
 
-def records(path: Path):
+def records(path: Path) -> Iterator[tuple[str, str]]:
     """(command line, reply) pairs with waiting commands merged with their argument line."""
     recs = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     recs = [r for r in recs if "send" in r]
@@ -114,11 +117,11 @@ def records(path: Path):
         i += 1
 
 
-def replay(robot: str, script: str):
+def replay(robot: str, script: str) -> tuple[dict[str, int], list[tuple[str, str, str]]]:
     config = MotionSettings(robot)
     stats = {"get_match": 0, "get_mismatch": 0, "set_match": 0, "set_mismatch": 0,
              "parse_error": 0, "skipped": 0}
-    mismatches = []
+    mismatches: list[tuple[str, str, str]] = []
     for line, reply in records(CONFORMANCE / robot / f"{script}.jsonl"):
         parts = line.split(None, 1)
         if not parts:
@@ -169,14 +172,14 @@ def replay(robot: str, script: str):
 
 @pytest.mark.parametrize("script", SCRIPTS)
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_transcript(robot, script):
+def test_transcript(robot: str, script: str) -> None:
     stats, mismatches = replay(robot, script)
     assert not mismatches, mismatches[:5]
     assert stats["get_match"] + stats["set_match"] > 10
     print(robot, script, stats)
 
 
-def test_totals(capsys):
+def test_totals(capsys: CaptureFixture[str]) -> None:
     total: dict[str, int] = {}
     for robot in ROBOTS:
         for script in SCRIPTS:

@@ -1,28 +1,31 @@
 """LIN planning: straight line, limits, rejection before motion (singularity, reach, config)."""
 
+from collections.abc import Sequence
+
 import numpy as np
 import pytest
 
-from rob6.robots import get_robot
+from rob6.robots import RobotModel, get_robot
 from rob6_driver.motion import MotionCore
 from rob6_planner.config import MotionSettings
-from rob6_planner.lin_planner import LinOptions, plan_lin
-from rob6_planner.trajectory import TrajectoryPlanner, finite_difference_violations
+from rob6_planner.lin_planner import IkFn, LinOptions, plan_lin
+from rob6_planner.trajectory import SampledTrajectory, TrajectoryPlanner, finite_difference_violations
 from tests.motion.motion_kin import fk, make_ik
 
 
-def rot_z(deg):
+def rot_z(deg: float) -> np.ndarray:
     c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
 
 
-def setup(robot="kr16", q0=(10, -80, 100, 20, 40, 30)):
+def setup(robot: str = "kr16", q0: Sequence[float] = (10, -80, 100, 20, 40, 30)
+          ) -> tuple[RobotModel, MotionSettings, TrajectoryPlanner, np.ndarray, np.ndarray, IkFn]:
     r = get_robot(robot)
-    q0 = np.array(q0, float)
-    return r, MotionSettings(r), TrajectoryPlanner(r), q0, fk(r, q0)[0], make_ik(r, q0)
+    start = np.array(q0, float)
+    return r, MotionSettings(r), TrajectoryPlanner(r), start, fk(r, start)[0], make_ik(r, start)
 
 
-def line_deviation(r, tr, T0, T1):
+def line_deviation(r: RobotModel, tr: SampledTrajectory, T0: np.ndarray, T1: np.ndarray) -> tuple[float, np.ndarray]:
     P = fk(r, tr.q)[:, :, 3]
     u = (T1[:, 3] - T0[:, 3]) / np.linalg.norm(T1[:, 3] - T0[:, 3])
     d = P - T0[:, 3]
@@ -30,7 +33,7 @@ def line_deviation(r, tr, T0, T1):
     return np.linalg.norm(d - np.outer(along, u), axis=1).max(), along
 
 
-def test_lin_is_straight_and_within_limits():
+def test_lin_is_straight_and_within_limits() -> None:
     r, c, p, q0, T0, ik = setup()
     T1 = T0.copy()
     T1[:, 3] += [200, 150, -100]
@@ -59,7 +62,7 @@ def test_lin_is_straight_and_within_limits():
     assert np.abs(rel[:, 2, 2] - 1).max() < 1e-9  # about z only: no wobble
 
 
-def test_lin_speed_is_limited_by_the_slowest_joint():
+def test_lin_speed_is_limited_by_the_slowest_joint() -> None:
     r, c, p, q0, T0, ik = setup()
     T1 = T0.copy()
     T1[:, 3] += [0, 300, 0]
@@ -74,7 +77,7 @@ def test_lin_speed_is_limited_by_the_slowest_joint():
     assert (peak / lim.vmax).max() > 0.8  # uses most of the allowed speed
 
 
-def test_lin_through_the_wrist_singularity_is_rejected():
+def test_lin_through_the_wrist_singularity_is_rejected() -> None:
     # constant orientation, the arm moves so that q5 must pass through 0
     r, c, p, qa, Ta, ik = setup(q0=(0, -90, 90, 0, 10, 0))
     Tb = fk(r, [0, -90, 110, 0, -10, 0])[0]
@@ -84,7 +87,7 @@ def test_lin_through_the_wrist_singularity_is_rejected():
     assert "wrist singularity" in res.reason
 
 
-def test_lin_rejections():
+def test_lin_rejections() -> None:
     r, c, p, q0, T0, ik = setup()
     far = T0.copy()
     far[:, 3] += [3000, 0, 0]
@@ -112,7 +115,7 @@ def test_lin_rejections():
     assert res.ok and res.trajectory is not None and res.trajectory.n == 1
 
 
-def test_lin_start_must_match_the_current_joints():
+def test_lin_start_must_match_the_current_joints() -> None:
     r, c, p, q0, T0, ik = setup()
     T1 = T0.copy()
     T1[:, 3] += [50, 0, 0]

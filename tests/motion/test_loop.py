@@ -8,7 +8,7 @@ from rob6_driver.motion import CoreState, MotionCore
 from rob6_planner.bench import bench_ptp
 
 
-def test_runner_publishes_every_cycle_on_time():
+def test_runner_publishes_every_cycle_on_time() -> None:
     sim = MotionCore("kr16rt")  # 4 ms
     published: list[CoreState] = []
     runner = CycleRunner(sim.step, sim.dt, published.append)
@@ -26,10 +26,10 @@ def test_runner_publishes_every_cycle_on_time():
     assert runner.stats.errors == 0
 
 
-def test_runner_counts_missed_cycles_and_survives_errors():
+def test_runner_counts_missed_cycles_and_survives_errors() -> None:
     calls = []
 
-    def step():
+    def step() -> int:
         calls.append(time.monotonic())
         if len(calls) == 3:
             time.sleep(0.035)  # overruns ~3 periods of 10 ms
@@ -46,7 +46,7 @@ def test_runner_counts_missed_cycles_and_survives_errors():
     assert runner.stats.cycles >= 8
 
 
-def test_trajectory_completion_is_awaitable_in_real_time():
+def test_trajectory_completion_is_awaitable_in_real_time() -> None:
     from rob6_planner.config import MotionSettings
     from rob6_planner.trajectory import TrajectoryPlanner
 
@@ -63,7 +63,7 @@ def test_trajectory_completion_is_awaitable_in_real_time():
     assert motion.final is not None and motion.final.q[0] == 2.0
 
 
-def test_bench_functions():
+def test_bench_functions() -> None:
     r = bench_ptp("kr16", n=50, warmup=5)
     assert r["p50_us"] > 0 and r["p99_us"] >= r["p50_us"]
     r = bench_ptp("kr16rt", n=50, warmup=5, sample=False)

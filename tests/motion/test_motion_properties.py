@@ -14,10 +14,12 @@ positions and the reported qd/qdd), with a 1e-6 relative tolerance.
 from __future__ import annotations
 
 import os
-from typing import TypedDict
+from collections.abc import Sequence
+from typing import Any, TypedDict
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
+from pytest import CaptureFixture
 
 from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
@@ -59,6 +61,10 @@ command = st.one_of(
 )
 
 
+#: one drawn command: its kind, then that kind's own arguments (see ``command``)
+Command = tuple[Any, ...]
+
+
 class Harness:
     def __init__(self, robot: str):
         self.robot = get_robot(robot)
@@ -73,11 +79,12 @@ class Harness:
         self.expected_violations = 0
 
     # -------------------------------------------------------------- helpers
-    def joints(self, f) -> np.ndarray:
+    def joints(self, f: Sequence[float]) -> np.ndarray:
         lo = np.asarray(self.robot.turn_min, float)
         hi = np.asarray(self.robot.turn_max, float)
         # inside the default range, mostly the central 80 %
-        return lo + (hi - lo) * (0.1 + 0.8 * np.asarray(f))
+        q: np.ndarray = lo + (hi - lo) * (0.1 + 0.8 * np.asarray(f))
+        return q
 
     def push_limits(self) -> None:
         c = self.config
@@ -117,7 +124,7 @@ class Harness:
             self.states += 1
 
     # -------------------------------------------------------------- commands
-    def do(self, cmd) -> None:
+    def do(self, cmd: Command) -> None:
         sim, c = self.sim, self.config
         kind = cmd[0]
         if kind == "ptp":
@@ -190,7 +197,7 @@ class Harness:
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(robot=st.sampled_from(["kr16", "kr16rt", "ad850"]),
        commands=st.lists(command, min_size=1, max_size=18))
-def test_random_command_sequences_never_break_a_limit(robot, commands):
+def test_random_command_sequences_never_break_a_limit(robot: str, commands: list[Command]) -> None:
     h = Harness(robot)
     for cmd in commands:
         h.do(cmd)
@@ -217,7 +224,7 @@ def test_random_command_sequences_never_break_a_limit(robot, commands):
     assert all(v.kind != "unavoidable" for v in violations)
 
 
-def test_property_harness_sees_something():
+def test_property_harness_sees_something() -> None:
     """Sanity: the harness really moves the robot and counts states."""
     h = Harness("kr16")
     h.do(("ptp", [0.7] * 6, True))
@@ -227,6 +234,6 @@ def test_property_harness_sees_something():
     assert h.problems == []
 
 
-def test_zz_report(capsys):
+def test_zz_report(capsys: CaptureFixture[str]) -> None:
     with capsys.disabled():
         print("\nproperty tests:", STATS)

@@ -1,15 +1,17 @@
 """PTP planning: timing against the analytic jerk-limited profile, validation, limits."""
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
 
 from rob6.robots import ROBOT_TYPES
 from rob6.units import JERK_RAMP_S, UNIT_CYCLE_S
-from rob6_driver.motion import MotionCore
+from rob6_driver.motion import Motion, MotionCore
 from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import (
+    SampledTrajectory,
     TrajectoryPlanner,
     check_target,
     finite_difference_violations,
@@ -23,18 +25,18 @@ def analytic_time(d: float, v: float, a: float, j: float) -> float:
     if v * j >= a * a:  # the acceleration limit can be reached before the speed limit
         if d >= v * (v / a + a / j):
             return d / v + v / a + a / j  # reaches a and v (cruise)
-    else:
-        if d >= 2 * v * math.sqrt(v / j):
-            return d / v + 2 * math.sqrt(v / j)  # reaches v, not a
+    elif d >= 2 * v * math.sqrt(v / j):
+        return d / v + 2 * math.sqrt(v / j)  # reaches v, not a
     # no cruise
     tau = (d / (2 * j)) ** (1 / 3)
     if j * tau <= a:
-        return 4 * tau  # reaches neither
+        return float(4 * tau)  # reaches neither
     vp = (-a / j + math.sqrt((a / j) ** 2 + 4 * d / a)) * a / 2  # reaches a, not v
     return 2 * (vp / a + a / j)
 
 
-def run_ptp_in_sim(robot, q1, config=None):
+def run_ptp_in_sim(robot: str, q1: Sequence[float], config: MotionSettings | None = None
+                   ) -> tuple[MotionCore, Motion, int, SampledTrajectory]:
     config = config or MotionSettings(robot)
     planner = TrajectoryPlanner(robot)
     sim = MotionCore(robot)
@@ -51,7 +53,7 @@ def run_ptp_in_sim(robot, q1, config=None):
     return sim, motion, cycles, tr
 
 
-def test_30deg_a1_kr16_takes_the_analytic_time():
+def test_30deg_a1_kr16_takes_the_analytic_time() -> None:
     c = MotionSettings("kr16")
     v = c.speed[0] / UNIT_CYCLE_S  # 15.6 deg/s
     a = c.accel[0] / UNIT_CYCLE_S**2  # 34.72 deg/s^2
@@ -71,7 +73,7 @@ def test_30deg_a1_kr16_takes_the_analytic_time():
 
 @pytest.mark.parametrize("d", [0.01, 0.3, 1.0, 2.0, 5.0, 30.0, 120.0])
 @pytest.mark.parametrize("robot", ["kr16", "kr3rt", "ad850"])
-def test_single_axis_duration_matches_analytic(robot, d):
+def test_single_axis_duration_matches_analytic(robot: str, d: float) -> None:
     c = MotionSettings(robot)
     p = TrajectoryPlanner(robot)
     for joint in (0, 5):
@@ -86,7 +88,7 @@ def test_single_axis_duration_matches_analytic(robot, d):
         assert T - 1e-9 <= dur <= T + p.dt + 1e-9  # rounded up to whole cycles
 
 
-def test_sampling_matches_ruckig_and_respects_limits():
+def test_sampling_matches_ruckig_and_respects_limits() -> None:
     rng = np.random.default_rng(3)
     for robot in ROBOT_TYPES:
         c = MotionSettings(robot)
@@ -112,7 +114,7 @@ def test_sampling_matches_ruckig_and_respects_limits():
             assert np.all(np.abs(tr.q[-2, moving] - q1[moving]) > 0)
 
 
-def test_target_validation():
+def test_target_validation() -> None:
     c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     zero = np.zeros(6)
@@ -141,7 +143,7 @@ def test_target_validation():
     assert res.ok and res.trajectory is not None and res.trajectory.n == 1
 
 
-def test_from_outside_changed_turn_limits_back_inside():
+def test_from_outside_changed_turn_limits_back_inside() -> None:
     """Limits narrowed while the robot is outside: a move back inside is allowed."""
     c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
@@ -150,7 +152,7 @@ def test_from_outside_changed_turn_limits_back_inside():
     assert res.ok
 
 
-def test_lower_limits_take_longer():
+def test_lower_limits_take_longer() -> None:
     c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     t_default = p.ptp_duration(np.zeros(6), [30, 0, 0, 0, 0, 0], c)
@@ -159,7 +161,7 @@ def test_lower_limits_take_longer():
     assert t_half > 1.7 * t_default
 
 
-def test_allowed_status_and_pattern():
+def test_allowed_status_and_pattern() -> None:
     c = MotionSettings("kr16")
     p = TrajectoryPlanner("kr16")
     zero = np.zeros(6)  # noflip up lefty

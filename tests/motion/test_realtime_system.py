@@ -5,10 +5,12 @@ reach their targets; a 30 deg PTP of A1 takes the time the limits imply."""
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
-from rob6.robots import get_robot
+from rob6.robots import RobotModel, get_robot
 from rob6.units import UNIT_CYCLE_S
 from rob6_driver.service import REST_STATE_PERIOD_S
 from rob6_recorder.reader import read_records
@@ -17,7 +19,7 @@ from tests.system import running
 TOL = 1e-6
 
 
-def joint_states(directory) -> tuple[np.ndarray, np.ndarray]:
+def joint_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
     """(t, q) of every recorded driver cycle, from the system recording."""
     rows = []
     for path in directory.glob("*_system_*.mcap"):
@@ -26,7 +28,8 @@ def joint_states(directory) -> tuple[np.ndarray, np.ndarray]:
     return np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
 
 
-def assert_within_limits(robot, t, q, speed=None, accel=None) -> int:
+def assert_within_limits(robot: RobotModel, t: np.ndarray, q: np.ndarray, speed: Sequence[float] | None = None,
+                         accel: Sequence[float] | None = None) -> int:
     """The recorded states within the joint, speed and acceleration limits; returns the
     number of records in which the robot had moved since the one before.
 
@@ -34,8 +37,8 @@ def assert_within_limits(robot, t, q, speed=None, accel=None) -> int:
     are whole cycles apart and a gap is at most that long. A change across a gap is taken as
     one cycle's step (the robot may start in the gap's last cycle): that can only
     overestimate speed and acceleration, so the check stays sound."""
-    speed = np.array(speed or robot.default_speed) / UNIT_CYCLE_S
-    accel = np.array(accel or robot.default_accel) / UNIT_CYCLE_S ** 2
+    vmax = np.array(speed or robot.default_speed) / UNIT_CYCLE_S
+    amax = np.array(accel or robot.default_accel) / UNIT_CYCLE_S ** 2
     assert np.all(q > np.array(robot.turn_min)) and np.all(q < np.array(robot.turn_max))
     cycles = np.diff(t) / robot.cycle_s
     assert np.allclose(cycles, np.rint(cycles), atol=1e-6) and np.all(np.rint(cycles) >= 1), \
@@ -43,12 +46,12 @@ def assert_within_limits(robot, t, q, speed=None, accel=None) -> int:
     assert np.all(np.diff(t) <= REST_STATE_PERIOD_S + robot.cycle_s + 1e-9), "a driver cycle is missing from the recording"
     v = np.diff(q, axis=0) / robot.cycle_s
     a = np.diff(v, axis=0) / robot.cycle_s
-    assert np.all(np.abs(v) <= speed * (1 + TOL) + TOL), f"speed {np.abs(v).max(axis=0)} > {speed}"
-    assert np.all(np.abs(a) <= accel * (1 + TOL) + 1e-3), f"acceleration {np.abs(a).max(axis=0)} > {accel}"
+    assert np.all(np.abs(v) <= vmax * (1 + TOL) + TOL), f"speed {np.abs(v).max(axis=0)} > {vmax}"
+    assert np.all(np.abs(a) <= amax * (1 + TOL) + 1e-3), f"acceleration {np.abs(a).max(axis=0)} > {amax}"
     return int(np.any(v != 0, axis=1).sum())
 
 
-def test_ptp_lin_and_alter_sessions_stay_within_limits(tmp_path):
+def test_ptp_lin_and_alter_sessions_stay_within_limits(tmp_path: Path) -> None:
     robot = get_robot("kr16")
     start = [0.0, -80.0, 100.0, 0.0, 30.0, 0.0]
     with running("kr16", dummy=False, log_dir=str(tmp_path)) as system:
@@ -95,7 +98,7 @@ def test_ptp_lin_and_alter_sessions_stay_within_limits(tmp_path):
     assert ptp_wall >= expected - 2 * robot.cycle_s  # answered only after the robot arrived
 
 
-def test_alter_mode_stops_when_the_client_goes_away():
+def test_alter_mode_stops_when_the_client_goes_away() -> None:
     with running("kr16rt", dummy=False) as system:
         with system.client() as client:
             assert client.ask("MovePTPJoints 0 -10 10 0 30 0", timeout=30) == "true\n"
@@ -113,7 +116,7 @@ def test_alter_mode_stops_when_the_client_goes_away():
             assert client.ask("MoveRTJoints 10 -10 10 0 30 0") == "false\n"  # Alter mode ended with it
 
 
-def test_alter_mode_stops_when_targets_stop_coming():
+def test_alter_mode_stops_when_targets_stop_coming() -> None:
     with running("kr16rt", dummy=False) as system, system.client() as client:
         assert client.ask("MovePTPJoints 0 -10 10 0 30 0", timeout=30) == "true\n"
         assert client.ask("EnableAlter") == "true\n"
@@ -125,7 +128,7 @@ def test_alter_mode_stops_when_targets_stop_coming():
         assert 0.5 < first[0] < 30.0
 
 
-def test_robot_stops_when_the_planner_goes_away_mid_motion():
+def test_robot_stops_when_the_planner_goes_away_mid_motion() -> None:
     import os
     import signal
     with running("kr16", dummy=False) as system, system.client() as client:

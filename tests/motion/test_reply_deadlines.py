@@ -9,27 +9,28 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterable, Iterator
 
 import pytest
 
 from rob6_client import Robot
-from tests.system import running
+from tests.system import Client, System, running
 
 START = [0.0, -10.0, 10.0, 0.0, 30.0, 0.0]
 READ_S = 30.0  # a reply later than this is a hang, whatever the machine's load
 
 
 @pytest.fixture(scope="module")
-def kr16rt():
+def kr16rt() -> Iterator[System]:
     with running("kr16rt", dummy=False) as system:
         yield system
 
 
-def _joints(values) -> str:
+def _joints(values: Iterable[float]) -> str:
     return " ".join(f"{v:f}" for v in values)
 
 
-def _position(client) -> list[float]:
+def _position(client: Client) -> list[float]:
     return [float(x) for x in client.ask("GetPositionJoints").split()]
 
 
@@ -41,7 +42,7 @@ def _sine(k: int) -> list[float]:
     return target
 
 
-def test_disable_alter_mid_stream_answers_true_at_rest_and_the_next_ptp_works(kr16rt):
+def test_disable_alter_mid_stream_answers_true_at_rest_and_the_next_ptp_works(kr16rt: System) -> None:
     with kr16rt.client(timeout=READ_S) as client:
         assert client.ask("MovePTPJoints " + _joints(START)) == "true\n"
         assert client.ask("EnableAlter") == "true\n"
@@ -57,7 +58,7 @@ def test_disable_alter_mid_stream_answers_true_at_rest_and_the_next_ptp_works(kr
         assert _position(client) == START
 
 
-def test_client_library_alter_block_ends_with_the_arm_at_rest(kr16rt):
+def test_client_library_alter_block_ends_with_the_arm_at_rest(kr16rt: System) -> None:
     with Robot("127.0.0.1", kr16rt.port, timeout=READ_S) as robot:
         assert robot.move_ptp_joints(START)
         with robot.alter():  # DisableAlter on exit: raised Rob6Error before the fix

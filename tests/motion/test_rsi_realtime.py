@@ -10,20 +10,20 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
-from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import free_port, running
+from tests.system import Client, System, free_port, link_status, running
 
 pytestmark = pytest.mark.slow
 
@@ -36,36 +36,26 @@ RATED = np.array([156.0, 156.0, 156.0, 330.0, 330.0, 615.0])
 POSITION_TOL = 2e-4
 
 
-def rsi_system(port: int, **kwargs):
+def rsi_system(port: int, **kwargs: Any) -> AbstractContextManager[System]:
     return running("kr16rt", dummy=False, extra_env={"ROB6_LINK": "rsi", "ROB6_RSI_LISTEN": f"127.0.0.1:{port}"},
                    **kwargs)
 
 
-def connected(client, kuka, system) -> np.ndarray:
+def connected(client: Client, kuka: RsiController, system: System) -> np.ndarray:
     """Wait until rob6 follows the controller: the driver's link is up again and rob6's
     position is the controller's AIPos (a robot holding still shows that already while
     the link is still lost)."""
-    def follows():
+    def follows() -> np.ndarray | None:
         q = joints(client)
         return q if np.allclose(q, kuka.status()["aipos"], atol=POSITION_TOL) else None
     wait_until(lambda: link_status(system).state == "connected", timeout=10.0, what="the RSI link to be up")
     return wait_until(follows, timeout=10.0, what="rob6 to follow the controller")
 
 
-def assert_no_jump(status: dict) -> None:
+def assert_no_jump(status: dict[str, Any]) -> None:
     """No correction step of the run went beyond what the axes can move in one cycle."""
     assert not status["trips"], status["trips"]
     assert np.all(np.array(status["max_ak_step"]) <= RATED * ROBOT.cycle_s), status["max_ak_step"]
-
-
-def link_status(system):
-    bus = Bus(BusSettings(robot="kr16rt", robot_id=system.robot_id,
-                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
-    try:
-        bus.wait_for(["driver"], 10)
-        return bus.request("driver", "link", LinkQuery())
-    finally:
-        bus.close()
 
 
 def connected_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -80,7 +70,7 @@ def connected_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.array([rows[c][0] for c in cycles]), np.array([rows[c][1] for c in cycles])
 
 
-def session(client) -> None:
+def session(client: Client) -> None:
     """PTP, LIN and Alter (MoveRTJoints streamed at 250 Hz), as in test_realtime_system."""
     start = "0 -80 100 0 30 0"
     assert reply(client, "MovePTPJoints " + start) == "true\n"
@@ -111,7 +101,7 @@ def session(client) -> None:
     assert client.ask("DisableAlter") == "true\n"
 
 
-def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp_path):
+def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp_path: Path) -> None:
     port = free_port(socket.SOCK_DGRAM)
     # the controller starts where the simulation does, so that the replay below is exact
     zero = "--start-pose", "0,0,0,0,0,0"
@@ -152,26 +142,26 @@ def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp
     with running("kr16rt", dummy=False) as simulation:
         result = subprocess.run([sys.executable, "-m", "rob6_recorder.cli", "replay", str(replayed[0]), "--to",
                                  f"127.0.0.1:{simulation.port}", "--timeout", "30"],
-                                capture_output=True, text=True, timeout=180)
+                                capture_output=True, check=False, text=True, timeout=180)
     assert result.returncode == 0, result.stdout + result.stderr
 
 
 @pytest.fixture(scope="module")
-def rsi():
+def rsi() -> Iterator[tuple[System, int]]:
     """One rob6 system on RSI for the fault tests; each test brings its own controller."""
     port = free_port(socket.SOCK_DGRAM)
     with rsi_system(port) as system:
         yield system, port
 
 
-def long_move(client, kuka) -> None:
+def long_move(client: Client, kuka: RsiController) -> None:
     """Start a PTP of ~3 s from HOME (A1 0 -> 40) without waiting for its reply."""
     assert reply(client, "MovePTPJoints 0 -90 90 0 0 0") == "true\n"
     client.send("MovePTPJoints 40 -90 90 0 0 0\n")
     wait_until(lambda: kuka.status()["aipos"][0] > 5.0, timeout=10.0, what="the robot to move")
 
 
-def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi):
+def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi: tuple[System, int]) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -189,7 +179,7 @@ def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi):
         assert_no_jump(kuka.status())
 
 
-def test_every_50th_packet_dropped_the_motion_completes(rsi):
+def test_every_50th_packet_dropped_the_motion_completes(rsi: tuple[System, int]) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -208,7 +198,7 @@ def test_every_50th_packet_dropped_the_motion_completes(rsi):
         assert np.allclose(joints(client), status["aipos"], atol=POSITION_TOL)
 
 
-def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi):
+def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi: tuple[System, int]) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -227,7 +217,7 @@ def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi):
         assert_no_jump(status)
 
 
-def test_controller_vanishes_and_returns(rsi):
+def test_controller_vanishes_and_returns(rsi: tuple[System, int]) -> None:
     system, port = rsi
     with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
         connected(client, kuka, system)
@@ -247,9 +237,9 @@ def test_controller_vanishes_and_returns(rsi):
         assert_no_jump(status)
 
 
-def test_rsi_on_a_robot_without_rsi_is_refused_in_one_line():
+def test_rsi_on_a_robot_without_rsi_is_refused_in_one_line() -> None:
     result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "ad850", "--link", "rsi"],
-                            capture_output=True, text=True, timeout=60)
+                            capture_output=True, check=False, text=True, timeout=60)
     assert result.returncode == 78
     assert result.stderr == ("rob6-driver: --link rsi drives KUKA robots (kr3, kr16, kr3rt, kr16rt), "
                              "not ad850; use --link sim\n")

@@ -4,26 +4,30 @@ Everything runs in fast-forward (``sim.step()``), never on the wall clock.
 """
 
 import math
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from rob6_driver.limits import Limits
-from rob6_driver.motion import Motion, MotionCore
+from rob6_driver.motion import CoreState, Motion, MotionCore
 from rob6_planner.config import MotionSettings
-from rob6_planner.trajectory import TrajectoryPlanner
+from rob6_planner.trajectory import SampledTrajectory, TrajectoryPlanner
 
 TOL_REL = 1e-6
 TOL_V = 1e-9
 TOL_A = 1e-6
 
 
-def limit_problems(qs, dt, lim: Limits, q_before=None, v_before=None, qd=None, qdd=None):
+def limit_problems(qs: npt.ArrayLike, dt: float, lim: Limits, q_before: npt.ArrayLike | None = None,
+                   v_before: npt.ArrayLike | None = None, qd: npt.ArrayLike | None = None,
+                   qdd: npt.ArrayLike | None = None) -> list[tuple[str, np.ndarray]]:
     """All speed/acceleration/turn problems of a state sequence (finite differences + exact)."""
     qs = np.asarray(qs, float)
     if q_before is not None:
         qs = np.vstack([q_before, qs])
-    problems = []
+    problems: list[tuple[str, np.ndarray]] = []
     v = np.diff(qs, axis=0) / dt
     v0 = np.zeros((1, 6)) if v_before is None else np.asarray(v_before)[None]
     a = np.diff(np.vstack([v0, v]), axis=0) / dt
@@ -40,21 +44,23 @@ def limit_problems(qs, dt, lim: Limits, q_before=None, v_before=None, qd=None, q
     return problems
 
 
-def run_states(sim, n):
+def run_states(sim: MotionCore, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[CoreState]]:
     states = sim.run(n)
     return (np.array([s.q for s in states]), np.array([s.qd for s in states]),
             np.array([s.qdd for s in states]), states)
 
 
-def plan(robot, q0, q1, config=None):
+def plan(robot: str, q0: npt.ArrayLike, q1: npt.ArrayLike,
+         config: MotionSettings | None = None) -> SampledTrajectory:
     config = config or MotionSettings(robot)
     res = TrajectoryPlanner(robot).plan_ptp(q0, q1, config)
     assert res.ok, res.reason
+    assert res.trajectory is not None
     return res.trajectory
 
 
 # ---------------------------------------------------------------- trajectories
-def test_execute_completes_awaitably():
+def test_execute_completes_awaitably() -> None:
     sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [20, -30, 40, 10, 30, -50])
     seen = []
@@ -76,7 +82,7 @@ def test_execute_completes_awaitably():
     assert late == [True]
 
 
-def test_execute_refusals():
+def test_execute_refusals() -> None:
     sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [10, 0, 0, 0, 0, 0])
     assert "start" in sim.execute(tr.q[5:]).reason
@@ -93,7 +99,7 @@ def test_execute_refusals():
     assert m.ok and sim.violation_count == 0
 
 
-def test_monitor_stops_a_bad_sample_in_a_controlled_way():
+def test_monitor_stops_a_bad_sample_in_a_controlled_way() -> None:
     sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [30, 0, 0, 0, 0, 0])
     bad = tr.q.copy()
@@ -112,7 +118,7 @@ def test_monitor_stops_a_bad_sample_in_a_controlled_way():
     assert stopped_at < tr.n
 
 
-def test_stop_mid_trajectory_ramps_within_limits():
+def test_stop_mid_trajectory_ramps_within_limits() -> None:
     for with_derivatives in (True, False):
         sim = MotionCore("kr16rt")
         tr = plan("kr16rt", np.zeros(6), [60, -40, 50, 90, 60, 120])
@@ -131,7 +137,7 @@ def test_stop_mid_trajectory_ramps_within_limits():
             assert sim.violation_count == 0
 
 
-def test_dummy_mode_jumps_to_the_end():
+def test_dummy_mode_jumps_to_the_end() -> None:
     sim = MotionCore("kr16", dummy=True)
     tr = plan("kr16", np.zeros(6), [10, -60, 80, 20, 40, 30])
     m = sim.execute(tr.q, tr.dt)
@@ -145,7 +151,7 @@ def test_dummy_mode_jumps_to_the_end():
 
 # ---------------------------------------------------------------- Alter mode
 @pytest.mark.parametrize("robot", ["kr16rt", "kr16"])
-def test_alter_streaming_250hz(robot):
+def test_alter_streaming_250hz(robot: str) -> None:
     sim = MotionCore(robot, alter_timeout_s=0.1)
     q_start = np.array([0, -60, 80, 0, 40, 0.0])
     sim.execute(plan(robot, np.zeros(6), q_start).q)
@@ -179,8 +185,8 @@ def test_alter_streaming_250hz(robot):
     assert sim.violation_count == 0
 
 
-def test_watchdog_event_and_resume():
-    events: list[dict] = []
+def test_watchdog_event_and_resume() -> None:
+    events: list[dict[str, Any]] = []
     sim = MotionCore("kr16rt", alter_timeout_s=0.05, on_event=events.append)
     sim.enable_alter()
     sim.set_target([40, 0, 0, 0, 0, 0])
@@ -195,7 +201,7 @@ def test_watchdog_event_and_resume():
     assert sim.state().q[0] == pytest.approx(1.0, abs=1e-9)
 
 
-def test_rt_speed_control_synchronised_vs_independent():
+def test_rt_speed_control_synchronised_vs_independent() -> None:
     arrival = {}
     for synchronized in (True, False):
         sim = MotionCore("kr16rt", alter_timeout_s=10)
@@ -212,7 +218,7 @@ def test_rt_speed_control_synchronised_vs_independent():
     assert arrival[False][4] < arrival[False][0] - 50  # RTSpeedControl 1: each on its own
 
 
-def test_alter_targets_near_a_turn_limit_never_cross_it():
+def test_alter_targets_near_a_turn_limit_never_cross_it() -> None:
     sim = MotionCore("kr16rt", alter_timeout_s=10)
     sim.set_limits(max_speed=[1.872] * 3 + [3.96, 3.96, 7.38], max_accel=[0.02] * 6)
     sim.enable_alter()
@@ -227,7 +233,7 @@ def test_alter_targets_near_a_turn_limit_never_cross_it():
     assert sim.violation_count == 0
 
 
-def test_alter_targets_within_max_change_of_where_the_robot_is():
+def test_alter_targets_within_max_change_of_where_the_robot_is() -> None:
     """The driver is the home of the Alter target rule (the gateway streams to it directly)."""
     sim = MotionCore("kr16", dummy=True)
     assert sim.set_limits(max_change=[5, 5, 5, 5, 5, 1])[0]
@@ -244,7 +250,7 @@ def test_alter_targets_within_max_change_of_where_the_robot_is():
     assert sim.limits().max_change.tolist() == [5, 5, 5, 5, 5, 1]
 
 
-def test_limit_change_during_alter_is_smooth():
+def test_limit_change_during_alter_is_smooth() -> None:
     sim = MotionCore("kr16rt", alter_timeout_s=10)
     sim.enable_alter()
     sim.set_target([100, 0, 0, 0, 0, 0])
@@ -263,7 +269,7 @@ def test_limit_change_during_alter_is_smooth():
     assert sim.violation_count == 0
 
 
-def test_turn_limit_change_under_a_crossing_motion_stops():
+def test_turn_limit_change_under_a_crossing_motion_stops() -> None:
     sim = MotionCore("kr16")
     tr = plan("kr16", np.zeros(6), [90, 0, 0, 0, 0, 0])
     m = sim.execute(tr.q, tr.dt, tr.qd, tr.qdd)
@@ -278,7 +284,7 @@ def test_turn_limit_change_under_a_crossing_motion_stops():
     assert np.array_equal(sim.enforced_limits().turn_max, [40, 20, 154, 350, 125, 350])
 
 
-def test_stop_in_alter_leaves_alter_mode():
+def test_stop_in_alter_leaves_alter_mode() -> None:
     sim = MotionCore("kr16", alter_timeout_s=10)
     sim.enable_alter()
     sim.set_target([20, -10, 10, 0, 20, 0])
@@ -291,7 +297,7 @@ def test_stop_in_alter_leaves_alter_mode():
     assert sim.disable_alter().done.is_set()
 
 
-def test_trajectory_extrema_match_dense_sampling():
+def test_trajectory_extrema_match_dense_sampling() -> None:
     """The sim's own extrema (used for the turn-limit look-ahead) against at_time sampling."""
     import ruckig
 

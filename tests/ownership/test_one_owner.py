@@ -19,14 +19,14 @@ from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import JointState
 from rob6.ownership import EXIT_REFUSED
-from tests.system import free_port, running
+from tests.system import Client, System, free_port, running
 
 pytestmark = pytest.mark.slow
 
 OWNERS = ("driver", "planner", "gripper", "gateway")
 
 
-def _start(system, service: str, **env) -> subprocess.Popen:
+def _start(system: System, service: str, **env: str) -> subprocess.Popen[str]:
     """One more instance of ``service`` for the robot id of ``system``, on its router."""
     env = dict(os.environ, ROB6_ROBOT=system.robot, ROB6_ROBOT_ID=system.robot_id, ROB6_DUMMY="1",
                ROB6_ZENOH_CONNECT=f"tcp/127.0.0.1:{system.router_port}", ROB6_PORT=str(free_port()),
@@ -36,7 +36,7 @@ def _start(system, service: str, **env) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _moves_undisturbed(client, stop: threading.Event, seen: list) -> None:
+def _moves_undisturbed(client: Client, stop: threading.Event, seen: list[bool | tuple[str, str]]) -> None:
     """A client of the first system moving the robot, reading back every position."""
     k = 0
     while not stop.is_set():
@@ -50,7 +50,7 @@ def _moves_undisturbed(client, stop: threading.Event, seen: list) -> None:
         k += 1
 
 
-def test_second_owner_of_each_kind_is_refused_with_one_line():
+def test_second_owner_of_each_kind_is_refused_with_one_line() -> None:
     with running("kr16", dummy=True) as system, system.client() as client:
         stop = threading.Event()
         seen: list[bool | tuple[str, str]] = []
@@ -81,12 +81,12 @@ def test_second_owner_of_each_kind_is_refused_with_one_line():
         assert client.ask("MovePTPJoints 1 -60 80 0 40 0") == "true\n"
 
 
-def test_a_second_rob6_run_is_refused_at_once():
+def test_a_second_rob6_run_is_refused_at_once() -> None:
     with running("kr16", dummy=True) as system:
         started = time.monotonic()
         second = subprocess.run([sys.executable, "-m", "rob6.cli", "run", "--robot-id", system.robot_id,
                                  "--port", str(system.port), "--router-port", str(system.router_port)],
-                                capture_output=True, text=True, timeout=30)
+                                capture_output=True, check=False, text=True, timeout=30)
         assert second.returncode != 0
         assert time.monotonic() - started < 5
         assert second.stderr.strip().splitlines() == [
@@ -98,7 +98,7 @@ def test_a_second_rob6_run_is_refused_at_once():
 
 
 @pytest.mark.parametrize("service", ["driver", "gateway"])
-def test_two_started_at_the_same_moment_exactly_one_wins(service):
+def test_two_started_at_the_same_moment_exactly_one_wins(service: str) -> None:
     # only a router and kinematics: both newcomers race for an empty role
     with running("kr16", dummy=True, services=("kinematics",)) as system:
         for _ in range(3):
@@ -121,7 +121,7 @@ def test_two_started_at_the_same_moment_exactly_one_wins(service):
                     process.wait(10)
 
 
-def test_a_foreign_state_on_the_robot_key_is_ignored_and_logged():
+def test_a_foreign_state_on_the_robot_key_is_ignored_and_logged() -> None:
     with running("kr16", dummy=True) as system, system.client() as client:
         assert client.ask("MovePTPJoints 20 -60 80 0 40 0") == "true\n"
         config = zenoh.Config()

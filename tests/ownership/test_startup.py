@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -17,20 +18,20 @@ from tests.system import Client, System, free_port
 pytestmark = pytest.mark.slow
 
 
-def _rob6_run(*args: str, **env) -> subprocess.CompletedProcess:
+def _rob6_run(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "rob6.cli", "run", "--dummy", *args],
-                          env={**os.environ, "ROB6_LIVE_PORT": "0", **env}, capture_output=True, text=True,
+                          env={**os.environ, "ROB6_LIVE_PORT": "0", **env}, capture_output=True, check=False, text=True,
                           timeout=30)
 
 
-def _one_line(result: subprocess.CompletedProcess) -> str:
+def _one_line(result: subprocess.CompletedProcess[str]) -> str:
     lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stdout + result.stderr
     return lines[0]
 
 
 @pytest.mark.parametrize("taken", ["client", "router"])
-def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken):
+def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken: str) -> None:
     port, router_port = free_port(), free_port()
     with socket.socket() as squatter:
         squatter.bind(("127.0.0.1" if taken == "router" else "0.0.0.0", port if taken == "client" else router_port))
@@ -47,24 +48,24 @@ def test_a_port_in_use_is_one_line_and_a_non_zero_exit(taken):
         assert "ROB6_ROUTER_PORT" in line
 
 
-def test_an_unknown_setting_is_refused_before_anything_starts():
+def test_an_unknown_setting_is_refused_before_anything_starts() -> None:
     result = _rob6_run("--port", str(free_port()), ROB6_LINK="serial")
     assert result.returncode != 0
     assert "Invalid value for '--link'" in result.stderr and "Traceback" not in result.stderr
 
 
-def test_a_router_that_cannot_bind_says_so_in_one_line():
+def test_a_router_that_cannot_bind_says_so_in_one_line() -> None:
     with socket.socket() as squatter:
         squatter.bind(("127.0.0.1", 0))
         squatter.listen()
         port = squatter.getsockname()[1]
         result = subprocess.run([sys.executable, "-m", "rob6.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"],
-                                capture_output=True, text=True, timeout=30)
+                                capture_output=True, check=False, text=True, timeout=30)
     assert result.returncode == 78
     assert _one_line(result).startswith(f"rob6-router: cannot listen on tcp/127.0.0.1:{port}: address already in use")
 
 
-def test_a_client_connecting_the_instant_the_port_opens_gets_real_answers():
+def test_a_client_connecting_the_instant_the_port_opens_gets_real_answers() -> None:
     """20 cold starts in a row: the first motion command of a client that connected as
     soon as the port accepted is executed, never 'planner unavailable'."""
     for attempt in range(20):
@@ -86,7 +87,7 @@ def test_a_client_connecting_the_instant_the_port_opens_gets_real_answers():
             system.stop()
 
 
-def test_ctrl_c_after_a_session_loses_no_record(tmp_path):
+def test_ctrl_c_after_a_session_loses_no_record(tmp_path: Path) -> None:
     system = System("kr16", dummy=False, log_dir=str(tmp_path))
     try:
         system.wait_ready()

@@ -7,6 +7,9 @@ import asyncio
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
+
+from rob6_recorder.writer import Recorder
 
 URDF = """<?xml version="1.0"?>
 <robot name="mini6">
@@ -51,13 +54,17 @@ SESSION_LINES = [
 ]
 
 
-def record_session(rec, session: int = 3, t0: int | None = None, step_ns: int = 20_000_000,
-                   joint_states_per_line: int = 2) -> list[tuple[str, int, dict]]:
+#: one record as submitted to the recorder: topic, log time (ns), payload
+Submitted = tuple[str, int, dict[str, Any]]
+
+
+def record_session(rec: Recorder, session: int = 3, t0: int | None = None, step_ns: int = 20_000_000,
+                   joint_states_per_line: int = 2) -> list[Submitted]:
     """Feed ``rec`` (a Recorder) a scripted client session; return what was submitted."""
     t = time.time_ns() if t0 is None else t0
-    submitted: list[tuple[str, int, dict]] = []
+    submitted: list[Submitted] = []
 
-    def put(topic: str, data: dict) -> None:
+    def put(topic: str, data: dict[str, Any]) -> None:
         nonlocal t
         t += step_ns // 4
         assert rec.submit(topic, t, data)
@@ -99,7 +106,7 @@ class FakeServer:
     """
 
     def __init__(self, handler: Callable[[int, bytes], tuple[bytes, bool]],
-                 greeting: str = GREETING, per_line: bool = True):
+                 greeting: str = GREETING, per_line: bool = True) -> None:
         self.handler = handler
         self.greeting = greeting
         self.per_line = per_line
@@ -156,7 +163,7 @@ class FakeServer:
         self._ready.wait(5)
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         async def stop() -> None:
             self.server.close()
             await self.server.wait_closed()
@@ -170,7 +177,11 @@ class FakeServer:
         self.loop.close()
 
 
-def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = None):
+#: a fake server's answer to one received chunk of connection n: (reply bytes, close after it)
+Handler = Callable[[int, bytes], tuple[bytes, bool]]
+
+
+def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = None) -> Handler:
     table = dict(replies)
     table.update(overrides or {})
 

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -40,7 +41,7 @@ CHILD = textwrap.dedent("""
 """)
 
 
-def _kill_while_writing(directory, after: float) -> float:
+def _kill_while_writing(directory: Path, after: float) -> float:
     proc = subprocess.Popen([sys.executable, "-c", CHILD, str(directory), URDF],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None and proc.stderr is not None  # both are pipes
@@ -60,7 +61,7 @@ def _kill_while_writing(directory, after: float) -> float:
 
 
 @pytest.mark.parametrize("after", [0.15, 1.6])
-def test_sigkill_mid_write_then_recover(tmp_path, after):
+def test_sigkill_mid_write_then_recover(tmp_path: Path, after: float) -> None:
     rec_dir = tmp_path / "rec"
     killed_at = _kill_while_writing(rec_dir, after)
     files = sorted(rec_dir.glob("*.mcap"))
@@ -97,7 +98,7 @@ def test_sigkill_mid_write_then_recover(tmp_path, after):
             assert {m.name for m in mreader.iter_metadata()} >= {"rob6", "rob6.recovered"}
 
 
-def test_recover_cli_doctor_and_directory_sweep(tmp_path):
+def test_recover_cli_doctor_and_directory_sweep(tmp_path: Path) -> None:
     rec_dir = tmp_path / "rec"
     _kill_while_writing(rec_dir, 1.2)
     (system,) = rec_dir.glob("*_system_*.mcap")
@@ -120,7 +121,7 @@ def test_recover_cli_doctor_and_directory_sweep(tmp_path):
     assert recover_unfinished(rec_dir, min_age_s=0) == []  # nothing left to do
 
 
-def test_damaged_chunk_is_skipped(tmp_path):
+def test_damaged_chunk_is_skipped(tmp_path: Path) -> None:
     from rob6_recorder.writer import Recorder
 
     with Recorder(tmp_path, "kr16", "robot1", chunk_interval=0.05, fsync=False) as rec:

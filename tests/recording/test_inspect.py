@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -11,18 +12,18 @@ from click.testing import CliRunner
 from rob6_recorder.cli import main as cli
 from rob6_recorder.inspect import command_word, summarize
 from rob6_recorder.writer import Recorder
-from tests.recording.rec_helpers import SESSION_LINES, record_session
+from tests.recording.rec_helpers import SESSION_LINES, Submitted, record_session
 
 
 @pytest.fixture
-def recording(tmp_path, urdf):
+def recording(tmp_path: Path, urdf: str) -> tuple[Path, list[Submitted]]:
     with Recorder(tmp_path / "rec", "kr16", "robot1", urdf=urdf) as rec:
         submitted = record_session(rec, session=3)
     (session,) = (tmp_path / "rec").glob("*_session3.mcap")
     return session, submitted
 
 
-def test_summary(recording):
+def test_summary(recording: tuple[Path, list[Submitted]]) -> None:
     path, submitted = recording
     s = summarize(path).as_dict()
     assert s["complete"] and s["robot"] == "kr16" and s["robot_id"] == "robot1"
@@ -44,7 +45,7 @@ def test_summary(recording):
     assert any("close" in e for e in sess["events"])
 
 
-def test_summary_cli(recording):
+def test_summary_cli(recording: tuple[Path, list[Submitted]]) -> None:
     path, _ = recording
     runner = CliRunner()
     res = runner.invoke(cli, ["summary", str(path)])
@@ -58,7 +59,7 @@ def test_summary_cli(recording):
     assert res.exit_code == 2
 
 
-def test_export_cli(recording, tmp_path):
+def test_export_cli(recording: tuple[Path, list[Submitted]], tmp_path: Path) -> None:
     path, submitted = recording
     out = tmp_path / "csv"
     res = CliRunner().invoke(cli, ["export", str(path), "--csv", str(out)])
@@ -80,7 +81,7 @@ def test_export_cli(recording, tmp_path):
         assert list(csv.DictReader(fh))[0]["message"] == "unknown command Foo"
 
 
-def test_command_word():
+def test_command_word() -> None:
     assert command_word("GetRobot\r\n") == "GetRobot"
     assert command_word(" \tForwardCalc 1 2") == "ForwardCalc"
     assert command_word("\n") == "(empty)"

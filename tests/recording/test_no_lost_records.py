@@ -15,13 +15,13 @@ import signal
 import time
 from pathlib import Path
 
-from rob6_recorder.reader import read_records
-from tests.system import running
+from rob6_recorder.reader import Record, read_records
+from tests.system import System, running
 
 PERIOD = 0.004  # s between client lines
 
 
-def _records(directory: Path, topic_end: str, kind: str = "") -> list:
+def _records(directory: Path, topic_end: str, kind: str = "") -> list[Record]:
     """The records on topics ending in ``topic_end`` of every file (``kind``: of the
     session files, ``_session``, or of the system files, ``_system``, only)."""
     out = []
@@ -30,14 +30,14 @@ def _records(directory: Path, topic_end: str, kind: str = "") -> list:
     return out
 
 
-def _recorder_restarted(system, killed: int, timeout: float = 30.0) -> None:
+def _recorder_restarted(system: System, killed: int, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
     while system.pids().get("recorder") in (None, killed):
         assert time.monotonic() < deadline, "the launcher did not restart the recorder"
         time.sleep(0.05)
 
 
-def test_recorder_killed_and_restarted_mid_session_loses_no_client_record(tmp_path):
+def test_recorder_killed_and_restarted_mid_session_loses_no_client_record(tmp_path: Path) -> None:
     with running("kr16", log_dir=str(tmp_path), restart=True) as system:
         with system.client() as client:
             exchanges = 1  # the handshake line

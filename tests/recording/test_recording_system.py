@@ -14,7 +14,7 @@ from pathlib import Path
 from mcap.reader import make_reader
 
 from rob6_recorder.reader import read_records
-from tests.system import running
+from tests.system import System, running
 
 SCRIPT = ["GetRobot", "ForwardCalc 10 -60 80 20 40 30", "MovePTPJoints 10 -60 80 20 40 30",
           "GetPositionJoints", "GetStatus", "BackwardCalc 1 0 0 1000 0 1 0 0 0 0 1 500 noflip up lefty",
@@ -22,7 +22,7 @@ SCRIPT = ["GetRobot", "ForwardCalc 10 -60 80 20 40 30", "MovePTPJoints 10 -60 80
 REPLY_LINES = {"ForwardCalc": 2}
 
 
-def _session(system) -> None:
+def _session(system: System) -> None:
     with system.client() as client:
         for line in SCRIPT:
             client.ask(line, REPLY_LINES.get(line.split()[0], 1))
@@ -39,13 +39,13 @@ def _session_file(directory: Path) -> Path:
         time.sleep(0.1)
 
 
-def _replay(path: Path, port: int) -> subprocess.CompletedProcess:
+def _replay(path: Path, port: int) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "rob6_recorder.cli", "replay", str(path), "--to",
-                           f"127.0.0.1:{port}", "--as-fast-as-possible"], capture_output=True, text=True,
+                           f"127.0.0.1:{port}", "--as-fast-as-possible"], capture_output=True, check=False, text=True,
                           timeout=120)
 
 
-def test_session_recorded_replayed_and_compared(tmp_path):
+def test_session_recorded_replayed_and_compared(tmp_path: Path) -> None:
     with running("kr16", log_dir=str(tmp_path)) as system:
         _session(system)
         time.sleep(1.5)  # the session file is finished shortly after the client left
@@ -72,7 +72,7 @@ def test_session_recorded_replayed_and_compared(tmp_path):
         assert "kr16" in changed.stdout and "ad850" in changed.stdout
 
 
-def test_recorder_killed_mid_session_leaves_a_readable_file(tmp_path):
+def test_recorder_killed_mid_session_leaves_a_readable_file(tmp_path: Path) -> None:
     with running("kr16", log_dir=str(tmp_path)) as system, system.client() as client:
         for _ in range(30):
             assert client.ask("GetRobot") == "kr16\n"

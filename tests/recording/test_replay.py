@@ -7,6 +7,7 @@ import asyncio
 import json
 from itertools import pairwise
 from pathlib import Path
+from typing import Any
 
 import pytest
 from click.testing import CliRunner
@@ -15,25 +16,26 @@ from rob6_recorder.cli import main as cli
 from rob6_recorder.playback import replay_joints
 from rob6_recorder.reader import read_records
 from rob6_recorder.session_replay import (
+    Script,
     compare_reply,
     load_script,
     load_transcript,
     replay,
 )
 from rob6_recorder.writer import Recorder
-from tests.recording.rec_helpers import REPLIES, SESSION_LINES, FakeServer, dict_handler, record_session
+from tests.recording.rec_helpers import REPLIES, SESSION_LINES, FakeServer, Handler, dict_handler, record_session
 from tests.system import CONFORMANCE
 
 
 @pytest.fixture
-def session_file(tmp_path):
+def session_file(tmp_path: Path) -> Path:
     with Recorder(tmp_path / "rec", "kr16", "robot1", system=False) as rec:
         record_session(rec, session=3, step_ns=4_000_000)  # 1 ms between records
     (path,) = (tmp_path / "rec").glob("*_session3.mcap")
     return path
 
 
-def test_load_recording(session_file):
+def test_load_recording(session_file: Path) -> None:
     (script,) = load_script(session_file)
     assert script.robot == "kr16" and script.greeting == "welcome to rob6server 0.1.01 !\n"
     assert [ex.send.decode() for ex in script.exchanges] == SESSION_LINES
@@ -42,7 +44,7 @@ def test_load_recording(session_file):
     assert all(b.t > a.t for a, b in pairwise(script.exchanges))
 
 
-def test_replay_identical_server_zero_differences(session_file):
+def test_replay_identical_server_zero_differences(session_file: Path) -> None:
     with FakeServer(dict_handler(REPLIES)) as server:
         res = CliRunner().invoke(cli, ["replay", str(session_file), "--to",
                                        f"127.0.0.1:{server.port}", "--as-fast-as-possible"])
@@ -53,14 +55,14 @@ def test_replay_identical_server_zero_differences(session_file):
         assert [m.decode() for m in server.received] == SESSION_LINES
 
 
-def test_replay_with_recorded_pacing(session_file):
+def test_replay_with_recorded_pacing(session_file: Path) -> None:
     with FakeServer(dict_handler(REPLIES)) as server:
         res = CliRunner().invoke(cli, ["replay", str(session_file), "--to",
                                        f"127.0.0.1:{server.port}", "--speed", "4"])
         assert res.exit_code == 0, res.output
 
 
-def test_replay_reports_differences(session_file):
+def test_replay_reports_differences(session_file: Path) -> None:
     overrides = {
         # a number beyond the tolerance
         "ForwardCalc 10 0 0 0 0 0\n": REPLIES["ForwardCalc 10 0 0 0 0 0\n"].replace(
@@ -85,13 +87,13 @@ def test_replay_reports_differences(session_file):
     assert "> 'ForwardCalc 10 0 0 0 0 0'" in out and "cid=c003" in out
 
 
-def test_replay_unreachable_server(session_file):
+def test_replay_unreachable_server(session_file: Path) -> None:
     res = CliRunner().invoke(cli, ["replay", str(session_file), "--to", "127.0.0.1:1",
                                    "--no-progress"])
     assert res.exit_code == 2 and "cannot connect" in res.output
 
 
-def test_replay_sends_handshake_when_not_recorded(tmp_path):
+def test_replay_sends_handshake_when_not_recorded(tmp_path: Path) -> None:
     with Recorder(tmp_path, "kr16", "robot1", system=False) as rec:
         rec.submit("/session/1/client_in", 1_000, {"session": 1, "cid": "a", "text": "GetRobot\n"})
         rec.submit("/session/1/client_out", 2_000, {"session": 1, "cid": "a", "text": "kr16\n"})
@@ -103,7 +105,7 @@ def test_replay_sends_handshake_when_not_recorded(tmp_path):
         assert [m.decode() for m in server.received] == ["Hello Robot\n", "GetRobot\n"]
 
 
-def test_compare_reply_rules():
+def test_compare_reply_rules() -> None:
     assert compare_reply("GetRobot", "kr16\n", "kr16\n") is None
     assert compare_reply("X", "1.000000 2\n", "1.000004 2\n") is None
     assert compare_reply("X", "1.000000 2\n", "1.000004 2\n", tolerance=1e-6) is not None
@@ -116,12 +118,12 @@ def test_compare_reply_rules():
     assert compare_reply("X", "true\n", "") == "expected 1 line(s), got 0 (no reply)"
 
 
-def _transcript_handler(path: Path):
+def _transcript_handler(path: Path) -> tuple[list[Script], Handler]:
     """Answer each connection from the transcript, one received chunk per record."""
     scripts = load_transcript(path)
     raw = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    per_conn: list[list[dict]] = []
-    current: list[dict] | None = None
+    per_conn: list[list[dict[str, Any]]] = []
+    current: list[dict[str, Any]] | None = None
     for rec in raw:
         if rec.get("connect"):
             current = []
@@ -130,7 +132,7 @@ def _transcript_handler(path: Path):
             current.append(rec)
     cursor = [0] * len(per_conn)
 
-    def handle(conn: int, msg: bytes):
+    def handle(conn: int, msg: bytes) -> tuple[bytes, bool]:
         recs = per_conn[conn]
         rec = recs[cursor[conn]]
         cursor[conn] += 1
@@ -140,7 +142,7 @@ def _transcript_handler(path: Path):
     return scripts, handle
 
 
-def test_replay_conformance_transcript(tmp_path):
+def test_replay_conformance_transcript(tmp_path: Path) -> None:
     path = CONFORMANCE / "kr16" / "session.jsonl"
     if not path.exists():
         pytest.skip("conformance transcripts not available")
@@ -154,12 +156,12 @@ def test_replay_conformance_transcript(tmp_path):
     assert result.exchanges == sum(len(s.exchanges) for s in scripts)
 
 
-def test_replay_joints_pacing(session_file):
-    got: list[dict] = []
+def test_replay_joints_pacing(session_file: Path) -> None:
+    got: list[dict[str, Any]] = []
     sleeps: list[float] = []
     now = [0.0]
 
-    def sleep(dt):
+    def sleep(dt: float) -> None:
         sleeps.append(dt)
         now[0] += dt
 
@@ -170,11 +172,11 @@ def test_replay_joints_pacing(session_file):
     times = [r.log_time for r in read_records(session_file, ["/driver/joint_state"])]
     assert now[0] == pytest.approx((times[-1] - times[0]) / 1e9 / 2)
     assert len(sleeps) == n - 1
-    fast: list = []
+    fast: list[dict[str, Any]] = []
     assert replay_joints(session_file, fast.append, speed=None) == n
 
 
-def test_replay_joints_cli(session_file):
+def test_replay_joints_cli(session_file: Path) -> None:
     res = CliRunner().invoke(cli, ["replay-joints", str(session_file), "--speed", "0"])
     assert res.exit_code == 0
     lines = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]

@@ -27,7 +27,7 @@ from tests.system import zenoh_router
 RECORDS = 80
 
 
-def _without_history(self) -> list:
+def _without_history(self: bus_trace._TraceSubscription) -> list[zenoh.ext.AdvancedSubscriber[None]]:
     subscriber = zenoh.ext.declare_advanced_subscriber(
         self.bus.session, self.bus.key("trace", "*"), zenoh.handlers.Callback(self._sample))
     return [subscriber]
@@ -45,7 +45,7 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
         original = bus_trace._TraceSubscription._sample
         arrivals: dict[int, int] = {}
 
-        def dropping(self, sample: zenoh.Sample) -> None:
+        def dropping(self: bus_trace._TraceSubscription, sample: zenoh.Sample) -> None:
             sn = sample.source_info.source_sn if sample.source_info is not None else -1
             arrivals[sn] = arrivals.get(sn, 0) + 1
             if str(sample.key_expr).endswith("/gateway") and drop(sn, arrivals[sn]):

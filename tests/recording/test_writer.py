@@ -6,9 +6,14 @@ import logging
 import math
 import re
 import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 from mcap.reader import make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.summary import Summary
+from pytest import LogCaptureFixture
 
 from rob6_recorder.reader import RecordingReader, is_complete, read_records
 from rob6_recorder.schemas import schema_for, to_foxglove_log
@@ -16,14 +21,17 @@ from rob6_recorder.transforms import TfDeriver, pose_from_fk
 from rob6_recorder.writer import Recorder
 from tests.recording.rec_helpers import record_session
 
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
 NAME = re.compile(r"^\d{8}T\d{6}Z_kr16_robot1_(session3|system_\d{3})(-\d+)?\.mcap$")
 
 
-def _files(d, kind):
+def _files(d: Path, kind: str) -> list[Path]:
     return sorted(p for p in d.iterdir() if p.suffix == ".mcap" and f"_{kind}" in p.name)
 
 
-def _checked_summary(path):
+def _checked_summary(path: Path) -> tuple[Summary, list[tuple[Schema | None, Channel, Message]]]:
     """The stock mcap reader accepts the file, with CRCs validated."""
     with open(path, "rb") as fh:
         reader = make_reader(fh, validate_crcs=True)
@@ -34,8 +42,8 @@ def _checked_summary(path):
         return summary, messages
 
 
-def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
-    def fk(q):
+def test_scripted_session_every_record_in_order_with_cid(tmp_path: Path, urdf: str) -> None:
+    def fk(q: list[float]) -> list[float]:
         return [1, 0, 0, 1000.0, 0, 1, 0, 0, 0, 0, 1, 500.0]
 
     with Recorder(tmp_path, "kr16", "robot1", urdf=urdf, fk=fk, tf_max_rate=0) as rec:
@@ -51,9 +59,7 @@ def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
                if r.topic not in ("/tf", "/flange", "/robot_description")]
         expected = []
         for topic, t, data in submitted:
-            if topic == "/log":
-                data = to_foxglove_log(data, t)
-            expected.append((topic, t, data))
+            expected.append((topic, t, to_foxglove_log(data, t) if topic == "/log" else data))
         assert got == expected  # every record, in submission order, with its cid
 
         # the cid chain: each client line -> its bus traffic -> its reply
@@ -96,7 +102,7 @@ def test_scripted_session_every_record_in_order_with_cid(tmp_path, urdf):
     assert log.data["level"] == 3 and log.data["name"] == "gateway/rob6.gateway"
 
 
-def test_records_outside_sessions_go_to_system_only(tmp_path):
+def test_records_outside_sessions_go_to_system_only(tmp_path: Path) -> None:
     with Recorder(tmp_path, "kr16", "robot1") as rec:
         t = time.time_ns()
         rec.submit("/driver/joint_state", t, {"q": [0] * 6})
@@ -113,7 +119,7 @@ def test_records_outside_sessions_go_to_system_only(tmp_path):
     assert [r.log_time - t for r in read_records(system)] == [0, 1, 2, 3, 4, 5]
 
 
-def test_a_trace_arriving_before_its_sessions_open_event_lands_in_the_session(tmp_path):
+def test_a_trace_arriving_before_its_sessions_open_event_lands_in_the_session(tmp_path: Path) -> None:
     """Two services' trace batches reach the recorder in either order: the kinematics trace of
     a session's first command may come before the gateway's open event (seen in a full test
     run on a busy machine). It belongs to the session by its time, not by its arrival."""
@@ -129,7 +135,7 @@ def test_a_trace_arriving_before_its_sessions_open_event_lands_in_the_session(tm
     assert sorted(r.log_time - t for r in read_records(system)) == [0, 1, 2, 3, 4]
 
 
-def test_rotation_by_size_and_time(tmp_path):
+def test_rotation_by_size_and_time(tmp_path: Path) -> None:
     with Recorder(tmp_path / "size", "kr16", "robot1", rotate_bytes=20_000, rotate_seconds=0,
                   chunk_interval=0.05, fsync=False) as rec:
         t = time.time_ns()
@@ -154,7 +160,7 @@ def test_rotation_by_size_and_time(tmp_path):
     assert [r.data["message"] for p in files for r in read_records(p)] == [str(i) for i in range(8)]
 
 
-def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path, caplog):
+def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path: Path, caplog: LogCaptureFixture) -> None:
     rec = Recorder(tmp_path, "kr16", "robot1", max_backlog=100, warn_backlog=50)
     t = time.time_ns()
     with caplog.at_level(logging.WARNING, logger="rob6.recorder"):
@@ -176,7 +182,7 @@ def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path, caplog):
     assert rec.stats().written == 100
 
 
-def test_missed_batches_are_logged_and_recorded_on_the_status_channel(tmp_path, caplog):
+def test_missed_batches_are_logged_and_recorded_on_the_status_channel(tmp_path: Path, caplog: LogCaptureFixture) -> None:
     """What the bus reports as lost on the way (sample-miss detection) is in the file."""
     with caplog.at_level(logging.WARNING, logger="rob6.recorder"), Recorder(tmp_path, "kr16", "robot1") as rec:
         rec.report_missed("rob6/robot1/trace/gateway gw-1", 3)
@@ -189,14 +195,14 @@ def test_missed_batches_are_logged_and_recorded_on_the_status_channel(tmp_path, 
                       {"missed": 2, "missed_source": "rob6/robot1/trace/gateway gw-1", "missed_total": 5}]
 
 
-def test_submit_after_close_is_refused_and_counted(tmp_path):
+def test_submit_after_close_is_refused_and_counted(tmp_path: Path) -> None:
     rec = Recorder(tmp_path, "kr16", "robot1").start()
     rec.close()
     assert rec.submit("/log", 1, {"message": "late"}) is False
     assert rec.stats().dropped == 1
 
 
-def test_bytes_and_structs_and_unserialisable(tmp_path):
+def test_bytes_and_structs_and_unserialisable(tmp_path: Path) -> None:
     import msgspec
 
     class JS(msgspec.Struct):
@@ -214,8 +220,8 @@ def test_bytes_and_structs_and_unserialisable(tmp_path):
     assert recs[2].schema == "rob6.Record" and recs[2].data["obj"].startswith("<object")
 
 
-def test_fk_without_urdf_gives_tf_and_flange(tmp_path):
-    def fk(q):
+def test_fk_without_urdf_gives_tf_and_flange(tmp_path: Path) -> None:
+    def fk(q: list[float]) -> list[float] | None:
         return None if q[0] > 100 else [1, 0, 0, q[0], 0, 1, 0, 0, 0, 0, 1, 0]
 
     with Recorder(tmp_path, "kr16", "robot1", fk=fk, tf_max_rate=0) as rec:
@@ -230,7 +236,7 @@ def test_fk_without_urdf_gives_tf_and_flange(tmp_path):
     assert tf[0]["parent_frame_id"] == "base" and tf[0]["translation"]["x"] == 0.05
 
 
-def test_schema_mapping():
+def test_schema_mapping() -> None:
     assert schema_for("/session/12/client_in").name == "rob6.ClientLine"
     assert schema_for("/bus/kinematics/fk/request").name == "rob6.BusRequest"
     assert schema_for("/bus/kinematics/fk/reply").name == "rob6.BusReply"
@@ -238,7 +244,7 @@ def test_schema_mapping():
     assert schema_for("/whatever").name == "rob6.Record"
 
 
-def test_log_mapping_levels():
+def test_log_mapping_levels() -> None:
     assert to_foxglove_log({"level": "ERROR", "name": "n", "message": "m", "service": "driver",
                             "time": 12.5}, 0) == {
         "timestamp": {"sec": 12, "nsec": 500_000_000}, "level": 4, "message": "m",
@@ -247,7 +253,7 @@ def test_log_mapping_levels():
     assert to_foxglove_log({"level": "DEBUG", "message": "x"}, 7)["timestamp"] == {"sec": 0, "nsec": 7}
 
 
-def test_tf_from_urdf(urdf):
+def test_tf_from_urdf(urdf: str) -> None:
     tf = TfDeriver(urdf)
     msg = tf.transforms([90.0, 0.0, 0, 0, 0, 0], 1_500_000_000)
     frames = [(t["parent_frame_id"], t["child_frame_id"]) for t in msg["transforms"]]
@@ -263,7 +269,7 @@ def test_tf_from_urdf(urdf):
     assert math.isclose(flipped["transforms"][1]["rotation"]["y"], math.sqrt(0.5))
 
 
-def test_pose_from_fk_forms():
+def test_pose_from_fk_forms() -> None:
     pose = pose_from_fk([0, -0.173648, -0.984808, 1741.140107, 0, -0.984808, 0.173648,
                          -307.009978, -1, 0, 0, 640])
     assert pose is not None
@@ -275,7 +281,7 @@ def test_pose_from_fk_forms():
     assert pose is not None and pose[0] == (0, 0, 1.0)
 
 
-def test_bus_trace_adapter():
+def test_bus_trace_adapter() -> None:
     from rob6_recorder.adapters import bus_trace_records
 
     payload = (b'{"t":1700000000.5,"dt":0.002,"instance":"k-1","request":{"v":1,"cid":"abc",'
@@ -289,7 +295,7 @@ def test_bus_trace_adapter():
     assert rep[3]["ok"] is False and rep[3]["error"]["code"] == "invalid" and rep[3]["cid"] == "abc"
 
 
-def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk():
+def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk() -> None:
     """Composing /tf from the shipped URDF gives the protocol's flange pose."""
     import pathlib
 
@@ -303,9 +309,9 @@ def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk():
         pytest.skip("no shipped URDF")
     tf = TfDeriver(path.read_text())
 
-    def matrix(t):
+    def matrix(t: dict[str, Any]) -> npt.NDArray[Any]:
         x, y, z, w = (t["rotation"][k] for k in "xyzw")
-        m = np.eye(4)
+        m: npt.NDArray[Any] = np.eye(4)
         m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
@@ -323,7 +329,7 @@ def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk():
         assert np.allclose(T[:3, :3], P[:, :3], atol=1e-9)
 
 
-def test_schemas_of_bus_messages_are_generated_from_their_structs():
+def test_schemas_of_bus_messages_are_generated_from_their_structs() -> None:
     """The joint state, link event and gripper state are recorded as the bus carries them:
     their schemas come from the Structs and name every field (the hand-written one had
     lost ``missed``)."""

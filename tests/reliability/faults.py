@@ -16,12 +16,14 @@ from __future__ import annotations
 import os
 import signal
 import time
+from collections.abc import Callable
+from typing import Any
 
 from tests.reliability.fuzz import FuzzClient
-from tests.system import running
+from tests.system import System, running
 
 # service -> (probe command, is the answer a correct one?)
-PROBES = {
+PROBES: dict[str, tuple[str, Callable[[list[bytes]], bool]]] = {
     "kinematics": ("ForwardCalc 10 0 0 0 0 0", lambda lines: len(lines) == 2 and lines[1].startswith(b"noflip")),
     # a Set reaches the planner (reads are answered from the gateway's mirror); 1 is the default
     "planner": ("SetRTSpeedControl 1", lambda lines: lines == [b"true"]),
@@ -47,7 +49,8 @@ def _acceptable_during_fault(service: str, lines: list[bytes]) -> bool:
         b"unavailable" in lines[0] or b"no reply" in lines[0])
 
 
-def _wait_recovered(system, client, service, old_pid, problems) -> bool:
+def _wait_recovered(system: System, client: FuzzClient, service: str, old_pid: int | None,
+                    problems: list[tuple[object, ...]]) -> bool:
     command, ok = PROBES[service]
     deadline = time.monotonic() + RECOVER_S
     while time.monotonic() < deadline:
@@ -60,7 +63,7 @@ def _wait_recovered(system, client, service, old_pid, problems) -> bool:
     return False
 
 
-def inject(system, client, service: str, fault: str, problems: list) -> bool:
+def inject(system: System, client: FuzzClient, service: str, fault: str, problems: list[tuple[object, ...]]) -> bool:
     """One fault; True when it was survived and recovered from."""
     pids = system.pids()
     pid = pids[service]
@@ -104,9 +107,9 @@ SERVICES = ("kinematics", "planner", "driver", "gripper", "recorder")
 FAULTS = ("kill", "stop", "term")
 
 
-def run_fault_campaign(robot: str = "ad850", rounds: int = 1) -> dict:
+def run_fault_campaign(robot: str = "ad850", rounds: int = 1) -> dict[str, Any]:
     """Every fault on every service (and SIGSTOP of the router) in one session of one system."""
-    problems: list = []
+    problems: list[tuple[object, ...]] = []
     injected = recovered = 0
     with running(robot, dummy=True, restart=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:
         gateway = system.pids()["gateway"]

@@ -29,15 +29,17 @@ import socket
 import time
 from dataclasses import dataclass, field
 from itertools import pairwise
-from typing import cast
+from typing import NoReturn, cast
 
 from hypothesis import strategies as st
 
 from rob6.bus import Bus
+from rob6.robots import get_robot
 from rob6.status import STATUS_WORDS as _CATEGORIES
 from rob6_gateway.args import Args, ParseError
 from rob6_gateway.commands import COMMANDS, GRIPPER_REPLY_LINES, Close, Gateway, Options, _split_command
 from rob6_gateway.framing import Framer, _clean
+from rob6_gateway.state import Session
 from tests.system import System
 
 COMMAND_NAMES = sorted(COMMANDS)
@@ -79,7 +81,7 @@ def reply_problem(line_text: str, reply: str | None) -> str | None:
 
 
 # ============================================================== input generators
-def _args_strategy():
+def _args_strategy() -> st.SearchStrategy[str]:
     token = st.one_of(st.sampled_from(NUMBER_TOKENS), st.sampled_from(STATUS_WORDS),
                       st.sampled_from(ODD_TOKENS),
                       st.floats(allow_nan=True, allow_infinity=True).map(repr),
@@ -91,7 +93,7 @@ def _args_strategy():
     return st.lists(st.tuples(sep, token), max_size=16).map(lambda ts: "".join(s + t for s, t in ts))
 
 
-def command_line_strategy():
+def command_line_strategy() -> st.SearchStrategy[str]:
     """A text line (latin-1, no newline): mostly a known command with random arguments."""
     name = st.one_of(st.sampled_from(COMMAND_NAMES),
                      st.sampled_from(COMMAND_NAMES).map(str.lower),
@@ -204,35 +206,37 @@ class _DeadBus:
     #: the gateway names its sessions with its own instance id (a move carries it)
     instance = "fuzz-gateway"
 
-    def __init__(self):
+    def __init__(self) -> None:
         from rob6.bus import BusError
         self._error = BusError
 
-    def subscribe(self, *a, **k):
+    def subscribe(self, *a: object, **k: object) -> None:
         pass
 
-    def on_liveliness(self, *a, **k):
+    def on_liveliness(self, *a: object, **k: object) -> None:
         pass
 
-    def publish(self, *a, **k):
+    def publish(self, *a: object, **k: object) -> None:
         pass
 
-    def instances(self, *a, **k):
+    def instances(self, *a: object, **k: object) -> list[str]:
         return []
 
-    def request(self, service, op, body, **kwargs):
+    def request(self, service: str, op: str, body: object, **kwargs: object) -> NoReturn:
         raise self._error("unavailable", f"{service} unavailable")
 
 
-def make_dead_gateway(robot: str = "kr16"):
-    from rob6.robots import get_robot
-    from rob6_gateway.state import Session
+#: a gateway whose every bus call fails, and a session of it
+DeadGateway = tuple[Gateway, Session]
+
+
+def make_dead_gateway(robot: str = "kr16") -> DeadGateway:
     logging.getLogger("rob6").setLevel(logging.CRITICAL)  # every call fails: thousands of warnings
     gateway = Gateway(cast(Bus, _DeadBus()), get_robot(robot), Options())  # the part of a Bus it uses
     return gateway, Session(number=1, peer="fuzz")
 
 
-def check_execute(gateway, session, text: str) -> None:
+def check_execute(gateway: Gateway, session: Session, text: str) -> None:
     if text == "":
         return  # the server answers empty lines itself (with nothing); they never reach execute
     try:
@@ -247,7 +251,7 @@ def check_execute(gateway, session, text: str) -> None:
 
 # ============================================================== through TCP
 class FuzzClient:
-    def __init__(self, port: int, timeout: float = 15.0):
+    def __init__(self, port: int, timeout: float = 15.0) -> None:
         self.port, self.timeout = port, timeout
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=timeout)
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -279,7 +283,7 @@ class FuzzClient:
                     return lines
             lines.append(line)
 
-    def close(self):
+    def close(self) -> None:
         self.sock.close()
 
 
@@ -315,10 +319,10 @@ class TcpFuzzer:
     gateway_pid: int = 0
     inputs: int = 0
     hangs: int = 0
-    problems: list = field(default_factory=list)
+    problems: list[tuple[object, ...]] = field(default_factory=list)
     reconnects: int = 0
-    turn_lo: list = field(default_factory=list)
-    turn_hi: list = field(default_factory=list)
+    turn_lo: list[float] = field(default_factory=list)
+    turn_hi: list[float] = field(default_factory=list)
     limit_violations: int = 0
     moves_ok: int = 0
     rss0: int = 0  # the gateway's VmRSS (KiB) before the fuzzing, for the caller to set
@@ -328,7 +332,7 @@ class TcpFuzzer:
         assert self._client is not None, "start() first"
         return self._client
 
-    def start(self):
+    def start(self) -> None:
         self.gateway_pid = self.system.pids()["gateway"]
         self._client = FuzzClient(self.system.port)
         self._update_envelope()
@@ -342,12 +346,12 @@ class TcpFuzzer:
         lines = self.client.until_pong()
         return [float(x) for x in lines[0].split()]
 
-    def _update_envelope(self):
+    def _update_envelope(self) -> None:
         lo, hi = self._numbers("GetJointsMaxTurnMin"), self._numbers("GetJointsMaxTurnMax")
         self.turn_lo = lo if not self.turn_lo else [min(a, b) for a, b in zip(self.turn_lo, lo, strict=True)]
         self.turn_hi = hi if not self.turn_hi else [max(a, b) for a, b in zip(self.turn_hi, hi, strict=True)]
 
-    def check_position(self):
+    def check_position(self) -> None:
         q = self._numbers("GetPositionJoints")
         if not all(lo - 1e-6 <= x <= hi + 1e-6 for lo, x, hi in zip(self.turn_lo, q, self.turn_hi, strict=True)):
             self.limit_violations += 1
@@ -424,7 +428,7 @@ class TcpFuzzer:
             self.moves_ok += 1
             self.check_position()
 
-    def _reconnect(self):
+    def _reconnect(self) -> None:
         with contextlib.suppress(OSError):
             self.client.close()
         time.sleep(0.2)

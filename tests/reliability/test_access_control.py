@@ -15,7 +15,7 @@ import pytest
 from tests.system import Client, free_port, running
 
 
-def _raw_connect(port, source="127.0.0.1"):
+def _raw_connect(port: int, source: str = "127.0.0.1") -> bytes:
     sock = socket.create_connection(("127.0.0.1", port), timeout=10, source_address=(source, 0))
     data = b""
     while True:
@@ -27,7 +27,7 @@ def _raw_connect(port, source="127.0.0.1"):
     return data
 
 
-def test_client_outside_the_allowlist_is_refused_with_one_line_and_closed():
+def test_client_outside_the_allowlist_is_refused_with_one_line_and_closed() -> None:
     with running("kr16", dummy=True, extra_env={"ROB6_ALLOW_CLIENTS": "127.0.0.2/32"}) as system:
         gateway = system.pids()["gateway"]
         assert _raw_connect(system.port) == b"ERROR: access denied for 127.0.0.1\n"
@@ -46,14 +46,14 @@ def test_client_outside_the_allowlist_is_refused_with_one_line_and_closed():
         assert system.pids()["gateway"] == gateway
 
 
-def test_allowlist_accepts_networks_and_lists():
+def test_allowlist_accepts_networks_and_lists() -> None:
     with running("kr16", dummy=True, extra_env={"ROB6_ALLOW_CLIENTS": "10.0.0.0/8, 127.0.0.0/30"}) as system:
         with Client(system.port) as client:
             assert client.ask("GetRobot") == "kr16\n"
         assert _raw_connect(system.port, "127.0.0.5").startswith(b"ERROR: access denied for 127.0.0.5")
 
 
-def test_shutdown_and_direct_adept_cmd_are_disabled_by_default_on_the_gateway():
+def test_shutdown_and_direct_adept_cmd_are_disabled_by_default_on_the_gateway() -> None:
     """The gateway alone (not ``rob6 run``) defaults to Shutdown disabled; DirectAdeptCmd is off."""
     with running("ad850", dummy=True, services=("driver", "kinematics", "planner", "gripper"),
                  extra_env={"ROB6_ALLOW_SHUTDOWN": "1"}) as system:
@@ -85,7 +85,7 @@ def test_shutdown_and_direct_adept_cmd_are_disabled_by_default_on_the_gateway():
             gateway.wait(10)
 
 
-def test_rob6_run_can_disable_shutdown():
+def test_rob6_run_can_disable_shutdown() -> None:
     with running("kr16", dummy=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:
         with Client(system.port) as client:
             assert client.ask("Shutdown").startswith("ERROR: Shutdown is disabled")
@@ -93,7 +93,7 @@ def test_rob6_run_can_disable_shutdown():
         assert system.process.poll() is None
 
 
-def test_rob6_run_enables_shutdown():
+def test_rob6_run_enables_shutdown() -> None:
     with running("kr16", dummy=True) as system:
         with Client(system.port) as client:
             assert client.ask("Shutdown", lines=2) == "bye!\nshutting down ...\n"
@@ -101,7 +101,7 @@ def test_rob6_run_enables_shutdown():
 
 
 @pytest.mark.parametrize("robot", ["kr16", "ad850"])
-def test_direct_adept_cmd_is_off_in_rob6_run(robot):
+def test_direct_adept_cmd_is_off_in_rob6_run(robot: str) -> None:
     with running(robot, dummy=True) as system, Client(system.port) as client:
         if robot == "kr16":  # not an Adept: false, as the original
             assert client.ask("DirectAdeptCmd SPEED 100") == "false\n"

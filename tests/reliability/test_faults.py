@@ -2,20 +2,20 @@
 (then SIGCONT) and SIGTERMed during one client session; the router SIGSTOPped. The session
 gets error replies naming the service (never a hang), and works again once the launcher
 restarted the service, with the same gateway process and connection."""
-
 import os
 import signal
 import time
+from collections.abc import Iterator
 
 import pytest
 
 from tests.reliability.faults import FAULTS, PROBES, SERVICES, _ask, inject
 from tests.reliability.fuzz import FuzzClient
-from tests.system import running
+from tests.system import System, running
 
 
 @pytest.fixture(scope="module")
-def session():
+def session() -> Iterator[tuple[System, FuzzClient, int]]:
     with running("ad850", dummy=True, restart=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:
         client = FuzzClient(system.port)
         yield system, client, system.pids()["gateway"]
@@ -24,20 +24,20 @@ def session():
 
 @pytest.mark.parametrize("fault", FAULTS)
 @pytest.mark.parametrize("service", SERVICES)
-def test_fault_is_survived_and_recovered(session, service, fault):
+def test_fault_is_survived_and_recovered(session: tuple[System, FuzzClient, int], service: str, fault: str) -> None:
     system, client, gateway = session
-    problems: list[tuple] = []
+    problems: list[tuple[object, ...]] = []
     assert inject(system, client, service, fault, problems), problems
     assert system.pids()["gateway"] == gateway
 
 
-def test_router_stopped_and_continued(session):
+def test_router_stopped_and_continued(session: tuple[System, FuzzClient, int]) -> None:
     system, client, gateway = session
-    problems: list[tuple] = []
+    problems: list[tuple[object, ...]] = []
     assert inject(system, client, "router", "stop", problems), problems
 
 
-def test_stopped_service_is_named_in_the_error(session):
+def test_stopped_service_is_named_in_the_error(session: tuple[System, FuzzClient, int]) -> None:
     system, client, _ = session
     pid = system.pids()["planner"]
     os.kill(pid, signal.SIGSTOP)
@@ -49,7 +49,7 @@ def test_stopped_service_is_named_in_the_error(session):
     assert took < 10
 
 
-def test_everything_works_again_in_the_same_session(session):
+def test_everything_works_again_in_the_same_session(session: tuple[System, FuzzClient, int]) -> None:
     system, client, gateway = session
     deadline = time.monotonic() + 30
     for service, (command, ok) in PROBES.items():
@@ -59,7 +59,7 @@ def test_everything_works_again_in_the_same_session(session):
     assert system.pids()["gateway"] == gateway
 
 
-def test_killed_router_is_restarted_and_the_session_goes_on():
+def test_killed_router_is_restarted_and_the_session_goes_on() -> None:
     """The launcher restarts a killed router and every Zenoh session reconnects to it: the
     same client session works again, with the same gateway."""
     with running("kr16", dummy=True, restart=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:

@@ -8,8 +8,8 @@ at the end (tests run in file order on one system): the gateway process is the s
 the session survives, memory stays bounded, the robot never leaves the widest turn limits
 that were ever configured.
 """
-
 import os
+from collections.abc import Iterator
 from typing import TypedDict
 
 import pytest
@@ -32,7 +32,7 @@ TCP = _Settings(deadline=None, database=None,
 
 
 @pytest.fixture(scope="module")
-def fuzzer():
+def fuzzer() -> Iterator[TcpFuzzer]:
     with running("kr16", dummy=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:
         fuzzer = TcpFuzzer(system)
         fuzzer.start()
@@ -41,7 +41,7 @@ def fuzzer():
         fuzzer.client.close()
 
 
-def _clean(fuzzer):
+def _clean(fuzzer: TcpFuzzer) -> None:
     assert fuzzer.problems == []
     assert fuzzer.hangs == 0
     assert fuzzer.alive()
@@ -49,24 +49,24 @@ def _clean(fuzzer):
 
 @settings(max_examples=500, **TCP)
 @given(text=command_line_strategy())
-def test_random_command_lines(fuzzer, text):
+def test_random_command_lines(fuzzer: TcpFuzzer, text: str) -> None:
     fuzzer.line(text)
     _clean(fuzzer)
 
 
 @pytest.mark.parametrize("terminated", [True, False])
-def test_one_mib_lines(fuzzer, terminated):
+def test_one_mib_lines(fuzzer: TcpFuzzer, terminated: bool) -> None:
     fuzzer.oversized(1 << 20, terminated)
     fuzzer.oversized(65537, terminated)
     _clean(fuzzer)
 
 
-def test_pipelined_flood_of_2000_commands_in_one_write(fuzzer):
+def test_pipelined_flood_of_2000_commands_in_one_write(fuzzer: TcpFuzzer) -> None:
     fuzzer.flood(2000)
     _clean(fuzzer)
 
 
-def test_pipelined_flood_of_mixed_commands(fuzzer):
+def test_pipelined_flood_of_mixed_commands(fuzzer: TcpFuzzer) -> None:
     # 500 x (unknown, parse error, ForwardCalc, empty line): 500 * (1 + 2 + 2 + 0) lines then PONG
     block = b"nope\nMovePTPJoints 1 2\nForwardCalc 1 2 3 4 5 6\n\n"
     fuzzer.client.sock.sendall(block * 500 + b"CM_PING\n")
@@ -77,32 +77,32 @@ def test_pipelined_flood_of_mixed_commands(fuzzer):
 
 @settings(max_examples=150, **TCP)
 @given(text=command_line_strategy(), cuts=st.lists(st.integers(0, 200), min_size=1, max_size=6))
-def test_commands_split_across_tcp_segments(fuzzer, text, cuts):
+def test_commands_split_across_tcp_segments(fuzzer: TcpFuzzer, text: str, cuts: list[int]) -> None:
     fuzzer.split(text, cuts)
     _clean(fuzzer)
 
 
 @pytest.mark.parametrize("value", EXTREMES_TCP)
-def test_every_command_with_extreme_values_and_wrong_arity(fuzzer, value):
+def test_every_command_with_extreme_values_and_wrong_arity(fuzzer: TcpFuzzer, value: str) -> None:
     for name in COMMAND_NAMES:
         for arity in (0, 1, 6, 7, 12, 13):
             fuzzer.line(" ".join([name] + [value] * arity))
     _clean(fuzzer)
 
 
-def test_non_ascii_nul_and_raw_bytes(fuzzer):
+def test_non_ascii_nul_and_raw_bytes(fuzzer: TcpFuzzer) -> None:
     for text in ["GetVersion\x00garbage", "\x00", "é", "GetVersion\xff", "\x80\x81\x82",
                  "ForwardCalc 1\x002 3", "\r", "\r\r", " ", "\t\x0b\x0c", "Hello Robot"]:
         fuzzer.line(text)
     _clean(fuzzer)
 
 
-def test_moves_never_leave_narrowed_turn_limits(fuzzer):
+def test_moves_never_leave_narrowed_turn_limits(fuzzer: TcpFuzzer) -> None:
     assert fuzzer.narrowed_limit_moves(150) > 10
     _clean(fuzzer)
 
 
-def test_invariants_after_the_fuzz(fuzzer):
+def test_invariants_after_the_fuzz(fuzzer: TcpFuzzer) -> None:
     assert fuzzer.inputs > 1000
     fuzzer.check_position()
     assert fuzzer.limit_violations == 0

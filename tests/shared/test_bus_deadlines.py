@@ -66,7 +66,7 @@ def buses() -> Iterator[tuple[Bus, Bus, Bus, threading.Event]]:
                 b.close()
 
 
-def test_an_announced_wait_beyond_the_quick_deadline_is_answered(buses):
+def test_an_announced_wait_beyond_the_quick_deadline_is_answered(buses: tuple[Bus, Bus, Bus, threading.Event]) -> None:
     caller, *_ = buses
     announced: list[tuple[float, str]] = []
     began = time.monotonic()
@@ -77,7 +77,7 @@ def test_an_announced_wait_beyond_the_quick_deadline_is_answered(buses):
     assert announced == [(ANNOUNCED_S + HOP_S, STOPPING)]  # passed on with a hop's margin
 
 
-def test_a_silent_live_instance_is_timeout_naming_what_it_waited_for(buses):
+def test_a_silent_live_instance_is_timeout_naming_what_it_waited_for(buses: tuple[Bus, Bus, Bus, threading.Event]) -> None:
     caller, *_ = buses
     with pytest.raises(BusTimeout) as error:
         caller.request("driver", "alter_mode", AlterMode(enable=False))
@@ -91,7 +91,7 @@ def test_a_silent_live_instance_is_timeout_naming_what_it_waited_for(buses):
     assert error.value.message == f"driver: no reply to ping within {QUICK_S:.1f} s"
 
 
-def test_a_service_in_between_passes_the_wait_on_and_reports_its_own_late_call(buses):
+def test_a_service_in_between_passes_the_wait_on_and_reports_its_own_late_call(buses: tuple[Bus, Bus, Bus, threading.Event]) -> None:
     caller, *_ = buses
     assert caller.request("planner", "mode", ModeRequest(command="EnableAlter")) == Ack(ok=True)
     with pytest.raises(BusError) as error:  # the planner gives up first: its error names the driver

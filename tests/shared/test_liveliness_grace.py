@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
+from pytest import MonkeyPatch
 
 from rob6.bus import Bus, BusError, call as bus_call
 from rob6.config import BusSettings
@@ -17,7 +19,7 @@ from tests.system import zenoh_router
 
 
 @pytest.fixture
-def settings():
+def settings() -> Iterator[BusSettings]:
     with zenoh_router("grace") as settings:
         yield settings
 
@@ -26,7 +28,7 @@ def _bus(settings: BusSettings, service: str, instance: str) -> Bus:
     return Bus(BusSettings(robot_id=settings.robot_id, connect=settings.connect, instance=instance), service)
 
 
-def test_a_call_waits_for_an_owner_that_comes_up(settings, monkeypatch):
+def test_a_call_waits_for_an_owner_that_comes_up(settings: BusSettings, monkeypatch: MonkeyPatch) -> None:
     monkeypatch.setattr(bus_call, "LIVELINESS_GRACE_S", 20.0)  # a slow machine's start-up fits
     client = _bus(settings, "test", "client")
     drivers: list[Bus] = []
@@ -49,7 +51,7 @@ def test_a_call_waits_for_an_owner_that_comes_up(settings, monkeypatch):
             bus.close()
 
 
-def test_no_instance_fails_unavailable_after_the_grace_within_the_deadline(settings, monkeypatch):
+def test_no_instance_fails_unavailable_after_the_grace_within_the_deadline(settings: BusSettings, monkeypatch: MonkeyPatch) -> None:
     monkeypatch.setattr(bus_call, "LIVELINESS_GRACE_S", 0.4)
     client = _bus(settings, "test", "client")
     try:

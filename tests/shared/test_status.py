@@ -10,7 +10,7 @@ from rob6.robots import ROBOTS
 from rob6.status import elbow_term, parse_status, reach_term, status_flags, status_matches, status_words
 
 
-def test_parse_status():
+def test_parse_status() -> None:
     assert parse_status(["lefty", "up", "noflip"]) == ("noflip", "up", "lefty")
     assert parse_status(["righty", "down", "flip"]) == ("flip", "down", "righty")
     assert parse_status(["noflip", "up"]) == ("noflip", "up", "toggleArm")
@@ -23,7 +23,7 @@ def test_parse_status():
             parse_status(bad)
 
 
-def test_status_matches():
+def test_status_matches() -> None:
     cur = ("noflip", "up", "lefty")
     assert status_matches(["toggleHand", "toggleElbow", "toggleArm"], ("flip", "down", "righty"), cur)
     assert status_matches(["noToggleHand", "up", "toggleArm"], ("noflip", "up", "righty"), cur)
@@ -32,7 +32,7 @@ def test_status_matches():
 
 
 @pytest.mark.parametrize("name", sorted(ROBOTS))
-def test_flags_on_arrays_equal_flags_on_floats(name):
+def test_flags_on_arrays_equal_flags_on_floats(name: str) -> None:
     robot = ROBOTS[name]
     q = np.random.default_rng(1).uniform(-170, 170, (500, 6))
     q2, q3 = np.radians(q[:, 1]), np.radians(q[:, 2])

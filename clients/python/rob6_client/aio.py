@@ -7,11 +7,14 @@ import socket
 import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager, suppress
+from typing import TypeVar
 
 from ._methods import AsyncRobotCommands
 from .client import DEFAULT_PORT
 from .errors import Rob6ConnectionError, Rob6Error, Rob6Timeout
-from .protocol import MAYBE_FALSE, MAYBE_FALSE_GRACE_S, READ, Command, Exchange, Pause, Send, handshake
+from .protocol import MAYBE_FALSE, MAYBE_FALSE_GRACE_S, READ, Command, ExchangeOf, Pause, Send, handshake
+
+R = TypeVar("R")
 
 
 class AsyncRobot(AsyncRobotCommands):
@@ -23,7 +26,7 @@ class AsyncRobot(AsyncRobotCommands):
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *, timeout: float = 10.0,
-                 move_timeout: float = 300.0, connect_timeout: float = 5.0):
+                 move_timeout: float = 300.0, connect_timeout: float = 5.0) -> None:
         self.host, self.port = host, port
         self.timeout = timeout
         self.move_timeout = move_timeout
@@ -62,7 +65,7 @@ class AsyncRobot(AsyncRobotCommands):
     async def __aenter__(self) -> AsyncRobot:
         return await self.connect()
 
-    async def __aexit__(self, *exc) -> None:
+    async def __aexit__(self, *exc: object) -> None:
         await self.close()
 
     async def close(self) -> None:
@@ -91,7 +94,7 @@ class AsyncRobot(AsyncRobotCommands):
 
     # ------------------------------------------------------------------ I/O
 
-    async def _call(self, command: Command, line: str, timeout: float | None):
+    async def _call(self, command: Command, line: str, timeout: float | None) -> object:
         if timeout is None:
             timeout = self.move_timeout if command.long else self.timeout
         value = await self._run(command.name, command.exchange(line), timeout)
@@ -99,7 +102,7 @@ class AsyncRobot(AsyncRobotCommands):
             self._drop()
         return value
 
-    async def _run(self, name: str, exchange: Exchange, timeout: float):
+    async def _run(self, name: str, exchange: ExchangeOf[R], timeout: float) -> R:
         async with self._lock:
             if self._writer is None:
                 raise Rob6ConnectionError(f"{name}: the connection is closed")
@@ -120,7 +123,8 @@ class AsyncRobot(AsyncRobotCommands):
                         result = None
                     action = exchange.send(result)
             except StopIteration as stop:
-                return stop.value
+                value: R = stop.value
+                return value
             except Rob6Error:
                 raise  # the whole reply was read: the connection is in step
             except BaseException:

@@ -7,12 +7,15 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
+from typing import TypeVar
 
 from ._methods import RobotCommands
 from .errors import Rob6ConnectionError, Rob6Error, Rob6Timeout
-from .protocol import MAYBE_FALSE, MAYBE_FALSE_GRACE_S, READ, Command, Exchange, Pause, Send, handshake
+from .protocol import MAYBE_FALSE, MAYBE_FALSE_GRACE_S, READ, Command, ExchangeOf, Pause, Send, handshake
 
 DEFAULT_PORT = 5005
+
+R = TypeVar("R")
 
 
 class Robot(RobotCommands):
@@ -33,7 +36,7 @@ class Robot(RobotCommands):
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *, timeout: float = 10.0,
-                 move_timeout: float = 300.0, connect_timeout: float = 5.0):
+                 move_timeout: float = 300.0, connect_timeout: float = 5.0) -> None:
         self.host, self.port = host, port
         self.timeout = timeout
         self.move_timeout = move_timeout
@@ -62,7 +65,7 @@ class Robot(RobotCommands):
     def __enter__(self) -> Robot:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def close(self) -> None:
@@ -96,7 +99,7 @@ class Robot(RobotCommands):
 
     # ------------------------------------------------------------------ I/O
 
-    def _call(self, command: Command, line: str, timeout: float | None):
+    def _call(self, command: Command, line: str, timeout: float | None) -> object:
         if timeout is None:
             timeout = self.move_timeout if command.long else self.timeout
         value = self._run(command.name, command.exchange(line), timeout)
@@ -104,7 +107,7 @@ class Robot(RobotCommands):
             self._drop()
         return value
 
-    def _run(self, name: str, exchange: Exchange, timeout: float):
+    def _run(self, name: str, exchange: ExchangeOf[R], timeout: float) -> R:
         with self._lock:
             if self._sock is None:
                 raise Rob6ConnectionError(f"{name}: the connection is closed")
@@ -125,7 +128,8 @@ class Robot(RobotCommands):
                         result = None
                     action = exchange.send(result)
             except StopIteration as stop:
-                return stop.value
+                value: R = stop.value
+                return value
             except Rob6Error:
                 raise  # the whole reply was read: the connection is in step
             except BaseException:

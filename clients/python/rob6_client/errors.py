@@ -11,7 +11,7 @@ class Rob6Error(Exception):
     ``planner unavailable``...).
     """
 
-    def __init__(self, command: str, message: str):
+    def __init__(self, command: str, message: str) -> None:
         super().__init__(f"{command}: {message}")
         self.command = command
         self.message = message

@@ -19,7 +19,7 @@ import operator
 import re
 from collections.abc import Callable, Generator, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeVar
 
 from .errors import Rob6ConnectionError, Rob6Error, Rob6ProtocolError
 
@@ -191,7 +191,11 @@ READ, MAYBE_FALSE = _Read(), _MaybeFalse()
 MAYBE_FALSE_GRACE_S = 0.05  # rob6 writes a reply in one go: a following `false` is already there
 ALLOWED_STATUS_PAUSE_S = 0.02  # lets the original read SetAllowedStatus before the next write
 
-Exchange = Generator[Any, Any, Any]
+R = TypeVar("R")
+#: one command's exchange: yields actions (READ, Send, Pause, MAYBE_FALSE), is sent what each
+#: produced (a line, a bool, None) and returns the reply's value, of type R
+ExchangeOf = Generator[Any, Any, R]
+Exchange = ExchangeOf[Any]  # the value's type is the command's (``Reply.returns``, _methods.pyi)
 
 # the parse errors the original sends with a `false` line after them (REFERENCE.md 4)
 _PARSE_ERRORS = {"incorrect joints", "incorrect matrix", "incorrect status", "incorrect value"}
@@ -239,7 +243,7 @@ def _bool(name: str, line: str) -> bool:
     return line == "true"
 
 
-def _scalar(convert):
+def _scalar(convert: Callable[[str], object]) -> Callable[[str], Exchange]:
     def parse(name: str) -> Exchange:
         line = yield from _line(name)
         try:
@@ -309,7 +313,7 @@ def parse_set_allowed_status(name: str) -> Exchange:
         raise Rob6Error(name, error)
 
 
-def _parse_bye(*expected: str):
+def _parse_bye(*expected: str) -> Callable[[str], Exchange]:
     def parse(name: str) -> Exchange:
         line = yield from _line(name)
         for i, text in enumerate(expected):
@@ -343,9 +347,9 @@ BYE = Reply(_parse_bye("bye!"), "None", closes=True)
 SHUTDOWN = Reply(_parse_bye("bye!", "shutting down ..."), "None", closes=True)
 
 
-def handshake() -> Exchange:
+def handshake() -> ExchangeOf[str]:
     """Greeting, ``Hello Robot``, ``accepted``; returns the greeting."""
-    greeting = yield READ
+    greeting: str = yield READ
     if greeting.startswith("ERROR:"):  # rob6: server busy, access denied
         raise Rob6ConnectionError(f"the server refused the connection: {greeting[6:].strip()}")
     if not greeting.startswith("welcome to rob6server"):
@@ -404,7 +408,7 @@ def _params(spec: str) -> tuple[Param, ...]:
     return tuple(params)
 
 
-def _table(*rows) -> dict[str, Command]:
+def _table(*rows: tuple[str, str, Reply, str] | tuple[str, str, Reply, str, bool]) -> dict[str, Command]:
     commands = {}
     for name, params, reply, doc, *long in rows:
         commands[name] = Command(name, _params(params), reply, doc, bool(long and long[0]))

@@ -9,7 +9,7 @@ import sys
 import click
 
 from .convention import limit_violation, rob6_to_controller
-from .server import Config, event, run
+from .server import Config, Controller, event, run
 
 
 def _host_port(value: str) -> tuple[str, int]:
@@ -69,8 +69,9 @@ def _pose(value: str) -> tuple[float, ...]:
               type=click.Choice(["full", "vplus"]),
               help="full: report errors and motion_possible; vplus: exactly what the V+ "
                    "program sends (no errors, motion_possible = not in motion).")
-def main(host, motion_port, state_port, io_port, control, byte_order, start_pose,
-         state_period, timing, monitor_speed, queue_depth, status_fields):
+def main(host: str, motion_port: int, state_port: int, io_port: str, control: str, byte_order: str,
+         start_pose: str, state_period: float, timing: str, monitor_speed: float, queue_depth: int,
+         status_fields: str) -> None:
     """A simulated Adept Viper s850 controller running the ROS-Industrial V+ server
     (simple_message over TCP), for testing rob6's simple_message link."""
     control_host, control_port = _host_port(control)
@@ -90,7 +91,7 @@ def main(host, motion_port, state_port, io_port, control, byte_order, start_pose
 
 
 async def _main(cfg: Config) -> None:
-    def ready(addr, ctl):
+    def ready(addr: dict[str, tuple[str, int]], ctl: Controller) -> None:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, ctl.done.set)
@@ -103,7 +104,7 @@ async def _main(cfg: Config) -> None:
     await run(cfg, ready)
 
 
-def _fmt(addr) -> str:
+def _fmt(addr: tuple[str, int]) -> str:
     return f"{addr[0]}:{addr[1]}"
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from .codec import END_TRAJECTORY
@@ -33,7 +34,7 @@ class Point:
 
 
 class Arm:
-    def __init__(self, q0, now: float, *, timing: str = "vplus", monitor_speed: float = 100.0):
+    def __init__(self, q0: Sequence[float], now: float, *, timing: str = "vplus", monitor_speed: float = 100.0) -> None:
         if timing not in ("vplus", "duration"):
             raise ValueError(f"timing must be 'vplus' or 'duration', not {timing!r}")
         self.timing = timing
@@ -54,7 +55,7 @@ class Arm:
         self.queue.append(point)
         self.open = True
 
-    def stop(self, decel) -> None:
+    def stop(self, decel: Iterable[float]) -> None:
         """Drop every pending point and brake to rest with these decelerations (deg/s²)."""
         self.queue.clear()
         self._seg = None
@@ -82,7 +83,7 @@ class Arm:
             or self.q != self.ref
         )
 
-    def segment_time(self, start, point: Point) -> float:
+    def segment_time(self, start: Sequence[float], point: Point) -> float:
         """How long the commanded path takes from start to point."""
         full_speed = max(abs(b - a) / v for a, b, v in zip(start, point.q, self.vcap, strict=True))
         if self.timing == "vplus":  # SPEED 100 ALWAYS: velocity and duration are ignored
@@ -102,7 +103,7 @@ class Arm:
             self._step(self.t, DT)
             self.t += DT
 
-    def _play(self, t0: float, t: float):
+    def _play(self, t0: float, t: float) -> list[float] | None:
         """Move the commanded path on to time t; its joint velocities, or None at rest."""
         start = t0  # a point found waiting starts at once
         while True:

@@ -9,6 +9,7 @@ is a setting: the V+ program uses the big-endian LNGB/FLTB primitives as they ar
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 # message types
@@ -56,7 +57,7 @@ class TrajPoint:
 
 
 class Codec:
-    def __init__(self, byte_order: str = "big"):
+    def __init__(self, byte_order: str = "big") -> None:
         if byte_order not in BYTE_ORDERS:
             raise ValueError(f"byte order must be one of {sorted(BYTE_ORDERS)}, not {byte_order!r}")
         e = BYTE_ORDERS[byte_order]
@@ -68,7 +69,8 @@ class Codec:
         self._status = struct.Struct(e + "7i")
 
     def length(self, prefix: bytes) -> int:
-        return self._int.unpack(prefix)[0]
+        n: int = self._int.unpack(prefix)[0]
+        return n
 
     def header(self, payload: bytes) -> Header:
         return Header(*self._header.unpack_from(payload))
@@ -88,13 +90,13 @@ class Codec:
         """The V+ program's acknowledgement: header and one int32 (0, or -4 for a stop)."""
         return self._frame(JOINT_TRAJ_PT, SERVICE_REPLY, reply_code, self._int.pack(sequence))
 
-    def joint_position(self, joints_rad) -> bytes:
+    def joint_position(self, joints_rad: Sequence[float]) -> bytes:
         padded = tuple(joints_rad) + (0.0,) * (MAX_JOINTS - len(joints_rad))
         # the V+ program always sends sequence 0
         return self._frame(JOINT_POSITION, TOPIC, INVALID, self._joints.pack(0, *padded))
 
-    def status(self, drives_powered, e_stopped, error_code, in_error, in_motion, mode,
-               motion_possible) -> bytes:
+    def status(self, drives_powered: int, e_stopped: int, error_code: int, in_error: int, in_motion: int,
+               mode: int, motion_possible: int) -> bytes:
         body = self._status.pack(drives_powered, e_stopped, error_code, in_error, in_motion,
                                  mode, motion_possible)
         return self._frame(STATUS, TOPIC, INVALID, body)

@@ -12,6 +12,7 @@ both joint-range tables.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 N_JOINTS = 6
 
@@ -49,21 +50,21 @@ ESTOP_DECEL_DEG_S2 = tuple(10.0 * v for v in MAX_SPEED_DEG_S)
 LIMIT_TOL_DEG = 1e-4
 
 
-def rob6_to_controller(q_rob6_deg):
+def rob6_to_controller(q_rob6_deg: Iterable[float]) -> tuple[float, ...]:
     return tuple(
         s * q + o
         for s, q, o in zip(ROB6_TO_CONTROLLER_SIGN, q_rob6_deg, ROB6_TO_CONTROLLER_OFFSET_DEG, strict=True)
     )
 
 
-def controller_to_rob6(q_ctrl_deg):
+def controller_to_rob6(q_ctrl_deg: Iterable[float]) -> tuple[float, ...]:
     return tuple(
         (q - o) / s
         for s, q, o in zip(ROB6_TO_CONTROLLER_SIGN, q_ctrl_deg, ROB6_TO_CONTROLLER_OFFSET_DEG, strict=True)
     )
 
 
-def limit_violation(q_ctrl_deg) -> str | None:
+def limit_violation(q_ctrl_deg: Iterable[float]) -> str | None:
     """Why the controller would not move to these joints (controller degrees), or None."""
     for i, (q, (lo, hi)) in enumerate(zip(q_ctrl_deg, CONTROLLER_LIMITS_DEG, strict=True), start=1):
         if not math.isfinite(q):

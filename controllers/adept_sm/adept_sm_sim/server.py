@@ -17,7 +17,9 @@ import math
 import sys
 import time
 from collections import deque
+from collections.abc import Awaitable, Callable, Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from . import codec as sm
 from .arm import Arm, Point
@@ -59,7 +61,7 @@ class Config:
 
 
 class Controller:
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config) -> None:
         self.cfg = cfg
         self.codec = sm.Codec(cfg.byte_order)
         self.arm = Arm(cfg.start_pose_ctrl, time.monotonic(), timing=cfg.timing,
@@ -106,7 +108,7 @@ class Controller:
             return f"controller error {self.error_code}"
         return None
 
-    def halt(self, why: str, decel) -> None:
+    def halt(self, why: str, decel: Iterable[float]) -> None:
         self.advance()
         dropped = len(self.arm.queue)
         self.arm.stop(decel)
@@ -114,7 +116,7 @@ class Controller:
         self.room.set()
         event(f"{why}: stopping, {dropped} queued point(s) discarded")
 
-    async def accept(self, pt: sm.TrajPoint, client) -> str | None:
+    async def accept(self, pt: sm.TrajPoint, client: asyncio.StreamWriter) -> str | None:
         """Queue a point (waiting for room); why it was refused, or None."""
         q = tuple(math.degrees(x) for x in pt.joints_rad[:6])
         reason = self.refusal() or limit_violation(q)
@@ -191,7 +193,7 @@ class Controller:
             self.advance()
             w.write(self.status_frame())
 
-    async def serve_state(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+    async def serve_state(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         if not self._claim("state", writer):
             return
         watcher = asyncio.ensure_future(_until_eof(reader))
@@ -212,7 +214,7 @@ class Controller:
             self._release("state", writer)
 
     # ---- wire: motion port ------------------------------------------------------
-    async def serve_motion(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+    async def serve_motion(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         if not self._claim("motion", writer):
             return
         try:
@@ -259,7 +261,7 @@ class Controller:
                 self.arm.close_trajectory()
             self._release("motion", writer)
 
-    async def _reply(self, writer, code: int, seq: int, t_recv: float) -> None:
+    async def _reply(self, writer: asyncio.StreamWriter, code: int, seq: int, t_recv: float) -> None:
         if self.slow_ack_ms > 0:
             await asyncio.sleep(self.slow_ack_ms / 1000.0)
         writer.write(self.codec.traj_reply(code, seq))
@@ -269,7 +271,7 @@ class Controller:
             self.acknowledged += 1
 
     # ---- wire: I/O port ------------------------------------------------------------
-    async def serve_io(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+    async def serve_io(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         """The program's own I/O protocol (``ros.io``): two V+ READs per request, each
         taking what has arrived as one record, and a big-endian int32 (LNGB) from the first
         four bytes of each: the mode (1 read, anything else write), then the signal
@@ -337,7 +339,7 @@ class Controller:
         return "1"
 
     # ---- connections ----------------------------------------------------------------
-    def _claim(self, port: str, writer) -> bool:
+    def _claim(self, port: str, writer: asyncio.StreamWriter) -> bool:
         if getattr(self, f"{port}_client") is not None:
             event(f"{port}: a client is already connected, refusing another")
             writer.close()
@@ -346,7 +348,7 @@ class Controller:
         event(f"{port}: client connected from {_peer(writer)}")
         return True
 
-    def _release(self, port: str, writer) -> None:
+    def _release(self, port: str, writer: asyncio.StreamWriter) -> None:
         if getattr(self, f"{port}_client") is writer:
             setattr(self, f"{port}_client", None)
             event(f"{port}: client disconnected")
@@ -370,7 +372,7 @@ class Controller:
         return True
 
     # ---- control channel --------------------------------------------------------------
-    def status(self) -> dict:
+    def status(self) -> dict[str, Any]:
         self.advance()
         q = [round(x, 6) for x in self.arm.q]
         lat = sorted(self.latencies_ms)
@@ -407,7 +409,7 @@ class Controller:
             },
         }
 
-    def command(self, req) -> dict:
+    def command(self, req: object) -> dict[str, Any]:
         if not isinstance(req, dict):
             raise ValueError("a request is a JSON object like {\"cmd\": \"status\"}")
         cmd = req.get("cmd")
@@ -449,7 +451,7 @@ class Controller:
             )
         return {"ok": True}
 
-    async def serve_control(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter):
+    async def serve_control(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         try:
             while line := await reader.readline():
                 if not line.strip():
@@ -480,22 +482,26 @@ async def _until_eof(reader: asyncio.StreamReader) -> None:
         pass
 
 
-def _peer(writer) -> str:
+def _peer(writer: asyncio.StreamWriter) -> str:
     peer = writer.get_extra_info("peername")
     return f"{peer[0]}:{peer[1]}" if peer else "?"
 
 
-def _pct(sorted_values, p: float) -> float:
+def _pct(sorted_values: Sequence[float], p: float) -> float:
     if not sorted_values:
         return 0.0
     return sorted_values[min(len(sorted_values) - 1, int(p * len(sorted_values)))]
 
 
-def _handler(serve):
+#: a connection handler of asyncio.start_server
+Serve = Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]
+
+
+def _handler(serve: Serve) -> Serve:
     """A connection handler that ends quietly when shutdown cancels it (Python 3.11's
     streams would otherwise print the cancellation as an error)."""
 
-    async def handle(reader, writer):
+    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         try:
             await serve(reader, writer)
         except asyncio.CancelledError:
@@ -504,7 +510,7 @@ def _handler(serve):
     return handle
 
 
-async def run(cfg: Config, ready) -> None:
+async def run(cfg: Config, ready: Callable[[dict[str, tuple[str, int]], Controller], None]) -> None:
     """Serve until quit or a signal; ready(addresses) is called once everything listens."""
     ctl = Controller(cfg)
     servers = {

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import signal
 import sys
+from types import FrameType
+from typing import NoReturn
 
 import click
 
@@ -71,8 +73,10 @@ def _numbers(value: str, what: str) -> list[float]:
               help="fault: send every Nth packet after its successor")
 @click.option("--vanish-s", type=click.FloatRange(min=0, min_open=True), default=None,
               help="fault: stay silent (controller off) for the first T seconds")
-def main(robot, rob6, bind, control, sentype, timeout, timeout_counts, corr_window, start_pose, cycle_ms,
-         restart_delay, auto_ack, eipos, lose_s, drop_every, delay_ms, duplicate_every, reorder_every, vanish_s):
+def main(robot: str, rob6: str, bind: str, control: str, sentype: str, timeout: int, timeout_counts: str,
+         corr_window: str | None, start_pose: str, cycle_ms: int | None, restart_delay: float, auto_ack: float | None,
+         eipos: bool, lose_s: float | None, drop_every: int | None, delay_ms: float | None,
+         duplicate_every: int | None, reorder_every: int | None, vanish_s: float | None) -> None:
     """A KUKA KR C4 running RSI (RobotSensorInterface) against the rob6 PC.
 
     Every IPO cycle it sends <Rob> (RIst, RSol, AIPos, ASPos, Delay, IPOC) to --rob6 and
@@ -117,7 +121,7 @@ def main(robot, rob6, bind, control, sentype, timeout, timeout_counts, corr_wind
         vanish_s=vanish_s,
     )
 
-    def stop(signum, _frame):
+    def stop(signum: int, _frame: FrameType | None) -> NoReturn:
         raise Shutdown(signal.Signals(signum).name)
 
     signal.signal(signal.SIGTERM, stop)

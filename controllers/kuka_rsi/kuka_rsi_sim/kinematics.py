@@ -12,8 +12,12 @@ Angles: KUKA's Z-Y'-X'' Euler angles, R = Rz(A) Ry(B) Rx(C), in degrees.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from .machine import Machine
+
+#: a flange pose: X, Y, Z (mm), A, B, C (deg)
+Pose = tuple[float, float, float, float, float, float]
 
 _SIGN = (-1.0, 1.0, 1.0, -1.0, 1.0, -1.0)
 _OFFSET = (0.0, 0.0, -90.0, 0.0, 0.0, 0.0)
@@ -31,14 +35,14 @@ _RAD = 180.0 / math.pi
 class Kinematics:
     """FK of one robot; the DH constants are precomputed once."""
 
-    def __init__(self, machine: Machine):
+    def __init__(self, machine: Machine) -> None:
         m = machine
         self._d = (m.d1, 0.0, 0.0, m.d4, 0.0, m.d6)
         self._a = (m.a1, m.a2, m.a3, 0.0, 0.0, 0.0)
         self._ca = tuple(round(math.cos(a * _DEG)) for a in _ALPHA)  # exactly 0/1/-1
         self._sa = tuple(round(math.sin(a * _DEG)) for a in _ALPHA)
 
-    def pose(self, q) -> tuple[float, float, float, float, float, float]:
+    def pose(self, q: Sequence[float]) -> Pose:
         """Flange pose (X, Y, Z mm; A, B, C deg) for axis angles q (deg)."""
         # running product T = [R | p], rows of R kept as plain floats
         r11, r12, r13, r21, r22, r23, r31, r32, r33 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
@@ -71,7 +75,7 @@ class Kinematics:
         return px, py, pz, a, b, c
 
 
-def euler_zyx(r) -> tuple[float, float, float]:
+def euler_zyx(r: Sequence[Sequence[float]]) -> tuple[float, float, float]:
     """KUKA A, B, C (deg) of a rotation matrix r (rows): r = Rz(A) Ry(B) Rx(C).
 
     At B = +-90 deg only C - A (resp. C + A) is defined; the controller then reports A = 0.
@@ -88,7 +92,7 @@ def euler_zyx(r) -> tuple[float, float, float]:
     return a * _RAD, b * _RAD, c * _RAD
 
 
-def rotation_zyx(a: float, b: float, c: float):
+def rotation_zyx(a: float, b: float, c: float) -> tuple[tuple[float, float, float], ...]:
     """Rz(A) Ry(B) Rx(C) as rows (degrees in); the inverse of euler_zyx, for checks."""
     ca, sa = math.cos(a * _DEG), math.sin(a * _DEG)
     cb, sb = math.cos(b * _DEG), math.sin(b * _DEG)

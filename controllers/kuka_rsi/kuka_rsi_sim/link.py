@@ -7,6 +7,7 @@ import socket
 import time
 from collections import deque
 from collections.abc import Callable
+from typing import Any
 
 
 class FaultError(ValueError):
@@ -17,7 +18,7 @@ class Link:
     """Puts the controller's packets on the wire, or loses, drops, delays, duplicates and
     reorders them. Periodic faults count the packets the controller offers."""
 
-    def __init__(self, sock: socket.socket, on_sent: Callable[[int, float], None], log: Callable[[str], None]):
+    def __init__(self, sock: socket.socket, on_sent: Callable[[int, float], None], log: Callable[[str], None]) -> None:
         self._sock = sock
         self._on_sent = on_sent
         self._log = log
@@ -26,7 +27,7 @@ class Link:
         self.packets_sent = 0
         self.send_errors = 0
         self.stats = dict(lost_out=0, lost_in=0, dropped=0, delayed=0, duplicated=0, reordered=0)
-        self._queue: deque = deque()  # delayed packets: (due, packet, ipoc)
+        self._queue: deque[tuple[float, bytes, int]] = deque()  # delayed packets: (due, packet, ipoc)
         self._held: tuple[bytes, int] | None = None  # the first packet of a pair being swapped
         self.clear()
 
@@ -44,7 +45,7 @@ class Link:
         self._queue.clear()
         self._held = None
 
-    def set_faults(self, req: dict, now: float) -> None:
+    def set_faults(self, req: dict[str, Any], now: float) -> None:
         """Apply a fault request ({"lose_s": 0.3} ...); validated completely before any change."""
         known = {"lose_s", "drop_every", "delay_ms", "for_s", "duplicate_every", "reorder_every"}
         unknown = sorted(set(req) - known)
@@ -67,7 +68,7 @@ class Link:
             if v is not None:
                 setattr(self, k, v)
 
-    def describe(self, now: float) -> dict:
+    def describe(self, now: float) -> dict[str, Any]:
         return {
             "lose_s": round(max(0.0, self.lose_until - now), 3),
             "drop_every": self.drop_every,
@@ -135,7 +136,7 @@ class Link:
         self._on_sent(ipoc, time.monotonic())
 
 
-def _number(req: dict, key: str, minimum: float, exclusive: bool = False) -> float | None:
+def _number(req: dict[str, Any], key: str, minimum: float, exclusive: bool = False) -> float | None:
     if key not in req:
         return None
     v = req[key]
@@ -146,7 +147,7 @@ def _number(req: dict, key: str, minimum: float, exclusive: bool = False) -> flo
     return float(v)
 
 
-def _count(req: dict, key: str) -> int | None:
+def _count(req: dict[str, Any], key: str) -> int | None:
     if key not in req:
         return None
     v = req[key]

@@ -9,9 +9,9 @@ than an axis can move; the axes follow the command at most at rated speed.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 
-from .kinematics import Kinematics
+from .kinematics import Kinematics, Pose
 from .machine import Machine
 from .wire import AXES, RobWriter, Sen
 
@@ -36,7 +36,7 @@ class Rsi:
         start_pose: tuple[float, ...],
         writer: RobWriter,
         log: Callable[[str], None],
-    ):
+    ) -> None:
         self.machine = machine
         self.cycle_ms = cycle_ms
         self.sentype = sentype
@@ -67,17 +67,18 @@ class Rsi:
         self.replies_ok = 0
         self.max_ak_step = [0.0] * 6
         self.ipoc = 0  # IPOC of the last packet
-        self._fk_cache: dict[str, tuple] = {"rist": (None, None), "rsol": (None, None)}
+        self._fk_cache: dict[str, tuple[tuple[float, ...] | None, Pose | None]] = {
+            "rist": (None, None), "rsol": (None, None)}
 
     # ------------------------------------------------------------------ run control
-    def within_limits(self, q) -> str | None:
+    def within_limits(self, q: Sequence[float]) -> str | None:
         """None if q is inside the software limits, else what is wrong."""
         for n in range(6):
             if not self._lower[n] <= q[n] <= self._upper[n]:
                 return f"{AXES[n]} = {q[n]:g} is outside {self._lower[n]:g} .. {self._upper[n]:g}"
         return None
 
-    def move_to(self, pose) -> None:
+    def move_to(self, pose: Sequence[float]) -> None:
         """A PTP between runs (RSI off): the robot is simply there afterwards."""
         assert not self.running
         self.aipos = [float(v) for v in pose]
@@ -163,8 +164,7 @@ class Rsi:
         ak = [self.ak[n] if v is None else v for n, v in enumerate(sen.ak)]  # HOLDON per element
         for n in range(6):
             step = abs(ak[n] - self.ak[n])
-            if step > self.max_ak_step[n]:
-                self.max_ak_step[n] = step
+            self.max_ak_step[n] = max(self.max_ak_step[n], step)
         cmd = [0.0] * 6
         for n in range(6):  # AXISCORR clamps to its window, AXISCORRMON stops beyond it
             w = self.window[n]
@@ -196,14 +196,14 @@ class Rsi:
         if sen.stop:
             self.end_run("Stop from the PC", "pc")
 
-    def _pose(self, which: str, q: list) -> tuple:
+    def _pose(self, which: str, q: Sequence[float]) -> Pose:
         key = tuple(q)
         cached_q, cached_pose = self._fk_cache[which]
-        if cached_q != key:  # a robot standing still costs no FK
+        if cached_q != key or cached_pose is None:  # a robot standing still costs no FK
             cached_pose = self._kin.pose(key)
             self._fk_cache[which] = (key, cached_pose)
         return cached_pose
 
 
-def _fmt(q) -> str:
+def _fmt(q: Iterable[float]) -> str:
     return " ".join(f"{v:.4f}" for v in q)

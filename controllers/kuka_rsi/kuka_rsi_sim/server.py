@@ -1,4 +1,6 @@
-"""The controller's main loop: its own IPO clock, the RSI UDP client, the KRL program's
+"""The simulated KR C4's main loop: IPO clock, RSI UDP client, KRL run loop, control channel.
+
+The controller's main loop: its own IPO clock, the RSI UDP client, the KRL program's
 run loop, and a TCP control channel for tests and operators.
 
 One thread: every tick sleeps (in select) until the absolute deadline on the monotonic
@@ -15,7 +17,9 @@ import socket
 import sys
 import time
 from array import array
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from .link import FaultError, Link
 from .machine import Machine
@@ -42,7 +46,7 @@ class Options:
     restart_delay: float
     auto_ack: float | None
     eipos: bool
-    faults: dict
+    faults: dict[str, float]
     vanish_s: float | None
 
 
@@ -56,7 +60,7 @@ def log(msg: str) -> None:
 
 
 class Simulator:
-    def __init__(self, opts: Options):
+    def __init__(self, opts: Options) -> None:
         self.opts = opts
         self.period = opts.cycle_ms / 1000.0
         self.rsi = Rsi(
@@ -118,7 +122,10 @@ class Simulator:
 
     @property
     def control_address(self) -> tuple[str, int]:
-        return self.ctl.getsockname()[:2]
+        host: str
+        port: int
+        host, port = self.ctl.getsockname()[:2]
+        return host, port
 
     # ------------------------------------------------------------------ the loop
     def serve(self) -> None:
@@ -224,7 +231,7 @@ class Simulator:
         if self.sent_ipoc[i] == ipoc and self.sent_t[i] == 0.0:
             self.sent_t[i] = t
 
-    def _on_udp(self, sock) -> None:
+    def _on_udp(self, sock: socket.socket) -> None:
         while True:
             try:
                 data, _ = sock.recvfrom(65535)
@@ -263,15 +270,14 @@ class Simulator:
     def _record_rtt(self, dt: float) -> None:
         self.rtt[self.rtt_n % RTT_WINDOW] = dt
         self.rtt_n += 1
-        if dt > self.rtt_max:
-            self.rtt_max = dt
+        self.rtt_max = max(self.rtt_max, dt)
 
     def _reset_run_stats(self) -> None:
         self.rtt_n = 0
         self.rtt_max = 0.0
 
     # ------------------------------------------------------------------ control channel
-    def _on_accept(self, sock) -> None:
+    def _on_accept(self, sock: socket.socket) -> None:
         try:
             conn, _ = sock.accept()
         except (BlockingIOError, InterruptedError):
@@ -281,7 +287,7 @@ class Simulator:
         buf = bytearray()
         self.sel.register(conn, selectors.EVENT_READ, lambda c: self._on_control(c, buf))
 
-    def _on_control(self, conn, buf: bytearray) -> None:
+    def _on_control(self, conn: socket.socket, buf: bytearray) -> None:
         try:
             data = conn.recv(65536)
         except (BlockingIOError, InterruptedError):
@@ -309,7 +315,7 @@ class Simulator:
             if self.quit:
                 return
 
-    def _reply(self, conn, reply: dict) -> None:
+    def _reply(self, conn: socket.socket, reply: dict[str, Any]) -> None:
         data = (json.dumps(reply) + "\n").encode()
         try:
             conn.setblocking(True)  # replies are small; a client that reads nothing is its problem
@@ -321,7 +327,7 @@ class Simulator:
             with contextlib.suppress(OSError):
                 conn.setblocking(False)
 
-    def handle(self, line: bytes) -> dict:
+    def handle(self, line: bytes) -> dict[str, Any]:
         try:
             req = json.loads(line)
         except (ValueError, UnicodeDecodeError) as e:
@@ -337,16 +343,16 @@ class Simulator:
         except (FaultError, ValueError) as e:
             return {"ok": False, "error": str(e)}
 
-    def _cmd_status(self, req: dict, now: float) -> dict:
+    def _cmd_status(self, req: dict[str, Any], now: float) -> dict[str, Any]:
         _no_fields("status", req)
         return self.status(now)
 
-    def _cmd_fault(self, req: dict, now: float) -> dict:
+    def _cmd_fault(self, req: dict[str, Any], now: float) -> dict[str, Any]:
         self.link.set_faults(req, now)
         log(f"fault injected: {req}")
         return {"ok": True, "faults": self.link.describe(now)}
 
-    def _cmd_clear(self, req: dict, now: float) -> dict:
+    def _cmd_clear(self, req: dict[str, Any], now: float) -> dict[str, Any]:
         _no_fields("clear", req)
         self.link.clear()
         if self.vanished:
@@ -354,7 +360,7 @@ class Simulator:
         log("faults cleared")
         return {"ok": True, "faults": self.link.describe(now)}
 
-    def _cmd_restart(self, req: dict, now: float) -> dict:
+    def _cmd_restart(self, req: dict[str, Any], now: float) -> dict[str, Any]:
         _only_fields("restart", req, {"start"})
         start = req.get("start")
         if start is not None:
@@ -380,7 +386,7 @@ class Simulator:
         self._start_run(now)
         return {"ok": True, "start": [round(v, 6) for v in self.rsi.aipos]}
 
-    def _cmd_vanish(self, req: dict, now: float) -> dict:
+    def _cmd_vanish(self, req: dict[str, Any], now: float) -> dict[str, Any]:
         _only_fields("vanish", req, {"for_s"})
         for_s = req.get("for_s")
         if for_s is not None and (
@@ -398,7 +404,7 @@ class Simulator:
         log("vanished " + ("until restart" if for_s is None else f"for {for_s:g} s"))
         return {"ok": True}
 
-    def _cmd_quit(self, req: dict, now: float) -> dict:
+    def _cmd_quit(self, req: dict[str, Any], now: float) -> dict[str, Any]:
         _no_fields("quit", req)
         self.quit = True
         log("quit requested")
@@ -420,7 +426,7 @@ class Simulator:
         log(f"switched on again ({why})")
         self._start_run(now)
 
-    def status(self, now: float) -> dict:
+    def status(self, now: float) -> dict[str, Any]:
         rsi = self.rsi
         state = "vanished" if self.vanished else "running" if rsi.running else "stopped"
         n = min(self.rtt_n, RTT_WINDOW)
@@ -463,15 +469,15 @@ class Simulator:
         }
 
 
-def _r(q) -> list:
+def _r(q: Iterable[float]) -> list[float]:
     return [round(v, 6) for v in q]
 
 
-def _no_fields(cmd: str, req: dict) -> None:
+def _no_fields(cmd: str, req: dict[str, Any]) -> None:
     _only_fields(cmd, req, set())
 
 
-def _only_fields(cmd: str, req: dict, allowed: set) -> None:
+def _only_fields(cmd: str, req: dict[str, Any], allowed: set[str]) -> None:
     extra = sorted(set(req) - allowed)
     if extra:
         raise ValueError(f"{cmd}: unexpected field(s) {extra}" + (f"; allowed: {sorted(allowed)}" if allowed else ""))

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
@@ -23,7 +24,7 @@ AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 class RobWriter:
     """Formats the controller's packet; the template is built once, each cycle is one `%`."""
 
-    def __init__(self, precision: int = 4, eipos: bool = False):
+    def __init__(self, precision: int = 4, eipos: bool = False) -> None:
         f = f"%.{precision}f"
         cart = " ".join(f'{k}="{f}"' for k in "XYZABC")
         axes = " ".join(f'{k}="{f}"' for k in AXES)
@@ -35,7 +36,8 @@ class RobWriter:
             f'{ext}<Delay D="%d"/><IPOC>%d</IPOC></Rob>'
         )
 
-    def packet(self, rist, rsol, aipos, aspos, delay: int, ipoc: int) -> bytes:
+    def packet(self, rist: Sequence[float], rsol: Sequence[float], aipos: Sequence[float], aspos: Sequence[float],
+               delay: int, ipoc: int) -> bytes:
         return (self._template % (*rist, *rsol, *aipos, *aspos, delay, ipoc)).encode("ascii")
 
 
@@ -47,7 +49,7 @@ class SenError(ValueError):
 class Sen:
     type: str | None  # the Type attribute (None: missing)
     ipoc: int
-    ak: list  # six floats, None where the answer has no value for that axis
+    ak: list[float | None]  # six floats, None where the answer has no value for that axis
     stop: bool
 
 
@@ -72,7 +74,7 @@ def parse_sen(data: bytes) -> Sen:
         ipoc = int(ipoc_el.text.strip())
     except ValueError:
         raise SenError(f"IPOC {ipoc_el.text.strip()!r} is not an integer") from None
-    ak: list = [None] * 6
+    ak: list[float | None] = [None] * 6
     ak_el = root.find("AK")
     if ak_el is not None:
         for key, value in ak_el.attrib.items():

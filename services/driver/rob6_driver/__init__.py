@@ -1,1 +1,1 @@
-"""rob6 driver service."""
+"""rob6 driver service: owns the robot (motion core, limit monitor, links to the plant)."""

@@ -1,4 +1,6 @@
-"""rob6-driver: the robot, simulated (``--link sim``, the default), a KUKA KR C4 over
+"""rob6-driver command line: check the link options and run the driver service.
+
+rob6-driver: the robot, simulated (``--link sim``, the default), a KUKA KR C4 over
 RSI (``--link rsi``: this PC is the UDP server the controller's RSI context sends to), or
 an Adept V+ controller over ROS-Industrial simple_message (``--link simple_message``, or
 ``adept``: this PC is the client of the controller's motion and state ports), or a Kawasaki
@@ -6,10 +8,13 @@ controller running rob6's AS program (``--link kawasaki``: this PC is the client
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import click
 
 from rob6 import service
-from rob6.config import LINKS, bus_options
+from rob6.bus import Bus
+from rob6.config import LINKS, BusSettings, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
 
@@ -62,8 +67,9 @@ from .service import DriverService
 @click.option("--kas-period", envvar="ROB6_KAS_PERIOD", default=DEFAULT_KAS_PERIOD_S, show_default=True,
               type=float, help="kawasaki: seconds between streamed points, rounded to controller cycles "
                                "[env ROB6_KAS_PERIOD].")
-def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_motion_port, sm_state_port,
-         sm_io_port, sm_byte_order, sm_period, kas_host, kas_port, kas_period):
+def main(settings: BusSettings, log_level: str, dummy: bool, link: str, rsi_listen: str, rsi_sentype: str,
+         sm_host: str, sm_motion_port: int, sm_state_port: int, sm_io_port: int, sm_byte_order: str,
+         sm_period: float, kas_host: str, kas_port: int, kas_period: float) -> None:
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
     sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,
@@ -103,7 +109,7 @@ def main(settings, log_level, dummy, link, rsi_listen, rsi_sentype, sm_host, sm_
         except ValueError as exc:
             service.fail("driver", str(exc), EXIT_REFUSED)
 
-    def setup(bus):
+    def setup(bus: Bus) -> Callable[[], None]:
         try:
             driver = DriverService(bus, robot, dummy, link=link, rsi_listen=rsi_listen, rsi_sen_type=rsi_sentype,
                                    sm=sm, kas=kas)

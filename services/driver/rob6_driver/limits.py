@@ -32,10 +32,12 @@ deg per 12 ms cycle and deg per cycle^2 with ``rob6.units``).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from rob6.robots import RobotModel
 from rob6.units import JERK_RAMP_S, accel_si, jerk_si, speed_si
@@ -64,7 +66,8 @@ class Limits:
     max_change: np.ndarray  # deg: an Alter target's largest distance from where the robot is
 
     @classmethod
-    def from_protocol(cls, turn_min, turn_max, max_speed, max_accel, max_change,
+    def from_protocol(cls, turn_min: npt.ArrayLike, turn_max: npt.ArrayLike, max_speed: Sequence[float],
+                      max_accel: Sequence[float], max_change: npt.ArrayLike,
                       jerk_ramp_s: float = JERK_RAMP_S) -> Limits:
         a = accel_si(max_accel)
         return cls(np.asarray(turn_min, float).copy(), np.asarray(turn_max, float).copy(),
@@ -96,7 +99,7 @@ class LimitMonitor:
     Not thread-safe on its own: the motion core calls it under its lock.
     """
 
-    def __init__(self, limits: Limits, dt: float):
+    def __init__(self, limits: Limits, dt: float) -> None:
         self.dt = float(dt)
         self.enforced = limits.copy()
         # 0: speed/acceleration enforced as set; -1: wider, waiting for the state to get
@@ -173,7 +176,8 @@ class LimitMonitor:
         if self.outside_turn(q_new, q) is not None:
             v = np.clip(np.zeros_like(q), v_lo, v_hi)
             q_new = q + v * self.dt
-        return q_new
+        out: np.ndarray = q_new
+        return out
 
     def brake(self, q: np.ndarray, v_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One cycle of the hardest admissible brake: (next setpoint, its velocity)."""
@@ -259,16 +263,18 @@ def turn_bad(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, start: np.ndarray) -
     return int(k), int(j)
 
 
-def within_lo(qmin, lo, start) -> np.ndarray:
+def within_lo(qmin: np.ndarray, lo: np.ndarray, start: np.ndarray) -> np.ndarray:
     """Per joint: does a motion from ``start`` reaching down to ``qmin`` respect ``lo``?"""
-    return np.where(start <= lo, qmin >= start - OUTSIDE_TOL, qmin > lo)
+    ok: np.ndarray = np.where(start <= lo, qmin >= start - OUTSIDE_TOL, qmin > lo)
+    return ok
 
 
-def within_hi(qmax, hi, start) -> np.ndarray:
+def within_hi(qmax: np.ndarray, hi: np.ndarray, start: np.ndarray) -> np.ndarray:
     """Per joint: does a motion from ``start`` reaching up to ``qmax`` respect ``hi``?"""
-    return np.where(start >= hi, qmax <= start + OUTSIDE_TOL, qmax < hi)
+    ok: np.ndarray = np.where(start >= hi, qmax <= start + OUTSIDE_TOL, qmax < hi)
+    return ok
 
 
-def within(qmin, qmax, lo, hi, start) -> bool:
+def within(qmin: npt.ArrayLike, qmax: npt.ArrayLike, lo: np.ndarray, hi: np.ndarray, start: np.ndarray) -> bool:
     """Does a motion from ``start`` spanning ``qmin``..``qmax`` stay inside the turn limits?"""
     return bool(np.all(within_lo(np.asarray(qmin), lo, start) & within_hi(np.asarray(qmax), hi, start)))

@@ -39,7 +39,7 @@ class CycleRunner(Generic[S]):
     def __init__(self, step: Callable[[], S], period_s: float,
                  publish: Callable[[S], None] | None = None, *,
                  clock: Callable[[], float] = time.monotonic,
-                 name: str = "rob6-cycle", late_tolerance_s: float | None = None):
+                 name: str = "rob6-cycle", late_tolerance_s: float | None = None) -> None:
         if period_s <= 0:
             raise ValueError("period must be > 0")
         self.step = step
@@ -73,7 +73,7 @@ class CycleRunner(Generic[S]):
         self.start()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     # ------------------------------------------------------------------ the loop
@@ -84,8 +84,7 @@ class CycleRunner(Generic[S]):
         while not self._stop.is_set():
             begin = self.clock()
             lateness = begin - deadline
-            if lateness > stats.max_lateness_s:
-                stats.max_lateness_s = lateness
+            stats.max_lateness_s = max(stats.max_lateness_s, lateness)
             if lateness > self.late_tolerance_s:
                 stats.late += 1
             try:
@@ -98,8 +97,7 @@ class CycleRunner(Generic[S]):
             stats.cycles += 1
             now = self.clock()
             work = now - begin
-            if work > stats.max_work_s:
-                stats.max_work_s = work
+            stats.max_work_s = max(stats.max_work_s, work)
             deadline += period
             if now > deadline + period:
                 # overran past the next deadline: skip the ticks we cannot keep

@@ -1,4 +1,6 @@
-"""The motion core of the driver, independent of the robot it drives: state at the
+"""The driver's motion core: trajectories, Alter, stops and brakes, every setpoint through the limit monitor.
+
+The motion core of the driver, independent of the robot it drives: state at the
 controller cycle, trajectory execution, Alter (real-time target) mode with Ruckig
 online generation, watchdog and stops; every setpoint passes the independent limit
 monitor of ``limits.py`` (defence in depth) before it is applied.
@@ -54,11 +56,14 @@ import threading
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import ruckig
 
 from rob6.deadlines import stop_s
+from rob6.errors import RefusedError
 from rob6.robots import RobotModel, get_robot
 from rob6.units import accel_si, jerk_si, speed_si
 
@@ -108,7 +113,7 @@ class Motion:
     ``loop.call_soon_threadsafe`` to hand over to asyncio).
     """
 
-    def __init__(self, kind: str):
+    def __init__(self, kind: str) -> None:
         self.kind = kind
         self.done = threading.Event()
         self.ok: bool | None = None
@@ -143,7 +148,7 @@ class Motion:
         return f"Motion({self.kind}, done={self.done.is_set()}, ok={self.ok}, reason={self.reason!r})"
 
 
-class Offline(Exception):
+class Offline(RefusedError):
     """A motion command while the plant cannot be reached (the message says why)."""
 
 
@@ -152,9 +157,9 @@ class MotionCore:
     """The robot's motion. Thread-safe: commands from any thread, ``step()`` from one."""
 
     def __init__(self, robot: RobotModel | str, dt: float | None = None, *, dummy: bool = False,
-                 q0: Sequence[float] | None = None, limits: Limits | None = None,
+                 q0: npt.ArrayLike | None = None, limits: Limits | None = None,
                  alter_timeout_s: float = 0.5, offline: str = "",
-                 on_event: Callable[[dict], None] | None = None, max_violations: int = 1000):
+                 on_event: Callable[[dict[str, Any]], None] | None = None, max_violations: int = 1000) -> None:
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
         self._offline = offline  # why the plant cannot be reached ("": it can)
         self.dt = float(dt if dt is not None else self.robot.cycle_s)
@@ -250,14 +255,14 @@ class MotionCore:
             return self._stop_motion
 
     # ------------------------------------------------------------------ events
-    def _event(self, **event) -> None:
+    def _event(self, **event: Any) -> None:
         if self.on_event is not None:
             event.setdefault("t", self.t)
             event.setdefault("cycle", self._cycle)
             cb = self.on_event
             self._deferred.append(lambda: cb(event))
 
-    def _violation(self, kind, joint, value, limit, source, message) -> None:
+    def _violation(self, kind: str, joint: int, value: float, limit: float, source: str, message: str) -> None:
         v = Violation(self.t, self._cycle, kind, joint, float(value), float(limit), source, message)
         self.violations.append(v)
         self.violation_count += 1
@@ -288,7 +293,7 @@ class MotionCore:
             self._abort(reason)
         self._run_deferred()
 
-    def online(self, q_actual, reason: str = "resynchronized with the robot") -> None:
+    def online(self, q_actual: npt.ArrayLike, reason: str = "resynchronized with the robot") -> None:
         """The plant answers again: continue from ``q_actual`` (deg), at rest, never from
         where an interrupted motion would have been. A motion still running (the plant
         restarted under it) ends with ``reason``. Alter mode stays on, holding here."""
@@ -318,8 +323,9 @@ class MotionCore:
         self._motion = self._stop_motion = None
 
     # ------------------------------------------------------------------ limits
-    def set_limits(self, turn_min=None, turn_max=None, max_speed=None, max_accel=None,
-                   max_change=None) -> tuple[bool, str]:
+    def set_limits(self, turn_min: npt.ArrayLike | None = None, turn_max: npt.ArrayLike | None = None,
+                   max_speed: Sequence[float] | None = None, max_accel: Sequence[float] | None = None,
+                   max_change: npt.ArrayLike | None = None) -> tuple[bool, str]:
         """New limits (protocol units; None = unchanged). See the module doc for changes in motion."""
         with self._lock:
             new = self._lim.copy()
@@ -371,7 +377,7 @@ class MotionCore:
                         "turn limits changed under a motion that crosses them: stopping; "
                         "monitor bounds widened to contain the stop")
 
-    def _future_extrema(self):
+    def _future_extrema(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(min, max) per joint of the rest of the current motion, or None at rest."""
         if self._mode == "trajectory" and self._samples is not None:
             rest = self._samples[self._k:]
@@ -391,7 +397,8 @@ class MotionCore:
         return None
 
     # ------------------------------------------------------------------ trajectory mode
-    def execute(self, q, dt: float | None = None, qd=None, qdd=None, *, check: bool = True) -> Motion:
+    def execute(self, q: npt.ArrayLike, dt: float | None = None, qd: npt.ArrayLike | None = None,
+                qdd: npt.ArrayLike | None = None, *, check: bool = True) -> Motion:
         """Run a sampled trajectory (rows = cycles, row 0 = the current position).
 
         Returns a Motion at once; it completes when the last sample is reached, or with
@@ -429,7 +436,8 @@ class MotionCore:
         self._run_deferred()
         return motion
 
-    def _check_execute(self, q, dt, qd, qdd, check: bool = True) -> str:
+    def _check_execute(self, q: npt.ArrayLike, dt: float | None, qd: npt.ArrayLike | None,
+                       qdd: npt.ArrayLike | None, check: bool = True) -> str:
         if self._mode != "idle" or self._alter or self._gen is not None:
             return f"robot busy ({'alter mode' if self._alter else self._mode})"
         if dt is not None and abs(float(dt) - self.dt) > 1e-12:
@@ -495,7 +503,7 @@ class MotionCore:
         self._run_deferred()
         return motion
 
-    def set_target(self, q, synchronized: bool | None = None, relative: bool = False) -> tuple[bool, str]:
+    def set_target(self, q: npt.ArrayLike, synchronized: bool | None = None, relative: bool = False) -> tuple[bool, str]:
         """New Alter target (deg), any time; refused outside strict turn limits or further
         than max change from where the robot is. ``relative``: ``q`` is an offset from there.
 
@@ -587,7 +595,7 @@ class MotionCore:
         return motion
 
     # ------------------------------------------------------------------ generator
-    def _gen_input(self, lim: Limits, target: np.ndarray | None):
+    def _gen_input(self, lim: Limits, target: np.ndarray | None) -> ruckig.InputParameter:
         """Ruckig input from the exact current state; axes that may not move are held."""
         inp = self._inp
         q, v, a = self._q, self._qd, self._qdd
@@ -627,7 +635,7 @@ class MotionCore:
             inp.target_position = target.tolist()
         return inp
 
-    def _calculate(self, inp) -> ruckig.Trajectory | None:
+    def _calculate(self, inp: ruckig.InputParameter) -> ruckig.Trajectory | None:
         traj = ruckig.Trajectory(N_JOINTS)
         try:
             result = self._otg.calculate(inp, traj)
@@ -828,14 +836,15 @@ class MotionCore:
 
 
 # ====================================================================== helpers
-def _six(values) -> np.ndarray:
+def _six(values: npt.ArrayLike) -> np.ndarray:
     arr = np.asarray(values, float).reshape(-1)
     if arr.shape != (N_JOINTS,) or not np.all(np.isfinite(arr)):
         raise ValueError("expected 6 finite values")
     return arr
 
 
-def _consistent_state(v, a, vmax, amax, jmax):
+def _consistent_state(v: np.ndarray, a: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+                      jmax: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Velocity/acceleration made reachable within the limits (for estimated states).
 
     |v| <= vmax, |a| <= amax, and ramping the acceleration to 0 at max jerk must not
@@ -876,8 +885,9 @@ def trajectory_extrema(traj: ruckig.Trajectory, t_from: float = 0.0) -> tuple[np
     valid = (dur > 0) & (ts + dur >= t_from)
     tau0 = np.clip(t_from - ts, 0.0, dur)
 
-    def pos(tau):
-        return p + tau * (v + tau * (a * 0.5 + tau * j / 6.0))
+    def pos(tau: np.ndarray) -> np.ndarray:
+        at: np.ndarray = p + tau * (v + tau * (a * 0.5 + tau * j / 6.0))
+        return at
 
     cands = [np.where(valid, pos(tau0), np.nan), np.where(valid, pos(dur), np.nan)]
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from typing import Any
 
 from rob6.bus import Bus, Context
 from rob6.deadlines import arm_s
@@ -65,11 +66,11 @@ SIGNAL_PUBLISH_WAIT_S = 0.5
 class DriverService:
     def __init__(self, bus: Bus, robot: RobotModel, dummy: bool, alter_timeout_s: float = 0.5, *,
                  link: str = "sim", rsi_listen: str = DEFAULT_LISTEN, rsi_sen_type: str = DEFAULT_SEN_TYPE,
-                 sm: AdeptSettings | None = None, kas: KawasakiSettings | None = None):
+                 sm: AdeptSettings | None = None, kas: KawasakiSettings | None = None) -> None:
         self.bus = bus
         self.robot = robot
         self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
-        self._published: tuple | None = None  # the last published state without t and cycle
+        self._published: tuple[object, ...] | None = None  # the last published state without t and cycle
         self._published_t = 0.0
         self._published_outputs: list[int] = []  # in the last published state
         self._outputs_published = threading.Condition()
@@ -114,17 +115,17 @@ class DriverService:
         # cache for a recorder that was away
         self.bus.trace("driver/link", event)
 
-    def _on_event(self, event: dict) -> None:
+    def _on_event(self, event: dict[str, Any]) -> None:
         if event.get("type") == "violation":
             log.error("limit monitor: %s", event.get("message"))
         else:
             log.info("driver event: %s", event)
 
     # ---- operations ----------------------------------------------------------
-    def ping(self, _req: Empty, _ctx) -> PingReply:
+    def ping(self, _req: Empty, _ctx: Context) -> PingReply:
         return PingReply(robot_time=self.core.t, wall_time=time.time())
 
-    def state(self, _req: Empty, _ctx) -> JointState:
+    def state(self, _req: Empty, _ctx: Context) -> JointState:
         return self.joint_state(self.core.state())
 
     def execute(self, req: ExecuteRequest, ctx: Context) -> ExecuteReply:
@@ -152,7 +153,7 @@ class DriverService:
         return ExecuteReply(ok=bool(motion.ok), reason=motion.reason or "", error=motion.error,
                             state=self.joint_state(final))
 
-    def limits(self, req: LimitsUpdate, _ctx) -> Ack:
+    def limits(self, req: LimitsUpdate, _ctx: Context) -> Ack:
         ok, reason = self.core.set_limits(req.turn_min, req.turn_max, req.max_speed, req.max_accel,
                                           req.max_change)
         return Ack(ok=ok, reason=reason)
@@ -177,7 +178,7 @@ class DriverService:
             return Ack(ok=ok, reason=reason)
         return self._stopped(self.core.disable_alter(), ctx)  # done once the robot is at rest
 
-    def alter_target(self, req: AlterTarget, _ctx) -> Ack:
+    def alter_target(self, req: AlterTarget, _ctx: Context) -> Ack:
         try:
             ok, reason = self.core.set_target(req.q, req.synchronized, req.relative)
         except Offline as exc:
@@ -215,7 +216,7 @@ class DriverService:
             self._outputs_published.wait_for(lambda: self._published_outputs == switched, SIGNAL_PUBLISH_WAIT_S)
         return Ack()
 
-    def link_status(self, req: LinkQuery, _ctx) -> LinkStatus:
+    def link_status(self, req: LinkQuery, _ctx: Context) -> LinkStatus:
         return self.link.status(reset=req.reset)
 
     def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:

@@ -1,1 +1,1 @@
-"""rob6 gateway service."""
+"""rob6 gateway service: the rob6server text protocol on TCP, in front of the bus."""

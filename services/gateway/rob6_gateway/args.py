@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import re
 
+from rob6.errors import InputError
 from rob6.status import parse_status
 
 WHITESPACE = " \t\r\n\v\f"
@@ -25,7 +26,7 @@ _INTEGER = re.compile(r"[+-]?\d+")
 
 
 
-class ParseError(Exception):
+class ParseError(InputError):
     """A malformed argument; ``what`` is the original's word (joints, matrix, status, value)."""
 
     def __init__(self, what: str):

@@ -1,4 +1,6 @@
-"""What the gateway keeps between commands: the motion configuration and each
+"""What the gateway keeps between commands: the motion configuration and each session's state.
+
+What the gateway keeps between commands: the motion configuration and each
 client session's own state.
 
 The planner publishes the motion configuration whenever it changes; the gateway

@@ -1,4 +1,4 @@
-"""rob6 gripper service.
+"""rob6 gripper service: the Adept's serial gripper, or its simulation, on the bus.
 
 Library modules (the service wraps them):
 

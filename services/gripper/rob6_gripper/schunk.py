@@ -1,4 +1,6 @@
-"""The serial client of a real Schunk PG/PR/PRL module: :class:`SchunkGripper`, the
+"""The gripper backend of a real Schunk PG/PR/PRL module on a serial port (SMP over pyserial).
+
+The serial client of a real Schunk PG/PR/PRL module: :class:`SchunkGripper`, the
 gripper backend that speaks the Schunk Motion Protocol (:mod:`rob6_gripper.smp`, whose
 docstring gives the sources [M], [G], [P] and the frame format) on a serial port (pyserial).
 

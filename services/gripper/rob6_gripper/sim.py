@@ -58,6 +58,8 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from rob6.errors import RefusedError
+
 from .backend import (
     DEFAULT_TIMEOUT,
     ERROR,
@@ -111,7 +113,7 @@ class GripperParams:
         return self.stroke_min - EPS <= w <= self.stroke_max + EPS
 
 
-class GripperError(Exception):
+class GripperError(RefusedError):
     """A command the model refuses (the message is the user-facing reason)."""
 
 

@@ -1,4 +1,6 @@
-"""Schunk Motion Protocol (SMP) over RS232: constants, CRC, frames (encoder and an
+"""Schunk Motion Protocol (SMP) without I/O: constants, CRC, frames, decoder, payloads, errors.
+
+Schunk Motion Protocol (SMP) over RS232: constants, CRC, frames (encoder and an
 incremental decoder), payloads and errors. No I/O here: the serial client that speaks it
 to a real module is :class:`rob6_gripper.schunk.SchunkGripper`, the fake module of the
 tests is :mod:`rob6_gripper.fake_device`.
@@ -59,6 +61,8 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterable
 from dataclasses import dataclass
+
+from rob6.errors import LinkError
 
 # ---------------------------------------------------------------- constants
 GROUP_TO_MODULE = 0x05
@@ -372,7 +376,7 @@ def state_payload(state: ModuleState, mode: int = 0x07) -> bytes:
 
 
 # ---------------------------------------------------------------- errors
-class SmpError(Exception):
+class SmpError(LinkError):
     """Any failure talking to the module; the text is the user-facing reason."""
 
 

@@ -1,4 +1,4 @@
-"""rob6 kinematics service.
+"""rob6 kinematics service: stateless FK/IK and configuration selection.
 
 Library (no networking):
 

@@ -16,7 +16,7 @@ from .service import KinematicsService
 def main(settings: BusSettings, log_level: str) -> None:
     """Serve FK/IK for one robot type (several replicas may serve the same robot)."""
     kinematics = KinematicsService(get_robot(settings.robot))
-    service.run(settings, "kinematics", log_level, lambda bus: kinematics.serve(bus))
+    service.run(settings, "kinematics", log_level, kinematics.serve)
 
 
 if __name__ == "__main__":

@@ -234,7 +234,8 @@ class Kinematics:
         hi = self._hi if turn_max is None else _floats6(turn_max)
         mc = self._mc if max_change is None else _floats6(max_change)
         out: list[list[float] | None] = []
-        for q in raw:
+        for branch in raw:
+            q = branch
             if q is not None:
                 q = [v - 360.0 if v >= hi[j] else (v + 360.0 if v <= lo[j] else v) for j, v in enumerate(q)]
                 if not all(lo[j] < q[j] < hi[j] and not abs(q[j] - cur[j]) > mc[j] for j in range(6)):

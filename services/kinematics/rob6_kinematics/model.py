@@ -7,6 +7,8 @@ itself works in radians and metres).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
@@ -22,8 +24,6 @@ class PinModel:
 
     def __init__(self, robot: RobotModel, geometry: Geometry | None = None):
         if geometry is not None and geometry != Geometry.of(robot):
-            from dataclasses import replace
-
             robot = replace(robot, **{k: getattr(geometry, k) for k in ("d1", "a1", "a2", "a3", "d4", "d6")})
         self.robot = robot
         self.urdf = generate(robot)

@@ -412,7 +412,7 @@ def _dh_rot(th: float, ca: float, sa: float) -> list[list[float]]:
 
 def _fma_x(a: float, b: float, c: float) -> float:
     """fma(a, b, c); a*b + c where the product is exact (structural 0 and +-1)."""
-    if b == 0.0 or b == 1.0 or b == -1.0 or a == 0.0 or a == 1.0 or a == -1.0:
+    if b in (0.0, 1.0, -1.0) or a in (0.0, 1.0, -1.0):
         return a * b + c
     return _fma(a, b, c)
 
@@ -436,9 +436,8 @@ def _wrist(W: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
     r33 = W[2][2]
     sing = abs(r13) < WRIST_SING_EPS and abs(r23) < WRIST_SING_EPS
     out = []
-    for t4 in (math.atan2(-r23, -r13), math.atan2(r23, r13)):
-        if sing:
-            t4 = 0.0
+    for branch in (math.atan2(-r23, -r13), math.atan2(r23, r13)):
+        t4 = 0.0 if sing else branch
         c4, s4 = math.cos(t4), math.sin(t4)
         t5 = math.atan2(-(c4 * r13 + s4 * r23), r33)
         m20 = s4 * r11 - c4 * r21

@@ -1,1 +1,1 @@
-"""rob6 planner service."""
+"""rob6 planner service: limits, configuration choice and Ruckig trajectories."""

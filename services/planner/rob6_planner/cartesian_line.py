@@ -1,4 +1,6 @@
-"""The straight Cartesian line of a LIN move: position interpolated linearly, orientation
+"""The geometry of a LIN move's straight line: linear position, quaternion slerp orientation.
+
+The straight Cartesian line of a LIN move: position interpolated linearly, orientation
 by quaternion slerp (``rob6.rotations`` gives the quaternions, scalar first)."""
 
 from __future__ import annotations

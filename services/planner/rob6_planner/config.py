@@ -336,5 +336,8 @@ class MotionSettings:
         return (isinstance(other, MotionSettings) and self.robot.name == other.robot.name
                 and self.to_dict() == other.to_dict())
 
+    # mutable (the Set* commands change it), so unhashable, as Python makes any class with __eq__
+    __hash__ = None  # type: ignore[assignment]  # typeshed declares object.__hash__ a method
+
     def __repr__(self) -> str:
         return f"MotionSettings({self.robot.name!r}, {self.to_dict()!r})"

@@ -1,4 +1,6 @@
-"""LIN planning: a straight Cartesian line solved into joints, checked (reachability, turn
+"""LIN planning: the straight line solved into joints, checked, and timed by one Ruckig profile.
+
+LIN planning: a straight Cartesian line solved into joints, checked (reachability, turn
 limits, max change, configuration, jumps, singularities) and timed by one jerk-limited
 Ruckig profile of the path parameter (``plan_lin``)."""
 

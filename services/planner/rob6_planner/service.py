@@ -1,4 +1,6 @@
-"""The motion planner service: owns the motion configuration, validates and plans every
+"""The planner service: owns the motion configuration, plans every motion and hands it to the driver.
+
+The motion planner service: owns the motion configuration, validates and plans every
 motion with Ruckig, and hands sampled trajectories (or Alter targets) to the driver.
 
 Configuration choice for Cartesian targets is the kinematics service's ``select``
@@ -18,6 +20,7 @@ import numpy as np
 
 from rob6.bus import Bus, BusError, Context
 from rob6.deadlines import PLAN_LIN_S, PLAN_PTP_S, QUICK_S
+from rob6.errors import RefusedError
 from rob6.messages import (
     Ack,
     AlterMode,
@@ -70,7 +73,7 @@ BUSY = {
 LIMIT_FIELDS: tuple[Literal["speed", "accel", "turn_min", "turn_max", "max_change"], ...] = ("speed", "accel", "turn_min", "turn_max", "max_change")
 
 
-class MotionRefused(Exception):
+class MotionRefused(RefusedError):
     """A motion refused before it started (the client gets ``false``)."""
 
 

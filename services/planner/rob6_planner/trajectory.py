@@ -1,4 +1,6 @@
-"""Trajectory generation with Ruckig: joint limits, sampling Ruckig's profiles at the
+"""Joint-space trajectories with Ruckig: limits, sampling at the driver cycle, target checks, PTP.
+
+Trajectory generation with Ruckig: joint limits, sampling Ruckig's profiles at the
 driver cycle, target checks and PTP (joint space) planning. LIN (the Cartesian straight
 line) builds on it and this module knows nothing of it: ``lin_planner`` (checks and time
 law, ``plan_lin(planner, ...)``) and ``cartesian_line`` (the line's geometry).

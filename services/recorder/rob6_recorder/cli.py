@@ -20,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -225,8 +226,6 @@ def replay_joints_cmd(file: str, speed: float, topic: str) -> None:
 @click.option("--exit-at-end", is_flag=True, help="Stop serving at the end (scripts, tests).")
 def play(file: str, port: int, bind: str, speed: float, paused: bool, loop: bool, exit_at_end: bool) -> None:
     """Play a recording into the live view (Foxglove WebSocket), seekable from Foxglove."""
-    import signal
-
     from .playback import play as make_player
 
     if speed <= 0:

@@ -1,4 +1,6 @@
-"""The Foxglove channels derived from each joint state, and when: per-link ``/tf`` from the
+"""The Foxglove channels derived from each joint state (/tf, /flange), and when they are written.
+
+The Foxglove channels derived from each joint state, and when: per-link ``/tf`` from the
 URDF and, with a forward-kinematics callable, ``/flange`` and an ``fk_flange`` frame on
 ``/tf`` (the computation itself: ``transforms.py``).
 

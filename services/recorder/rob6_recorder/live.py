@@ -27,6 +27,7 @@ from __future__ import annotations
 import logging
 import os
 import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -43,6 +44,7 @@ from foxglove.websocket import (
 )
 
 from rob6.config import DEFAULT_LIVE_PORT, BusSettings
+from rob6.errors import RefusedError
 from rob6.messages import JointState
 
 from .mcapfile import ROBOT_DESCRIPTION_TOPIC, as_dict, encode
@@ -71,7 +73,7 @@ def _complete_joint_state(payload: bytes) -> bytes:
         return payload
 
 
-class LiveRefused(Exception):
+class LiveRefused(RefusedError):
     """The live view may not run with these settings (one line for the user)."""
 
 
@@ -239,7 +241,6 @@ class LiveView:
 
 
 def _now() -> int:
-    import time
     return time.time_ns()
 
 

@@ -14,6 +14,7 @@ channel's messages itself (from 1, like the recorder did).
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from pathlib import Path
@@ -39,7 +40,6 @@ def encode(data: Any) -> bytes:
     try:
         return _encoder.encode(data)
     except (TypeError, msgspec.EncodeError):
-        import json
         return json.dumps(data, default=repr).encode()
 
 

@@ -18,6 +18,7 @@ at the recorded pace, to a callback.
 from __future__ import annotations
 
 import bisect
+import json
 import logging
 import os
 import threading
@@ -57,7 +58,6 @@ def load(path: str | Path) -> tuple[list[Item], str | None]:
     items = [Item(r.topic, r.log_time, bytes(r.data)) for r in reader.records(decode=False)]
     urdf = next((bytes(a.data).decode() for a in reader.attachments if a.name == "robot.urdf"), None)
     if urdf is None:
-        import json
         for item in items:
             if item.topic == ROBOT_DESCRIPTION_TOPIC:
                 urdf = json.loads(item.payload).get("data")

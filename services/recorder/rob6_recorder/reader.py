@@ -41,6 +41,8 @@ from mcap.records import (
 )
 from mcap.stream_reader import breakup_chunk
 
+from rob6.errors import InputError
+
 MAGIC = bytes([137, 77, 67, 65, 80, 48, 13, 10])
 
 _READERS = {
@@ -54,8 +56,8 @@ _READERS = {
 }
 
 
-class NotMcap(ValueError):
-    pass
+class NotMcap(InputError, ValueError):
+    """The file does not begin with the MCAP magic: it is not a recording."""
 
 
 @dataclass

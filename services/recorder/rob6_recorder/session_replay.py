@@ -21,10 +21,12 @@ a number may differ by ``tolerance`` (absolute); for ``GetTimestamp`` and
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import math
 import os
 import re
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -173,8 +175,8 @@ def load_transcript(path: str | os.PathLike[str]) -> list[Script]:
     skip_next = False
     name = Path(path).name
     with open(path, encoding="utf-8") as fh:
-        for line in fh:
-            line = line.strip()
+        for raw in fh:
+            line = raw.strip()
             if not line:
                 continue
             rec = json.loads(line)
@@ -252,11 +254,8 @@ class _Conn(asyncio.Protocol):
         self.transport = transport
         sock = transport.get_extra_info("socket")
         if sock is not None:
-            try:
-                import socket
+            with contextlib.suppress(OSError):
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            except OSError:
-                pass
 
     def data_received(self, data: bytes) -> None:
         self.buf += data

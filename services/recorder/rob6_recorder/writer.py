@@ -287,8 +287,7 @@ class Recorder:
         last_flush = time.monotonic()
         while True:
             n = len(queue)
-            if n > self._max_seen:
-                self._max_seen = n
+            self._max_seen = max(self._max_seen, n)
             if n:
                 for _ in range(min(n, 20_000)):
                     item = queue.popleft()

@@ -1,4 +1,6 @@
-"""Calls: a request sent to one live instance and its reply received on the calling
+"""Calls: a request to one live instance and its reply, with deadline, retry and hedge.
+
+Calls: a request sent to one live instance and its reply received on the calling
 thread, with its deadline, its retry and its hedge.
 
 When an instance vanishes mid-request (its token disappears) or does not answer in time,

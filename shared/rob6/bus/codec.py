@@ -1,4 +1,6 @@
-"""The bus's wire format: JSON encoding, decoders by message type, correlation ids, the
+"""The bus's wire format: JSON encoding, decoders by message type, correlation ids, interim replies.
+
+The bus's wire format: JSON encoding, decoders by message type, correlation ids, the
 attachment that marks an interim reply."""
 
 from __future__ import annotations

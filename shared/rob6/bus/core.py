@@ -1,4 +1,6 @@
-"""The ``Bus`` class: the bus's jobs (mixins from the sibling modules) put together on one
+"""The ``Bus`` class: the bus's jobs (the sibling modules' mixins) put together on one session.
+
+The ``Bus`` class: the bus's jobs (mixins from the sibling modules) put together on one
 session, started in order and closed."""
 
 from __future__ import annotations

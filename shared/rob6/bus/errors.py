@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+from ..errors import ServiceError
 from ..messages import ErrorCode
 
 
-class BusError(Exception):
+class BusError(ServiceError):
     """A request that failed: ``code`` is machine-readable, ``message`` is for humans."""
 
     def __init__(self, code: ErrorCode, message: str):
@@ -24,7 +25,7 @@ class BusTimeout(BusError):
         self.service, self.op, self.seconds, self.waiting_for = service, op, seconds, waiting_for
 
 
-class CallAbandoned(Exception):
+class CallAbandoned(ServiceError):
     """The caller gave up on a request (``Bus.request``'s ``abandon``); its query is cancelled."""
 
 

@@ -1,4 +1,6 @@
-"""Liveliness: which instances of each service are up (their tokens), and which one a call
+"""Liveliness: which instances of each service are up, and which one a call goes to.
+
+Liveliness: which instances of each service are up (their tokens), and which one a call
 goes to.
 
 Calls of a replicated service (kinematics) are spread over its live instances (least in

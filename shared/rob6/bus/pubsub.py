@@ -1,4 +1,6 @@
-"""Publish and subscribe: messages on ``rob6/<id>/<suffix>`` (states, control, logs),
+"""Publish and subscribe on ``rob6/<id>/<suffix>``: states, control and logs, stamped by publisher.
+
+Publish and subscribe: messages on ``rob6/<id>/<suffix>`` (states, control, logs),
 each stamped with its publisher's instance, and subscriptions that follow an owner's.
 
 Every publication carries its instance id as the Zenoh attachment; a subscription made

@@ -1,4 +1,6 @@
-"""Serving: a service's queryable, its worker threads, and the answer to each request
+"""Serving: a service's queryable, its worker threads, and the answer to each request.
+
+Serving: a service's queryable, its worker threads, and the answer to each request
 (its envelope checked, its handler run, its reply and its trace record sent).
 
 A reply that waits for the arm (``Op.waits``) is announced first: the handler says how

@@ -1,4 +1,6 @@
-"""The Zenoh session of a rob6 process: its configuration, its opening, who it is and its
+"""The Zenoh session of a rob6 process: configuration, opening, identity and key expressions.
+
+The Zenoh session of a rob6 process: its configuration, its opening, who it is and its
 key expressions (``rob6/<id>/...``)."""
 
 from __future__ import annotations

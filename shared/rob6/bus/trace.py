@@ -1,4 +1,6 @@
-"""Records for the recorder: each process's ``trace/<service>`` batches out (``Bus.trace``),
+"""Records for the recorder: trace batches out of each process, and the recorder's subscription in.
+
+Records for the recorder: each process's ``trace/<service>`` batches out (``Bus.trace``),
 and the recorder's subscription that gets every batch in (``Bus.subscribe_traces``).
 
 Records leave in batches, one message per few milliseconds (``TRACE_BATCH_S``): a JSON

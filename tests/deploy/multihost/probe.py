@@ -8,7 +8,9 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 
-from tests.deploy.multihost.topology import TAG, Topology, run
+from tests.deploy.compose import run
+from tests.deploy.images import TAG
+from tests.deploy.multihost.topology import Topology
 
 SCRIPT = r"""
 import json, signal, sys, threading, zenoh
@@ -42,7 +44,7 @@ class Sample:
 
 
 class StateRecorder:
-    def __init__(self, topology: Topology, name: str):
+    def __init__(self, topology: Topology, name: str) -> None:
         self.topology = topology
         self.name = f"{topology.project}-{name}"
 

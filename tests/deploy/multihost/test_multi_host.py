@@ -21,12 +21,17 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
+from tests.deploy import images
+from tests.deploy.compose import run
 from tests.deploy.images import TAG
 from tests.deploy.multihost.topology import (
     REMOTE_KINEMATICS,
+    Call,
     Load,
     Topology,
     alter_session,
@@ -36,8 +41,8 @@ from tests.deploy.multihost.topology import (
     cannot_run,
     percentile,
     recovery,
-    run,
 )
+from tests.system import Client
 
 pytestmark = pytest.mark.docker
 
@@ -49,7 +54,7 @@ CALL_TIMEOUT = 10.0  # a reply later than this is a hang
 
 
 @pytest.fixture(scope="module")
-def topology(rob6_images):
+def topology(rob6_images: images.Outcome) -> Iterator[Topology]:
     REPORT["images"] = f"rob6/*:{TAG} ready in {rob6_images.seconds:.0f} s"
     topo = Topology(f"rob6mh{os.getpid()}")
     try:
@@ -61,13 +66,13 @@ def topology(rob6_images):
 
 
 @pytest.fixture
-def client(topology):
+def client(topology: Topology) -> Iterator[Client]:
     c = topology.client()
     yield c
     c.close()
 
 
-def assert_answered(results, what: str) -> dict[str, object]:
+def assert_answered(results: list[Call], what: str) -> dict[str, object]:
     """Every call answered within CALL_TIMEOUT: the right joints or an ERROR line, nothing else."""
     hung = [c for c in results if not c.reply]
     wrong = [c for c in results if c.reply and not c.ok and not c.error]
@@ -81,7 +86,7 @@ def assert_answered(results, what: str) -> dict[str, object]:
             "max ms": round(max(c.seconds for c in results) * 1000, 1)}
 
 
-def settle(client, line: str, timeout: float = 60.0) -> None:
+def settle(client: Client, line: str, timeout: float = 60.0) -> None:
     """Until 20 calls in a row succeed (after a fault is cleared)."""
     deadline = time.monotonic() + timeout
     streak = 0
@@ -91,7 +96,7 @@ def settle(client, line: str, timeout: float = 60.0) -> None:
 
 
 # ---------------------------------------------------------------------- the topology
-def test_every_host_serves(topology, client):
+def test_every_host_serves(topology: Topology, client: Client) -> None:
     line = backward_line(client)
     results = calls(client, line, 60)
     REPORT["BackwardCalc x60, no fault"] = assert_answered(results, "no fault")
@@ -119,7 +124,7 @@ def test_every_host_serves(topology, client):
 
 
 # ---------------------------------------------------------------------- partitions
-def test_compute_host_partitioned_mid_load(topology, client):
+def test_compute_host_partitioned_mid_load(topology: Topology, client: Client) -> None:
     """compute1 (its router and two replicas) loses the network for 8 s while a client calls
     BackwardCalc in a loop: every call is answered (compute2's replica, or an ERROR within the
     timeout), never a hang, never a wrong answer; all-success again after the heal."""
@@ -145,7 +150,7 @@ def test_compute_host_partitioned_mid_load(topology, client):
     assert max(c.seconds for c in during) < 5, "a call waited for the partitioned host"
 
 
-def test_loss_and_jitter_between_robot_pc_and_compute(topology, client):
+def test_loss_and_jitter_between_robot_pc_and_compute(topology: Topology, client: Client) -> None:
     """5 % loss and 0..20 ms jitter each way between the robot PC and both compute hosts."""
     line = backward_line(client)
     with topology.impaired(delay_ms=10, jitter_ms=10, loss=0.05):
@@ -164,7 +169,7 @@ def test_loss_and_jitter_between_robot_pc_and_compute(topology, client):
     settle(client, line)
 
 
-def test_reordering_between_robot_pc_and_compute(topology, client):
+def test_reordering_between_robot_pc_and_compute(topology: Topology, client: Client) -> None:
     """10 ms each way, and a quarter of the packets not delayed: they overtake the others
     (netem's reorder 25 %). TCP puts the segments back in order: every call correct."""
     line = backward_line(client)
@@ -178,7 +183,7 @@ def test_reordering_between_robot_pc_and_compute(topology, client):
     settle(client, line)
 
 
-def test_robot_pc_router_killed(topology, client):
+def test_robot_pc_router_killed(topology: Topology, client: Client) -> None:
     """Without the robot PC's router its services keep answering (peer links over loopback);
     a call for the remote replicas is an ERROR at once, never a hang; when the router is back
     the remote replicas are reached again."""
@@ -204,19 +209,19 @@ def test_robot_pc_router_killed(topology, client):
 
 
 # ---------------------------------------------------------------------- the motion
-def _ptp(client) -> None:
+def _ptp(client: Client) -> None:
     ask_true(client, "MovePTPJoints 30 -70 90 10 40 20")
 
 
-def test_motion_unchanged_when_every_remote_host_is_partitioned(topology, client):
+def test_motion_unchanged_when_every_remote_host_is_partitioned(topology: Topology, client: Client) -> None:
     """A PTP and an Alter session with compute1, compute2 and storage cut off from the robot
     PC: the joint states (recorded on the robot PC) are those of the same motions without
     faults (PTP: identical sample by sample; Alter: no fault, no missed cycle, the targets reached)."""
-    from tests.deploy.multihost.probe import StateRecorder, motion, same_motion
+    from tests.deploy.multihost.probe import Sample, StateRecorder, motion, same_motion
 
     refused: dict[bool, int] = {}
 
-    def session(fault: bool) -> tuple[list, list]:
+    def session(fault: bool) -> tuple[list[Sample], list[list[float]]]:
         ask_true(client, "MovePTPJoints 0 -80 100 0 30 0")
         with StateRecorder(topology, f"states{int(fault)}") as recorder:
             if fault:
@@ -262,7 +267,7 @@ def _ptp_samples(states: list[list[float]]) -> int:
 
 
 # ---------------------------------------------------------------------- recordings
-def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(topology, client, tmp_path):
+def test_no_record_lost_when_storage_is_partitioned_and_the_recorder_restarted(topology: Topology, client: Client, tmp_path: Path) -> None:
     """An Alter session at 250 Hz; the storage host cut off for 10 s, then its recorder
     SIGKILLed and started again: every client exchange of the session (the gateway numbers
     them, ``seq``) must be in the recorder's files, session and system alike. The batches

@@ -14,17 +14,20 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Iterator
 
 import pytest
 
+from tests.deploy import images
+from tests.deploy.compose import run
 from tests.deploy.images import TAG
 from tests.deploy.multihost.topology import (
     Topology,
     alter_session,
     ask_true,
     cannot_run,
-    run,
 )
+from tests.system import Client
 
 pytestmark = pytest.mark.docker
 
@@ -37,7 +40,7 @@ TARGET = [30.0, -70.0, 90.0, 10.0, 40.0, 20.0]
 
 
 @pytest.fixture(scope="module")
-def topology(rob6_images):
+def topology(rob6_images: images.Outcome) -> Iterator[Topology]:
     REPORT["images"] = f"rob6/*:{TAG} ready in {rob6_images.seconds:.0f} s"
     topo = Topology(f"rob6mhrsi{os.getpid()}", rsi=True)
     try:
@@ -58,7 +61,7 @@ def topology(rob6_images):
 
 
 @pytest.fixture
-def client(topology):
+def client(topology: Topology) -> Iterator[Client]:
     c = topology.client()
     yield c
     c.close()
@@ -69,7 +72,7 @@ def _networks(topology: Topology, service: str) -> set[str]:
     return {name.removeprefix(f"{topology.project}_") for name in json.loads(names)}
 
 
-def test_the_controller_is_on_the_robot_network_only(topology):
+def test_the_controller_is_on_the_robot_network_only(topology: Topology) -> None:
     assert _networks(topology, "kuka-rsi-sim") == {"robot"}
     assert _networks(topology, "robot-pc") == {"lab", "robot"}
     for host in ("compute1", "compute2", "storage"):
@@ -82,7 +85,7 @@ def test_the_controller_is_on_the_robot_network_only(topology):
                check=False).returncode == 0
 
 
-def test_rsi_motion_unchanged_when_every_remote_host_is_partitioned(topology, client):
+def test_rsi_motion_unchanged_when_every_remote_host_is_partitioned(topology: Topology, client: Client) -> None:
     """A PTP and an Alter session over RSI, first without faults, then with compute1,
     compute2 and storage cut off from the robot PC: each time the KR C4 runs through without
     a trip and its axes end where the client moved them (the late packets it counted are

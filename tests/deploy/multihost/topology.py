@@ -31,6 +31,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from tests.deploy.compose import compose_cmd, project_containers, run
 from tests.deploy.images import TAG
@@ -59,7 +60,7 @@ JOINTS = (10.0, -20.0, 30.0, 40.0, 50.0, 60.0)
 def cannot_run() -> str | None:
     """Why the multi-host suites cannot run here (None: they can): a Docker engine, compose,
     and the tools to make faults."""
-    if not shutil.which("docker") or subprocess.run(["docker", "info"], capture_output=True, timeout=30).returncode:
+    if not shutil.which("docker") or subprocess.run(["docker", "info"], capture_output=True, check=False, timeout=30).returncode:
         return "no Docker engine here"
     if compose_cmd() is None:
         return "no docker compose here"
@@ -115,10 +116,10 @@ class Topology:
         if self.rsi:
             self.env.update(ROB6_ROBOT="kr16rt", ROB6_LINK="rsi", ROB6_KUKA_SIM_CONTROL_PORT=str(self.control_port),
                             ROB6_RT_RUNTIME=self._realtime_budget())
-        self._netem: list[tuple[str, subprocess.Popen, list[list[str]]]] = []
+        self._netem: list[tuple[str, subprocess.Popen[str], list[list[str]]]] = []
 
     # ------------------------------------------------------------------ compose
-    def compose(self, *args: str, timeout: float = 300, check: bool = True) -> subprocess.CompletedProcess:
+    def compose(self, *args: str, timeout: float = 300, check: bool = True) -> subprocess.CompletedProcess[str]:
         profiles = [*(["--profile", "local-kinematics"] if self.local_kinematics else []),
                     *(["--profile", "rsi"] if self.rsi else [])]
         files = ["-f", str(COMPOSE_FILE), *(["-f", str(REALTIME_FILE)] if self.rsi else [])]
@@ -269,13 +270,14 @@ class Topology:
                 run(["docker", "network", "connect", "--ip", address, "--alias", host, self.lab, self.container(host)])
 
     # ------------------------------------------------------------------ the KR C4 (rsi)
-    def kuka(self) -> dict:
+    def kuka(self) -> dict[str, Any]:
         """The stand-in KR C4's status (its control channel): state, trips, late_total, aipos..."""
         with socket.create_connection(("127.0.0.1", self.control_port), timeout=10) as sock, \
                 sock.makefile("rwb") as control:
             control.write(b'{"cmd": "status"}\n')
             control.flush()
-            return json.loads(control.readline())
+            status: dict[str, Any] = json.loads(control.readline())
+            return status
 
     # ------------------------------------------------------------------ the client's side
     def client(self, attempts: int = 50) -> Client:
@@ -387,7 +389,7 @@ def calls(client: Client, line: str, count: int, timeout: float = 10.0) -> list[
 class Load:
     """A client calling ``line`` in a loop on its own thread until stopped."""
 
-    def __init__(self, client: Client, line: str, pause: float = 0.01, timeout: float = 10.0):
+    def __init__(self, client: Client, line: str, pause: float = 0.01, timeout: float = 10.0) -> None:
         self.client, self.line, self.pause, self.timeout = client, line, pause, timeout
         self.calls: list[Call] = []
         self._stop = threading.Event()

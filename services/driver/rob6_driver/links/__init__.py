@@ -27,6 +27,8 @@ import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 
+import numpy.typing as npt
+
 from rob6.messages import LinkEvent, LinkStatus
 
 from ..motion import CoreState
@@ -80,7 +82,7 @@ class Link(ABC):
         """The longest ``settle`` waits (its own timeouts), seconds."""
         return 0.0
 
-    def settle(self, q_final, timeout: float | None = None) -> str:
+    def settle(self, q_final: npt.ArrayLike, timeout: float | None = None) -> str:
         """After a motion ended at ``q_final`` (deg): wait until the robot is there.
         "" when it is, else why not (the motion then fails with that error). Links
         whose robot is where the setpoint is (sim, rsi) return at once."""

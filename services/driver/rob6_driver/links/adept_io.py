@@ -21,6 +21,8 @@ import struct
 import threading
 import time
 
+from rob6.errors import LinkError
+
 #: the mode rob6 sends: any value but 1 (read) makes the program write
 WRITE_MODE = 2
 #: between the mode and the number: two records for the program's two READs
@@ -30,7 +32,7 @@ CONNECT_TIMEOUT_S = 2.0
 _INT32 = struct.Struct(">i")
 
 
-class IoPortError(Exception):
+class IoPortError(LinkError):
     """The I/O port could not switch the signal (the text says why)."""
 
 
@@ -42,7 +44,7 @@ class AdeptIoPort:
     """One client connection to the program's I/O port, used by one request at a time."""
 
     def __init__(self, host: str, port: int, *, gap_s: float = GAP_S,
-                 answer_timeout_s: float = ANSWER_TIMEOUT_S):
+                 answer_timeout_s: float = ANSWER_TIMEOUT_S) -> None:
         self.addr = (host, port)
         self.name = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
         self.gap_s = gap_s

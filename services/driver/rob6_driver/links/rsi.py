@@ -99,7 +99,7 @@ class RsiLink(Link):
 
     def __init__(self, core: MotionCore, robot: RobotModel, listen: str, publish: Publish,
                  on_event: Callable[[LinkEvent], None] | None = None, *,
-                 sen_type: str = DEFAULT_SEN_TYPE, lost_after_s: float | None = None):
+                 sen_type: str = DEFAULT_SEN_TYPE, lost_after_s: float | None = None) -> None:
         if not robot.is_kuka:
             raise ValueError(f"RSI drives KUKA robots (kr3, kr16, kr3rt, kr16rt), not {robot.name}")
         self.core = core
@@ -128,7 +128,7 @@ class RsiLink(Link):
         self.sock.setblocking(False)
         # the plant's state (written by the receive thread only)
         self.state = "waiting"
-        self.peer: tuple | None = None
+        self.peer: tuple[str, int] | None = None
         self.q_actual: list[float] | None = None
         self.late = 0
         self.missed = 0
@@ -235,7 +235,7 @@ class RsiLink(Link):
             except Exception:  # never let one packet end the link
                 log.exception("driver: RSI packet handling failed")
 
-    def _drain(self) -> list[tuple[bytes, tuple, int]]:
+    def _drain(self) -> list[tuple[bytes, tuple[str, int], int]]:
         """Every datagram waiting: (data, sender, kernel receive time in ns)."""
         batch = []
         while True:
@@ -249,7 +249,7 @@ class RsiLink(Link):
             except BlockingIOError:
                 return batch
 
-    def _on_packet(self, data: bytes, addr, t_in: int) -> None:
+    def _on_packet(self, data: bytes, addr: tuple[str, int], t_in: int) -> None:
         try:
             pkt = parse_rob(data)
         except RsiParseError as exc:
@@ -315,8 +315,7 @@ class RsiLink(Link):
         self.sock.sendto(format_sen(self.sen_type, ak, pkt.ipoc, stop), addr)
         latency_us = max(0.0, (time.time_ns() - t_in) / 1000.0)
         self._hist[min(int(latency_us) // LATENCY_BIN_US, LATENCY_BINS - 1)] += 1
-        if latency_us > self._max_us:
-            self._max_us = latency_us
+        self._max_us = max(self._max_us, latency_us)
         self.packets += 1
         self._heard = time.monotonic()
         # after the answer: nothing here can make it late
@@ -327,7 +326,7 @@ class RsiLink(Link):
         if state is not None:
             self.publish(state)
 
-    def _begin_run(self, pkt: RobPacket, addr) -> None:
+    def _begin_run(self, pkt: RobPacket, addr: tuple[str, int]) -> None:
         """A new RSI run: zero correction, the core at rest on the start pose."""
         previous = self._aspos
         was = self.state
@@ -401,15 +400,17 @@ def _realtime_priority() -> bool:
     return True
 
 
-def _kernel_time(ancdata) -> int:
+def _kernel_time(ancdata: list[tuple[int, int, bytes]]) -> int:
     for level, kind, data in ancdata:
         if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= _TIMESPEC.size:
+            sec: int
+            nsec: int
             sec, nsec = _TIMESPEC.unpack_from(data)
             return sec * 1_000_000_000 + nsec
     return time.time_ns()
 
 
-def _peer(addr) -> str:
+def _peer(addr: tuple[str, int] | None) -> str:
     if not addr:
         return "-"
     return f"[{addr[0]}]:{addr[1]}" if ":" in addr[0] else f"{addr[0]}:{addr[1]}"

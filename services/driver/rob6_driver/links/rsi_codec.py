@@ -30,6 +30,9 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
+
+from rob6.errors import LinkError
 
 AXES = (b"A1", b"A2", b"A3", b"A4", b"A5", b"A6")
 
@@ -42,7 +45,7 @@ _ATTR = re.compile(rb"""([A-Za-z_][\w.-]*)\s*=\s*(?:"([^"]*)"|'([^']*)')""")
 _PREVIEW = 60
 
 
-class RsiParseError(ValueError):
+class RsiParseError(LinkError, ValueError):
     """A packet that is not a usable RSI ``<Rob>`` packet (the message says why)."""
 
 
@@ -52,7 +55,7 @@ class RobPacket:
     __slots__ = ("ipoc", "stamp", "delay", "aipos", "aspos", "robot_type")
 
     def __init__(self, ipoc: bytes, delay: int, aipos: tuple[float, ...], aspos: tuple[float, ...],
-                 robot_type: str = ""):
+                 robot_type: str = "") -> None:
         self.ipoc = ipoc
         self.stamp = int(ipoc)
         self.delay = delay
@@ -71,7 +74,7 @@ def _attributes(text: bytes) -> dict[bytes, bytes]:
             for m in _ATTR.finditer(text)}
 
 
-def _axes(match: re.Match | None, element: str, data: bytes) -> tuple[float, ...]:
+def _axes(match: re.Match[bytes] | None, element: str, data: bytes) -> tuple[float, ...]:
     if match is None:
         raise RsiParseError(f"no <{element}> element in {_preview(data)}")
     attrs = _attributes(match.group(1))
@@ -128,6 +131,6 @@ _SEN = (b'<Sen Type="%s"><AK A1="%.6f" A2="%.6f" A3="%.6f" A4="%.6f" A5="%.6f" A
 _STOP = b"<Stop>1</Stop>"
 
 
-def format_sen(sen_type: bytes, ak, ipoc: bytes, stop: bool = False) -> bytes:
+def format_sen(sen_type: bytes, ak: Sequence[float], ipoc: bytes, stop: bool = False) -> bytes:
     """The answer: absolute axis correction ``ak`` (6 values, deg) for the packet ``ipoc``."""
     return _SEN % (sen_type, ak[0], ak[1], ak[2], ak[3], ak[4], ak[5], _STOP if stop else b"", ipoc)

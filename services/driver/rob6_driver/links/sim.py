@@ -17,7 +17,7 @@ from . import Link, Outputs, Publish
 class SimLink(Link):
     kind = "sim"
 
-    def __init__(self, core: MotionCore, publish: Publish):
+    def __init__(self, core: MotionCore, publish: Publish) -> None:
         self.core = core
         self._publish = publish
         self.runner = CycleRunner(core.step, core.dt, self._cycle_done, name="driver-cycle")

@@ -1,4 +1,6 @@
-"""The simple_message link: drives an Adept Viper s850 (``ad850``) through the V+ server
+"""The simple_message link: drives an Adept Viper s850 (ad850) through the ROS-Industrial V+ server.
+
+The simple_message link: drives an Adept Viper s850 (``ad850``) through the V+ server
 program of the ROS-Industrial Adept packages, over ROS-Industrial simple_message.
 
 The controller is the TCP server, rob6 the client on its ports (``ROB6_SM_HOST``):
@@ -66,16 +68,17 @@ import socket
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from rob6.messages import LinkEvent, LinkStatus
 from rob6.robots import RobotModel
 
 from ..loop import CycleRunner
-from ..motion import MotionCore
+from ..motion import CoreState, MotionCore
 from . import Link, Outputs, Publish
 from .adept_io import AdeptIoPort, IoPortError
 from .simple_message_codec import (
@@ -89,6 +92,8 @@ from .simple_message_codec import (
     SUCCESS,
     TS_TRUE,
     Codec,
+    JointPosition,
+    Message,
     RobotStatus,
     SimpleMessageError,
 )
@@ -140,20 +145,23 @@ RATED_SPEED_DEG_S = np.array([250.0, 250.0, 250.0, 375.0, 375.0, 600.0])
 WIRE_DECIMALS = 4
 
 
-def to_controller_deg(q_rob6_deg) -> np.ndarray:
-    return TO_CONTROLLER_SIGN * np.asarray(q_rob6_deg, float) + TO_CONTROLLER_OFFSET_DEG
+def to_controller_deg(q_rob6_deg: npt.ArrayLike) -> np.ndarray:
+    q: np.ndarray = TO_CONTROLLER_SIGN * np.asarray(q_rob6_deg, float) + TO_CONTROLLER_OFFSET_DEG
+    return q
 
 
-def from_controller_deg(q_ctrl_deg) -> np.ndarray:
-    return (np.asarray(q_ctrl_deg, float) - TO_CONTROLLER_OFFSET_DEG) * TO_CONTROLLER_SIGN
+def from_controller_deg(q_ctrl_deg: npt.ArrayLike) -> np.ndarray:
+    q: np.ndarray = (np.asarray(q_ctrl_deg, float) - TO_CONTROLLER_OFFSET_DEG) * TO_CONTROLLER_SIGN
+    return q
 
 
-def to_wire(q_rob6_deg) -> list[float]:
+def to_wire(q_rob6_deg: npt.ArrayLike) -> list[float]:
     """rob6 joints (deg) -> the six controller joints on the wire (rad)."""
-    return np.radians(to_controller_deg(q_rob6_deg)).tolist()
+    joints: list[float] = np.radians(to_controller_deg(q_rob6_deg)).tolist()
+    return joints
 
 
-def from_wire(joints_rad) -> np.ndarray:
+def from_wire(joints_rad: Sequence[float]) -> np.ndarray:
     """The first six joints of a JOINT_POSITION (rad) -> rob6 joints (deg), rounded to
     1e-4 deg: float32 radians carry no more (1.4e-5 deg at 259 deg), and the controller's
     90 deg then reads as rob6's 0 exactly."""
@@ -205,7 +213,7 @@ class AdeptLink(Link):
                  on_event: Callable[[LinkEvent], None] | None = None, *,
                  ack_timeout_s: float = ACK_TIMEOUT_S, state_timeout_s: float = STATE_TIMEOUT_S,
                  retry_s: float = RETRY_S, no_progress_s: float = NO_PROGRESS_S,
-                 settle_max_s: float = SETTLE_MAX_S):
+                 settle_max_s: float = SETTLE_MAX_S) -> None:
         if not robot.is_adept:
             raise ValueError(f"the simple_message link drives the Adept Viper s850 (ad850), not {robot.name}")
         settings.check()
@@ -358,7 +366,7 @@ class AdeptLink(Link):
     def settle_bound_s(self) -> float:
         return self.settle_max_s + self.ack_timeout_s  # stopped short, or the last points never taken
 
-    def settle(self, q_final, timeout: float | None = None) -> str:
+    def settle(self, q_final: npt.ArrayLike, timeout: float | None = None) -> str:
         """Wait until the robot has arrived at ``q_final`` (deg); "" or why it did not."""
         target = np.asarray(q_final, float)
         deadline = time.monotonic() + (self.settle_max_s if timeout is None else timeout)
@@ -391,14 +399,14 @@ class AdeptLink(Link):
                 self._cond.wait(0.02)
 
     # ------------------------------------------------------------------ the cycle
-    def _cycle(self):
+    def _cycle(self) -> CoreState:
         with self._cond:
             state = self.core.step()
             self._stream(state)
         self.missed = self.runner.stats.missed  # cycles the runner skipped (the machine was too busy)
         return state
 
-    def _stream(self, state) -> None:
+    def _stream(self, state: CoreState) -> None:
         """Turn the core's setpoints into points (lock held)."""
         if not self._online:
             self._rest_q = state.q
@@ -568,15 +576,15 @@ class AdeptLink(Link):
                 heard = time.monotonic()
         return "closing"
 
-    def _on_state(self, message) -> None:
+    def _on_state(self, message: Message) -> None:
         kind = message.header.msg_type
-        if kind == JOINT_POSITION and message.value is not None:
+        if kind == JOINT_POSITION and isinstance(message.value, JointPosition):
             q = from_wire(message.value.joints)
             with self._cond:
                 self._previous_position = self._position
                 self._position = q
                 self.q_actual = q.tolist()
-        elif kind == STATUS and message.value is not None:
+        elif kind == STATUS and isinstance(message.value, RobotStatus):
             with self._cond:
                 self._status = message.value
                 self._status_count += 1
@@ -640,7 +648,7 @@ class AdeptLink(Link):
             self._on_reply(code, ctrl, stop, latency)
         return "closing"
 
-    def _next_request(self):
+    def _next_request(self) -> tuple[bytes, np.ndarray | None, bool] | None:
         """(frame, controller joints, is_stop) of the next request, or None (lock held).
         Points waiting since the last acknowledgement are merged into one."""
         if self._stop_pending:
@@ -686,7 +694,7 @@ class AdeptLink(Link):
             if readable:
                 self._receive(sock, buffer, connected)
 
-    def _on_reply(self, code: int, ctrl, stop: bool, latency: float) -> None:
+    def _on_reply(self, code: int, ctrl: np.ndarray | None, stop: bool, latency: float) -> None:
         with self._cond:
             self._inflight = False
             self._latencies.append(latency)

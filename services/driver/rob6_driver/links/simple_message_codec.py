@@ -31,7 +31,10 @@ other programs echo the point): only its header matters.
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterable
 from dataclasses import dataclass
+
+from rob6.errors import LinkError
 
 # message types
 JOINT_POSITION = 10
@@ -67,7 +70,7 @@ MESSAGE_NAMES = {JOINT_POSITION: "JOINT_POSITION", JOINT_TRAJ_PT: "JOINT_TRAJ_PT
 BYTE_ORDERS = ("big", "little")
 
 
-class SimpleMessageError(ValueError):
+class SimpleMessageError(LinkError, ValueError):
     """A frame that cannot be read (the connection's framing is lost)."""
 
 
@@ -115,7 +118,7 @@ class Message:
 class Codec:
     """Packs and unpacks frames in one byte order (``big`` or ``little``)."""
 
-    def __init__(self, byte_order: str = "big"):
+    def __init__(self, byte_order: str = "big") -> None:
         if byte_order not in BYTE_ORDERS:
             raise ValueError(f"byte order {byte_order!r}: expected big or little")
         self.byte_order = byte_order
@@ -132,13 +135,13 @@ class Codec:
     def frame(self, msg_type: int, comm_type: int, reply_code: int, body: bytes) -> bytes:
         return self._int.pack(HEADER_SIZE + len(body)) + self._header.pack(msg_type, comm_type, reply_code) + body
 
-    def traj_pt(self, sequence: int, joints_rad, velocity: float = 0.0, duration: float = 0.0,
+    def traj_pt(self, sequence: int, joints_rad: Iterable[float], velocity: float = 0.0, duration: float = 0.0,
                 comm_type: int = SERVICE_REQUEST) -> bytes:
         """A JOINT_TRAJ_PT (a service request unless told otherwise); joints padded to ten."""
         body = self._traj_pt.pack(sequence, *_ten(joints_rad), velocity, duration)
         return self.frame(JOINT_TRAJ_PT, comm_type, INVALID, body)
 
-    def joint_position(self, joints_rad, sequence: int = 0) -> bytes:
+    def joint_position(self, joints_rad: Iterable[float], sequence: int = 0) -> bytes:
         body = self._joint_position.pack(sequence, *_ten(joints_rad))
         return self.frame(JOINT_POSITION, TOPIC, INVALID, body)
 
@@ -154,6 +157,7 @@ class Codec:
     def length(self, prefix: bytes) -> int:
         """The length prefix; SimpleMessageError when it cannot be a frame's (with a hint
         when the other byte order would make sense of it)."""
+        n: int
         (n,) = self._int.unpack(prefix)
         if HEADER_SIZE <= n <= MAX_FRAME:
             return n
@@ -186,7 +190,7 @@ class Codec:
             value = self._body(header.msg_type, body)
         return Message(header, body, value)
 
-    def _body(self, msg_type: int, body: bytes):
+    def _body(self, msg_type: int, body: bytes) -> TrajPoint | JointPosition | RobotStatus | None:
         layout = {JOINT_TRAJ_PT: self._traj_pt, JOINT_POSITION: self._joint_position,
                   STATUS: self._status}.get(msg_type)
         if layout is None:
@@ -207,7 +211,7 @@ class Codec:
         return self._int.unpack_from(body)[0] if len(body) >= 4 else None
 
 
-def _ten(joints) -> list[float]:
+def _ten(joints: Iterable[float]) -> list[float]:
     values = [float(x) for x in joints]
     if len(values) > MAX_JOINTS:
         raise ValueError(f"at most {MAX_JOINTS} joints, got {len(values)}")
