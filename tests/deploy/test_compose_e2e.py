@@ -548,7 +548,7 @@ def test_adept_profile_drives_the_adept_container(built: None, entry_points: Non
 
 
 # ---------------------------------------------------------------------- tests: kawasaki profile
-def test_kawasaki_profile_drives_the_kawasaki_container(built, entry_points):
+def test_kawasaki_profile_drives_the_kawasaki_container(built: None, entry_points: None) -> None:
     """`ROB6_ROBOT=kaw_fs ROB6_LINK=kawasaki compose --profile kawasaki up`: the driver connects
     to the stand-in Kawasaki controller (its own container on the robot network, found by the
     compose default ROB6_KAS_HOST=kawasaki-as-sim) and streams a PTP motion to it as

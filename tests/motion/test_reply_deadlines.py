@@ -73,7 +73,7 @@ def test_client_library_alter_block_ends_with_the_arm_at_rest(kr16rt: System) ->
         assert list(robot.get_position_joints()) == START
 
 
-def test_the_move_after_an_alter_stream_starts_where_the_stream_left_the_arm():
+def test_the_move_after_an_alter_stream_starts_where_the_stream_left_the_arm() -> None:
     """A dummy arm follows each target at once; as fast as the client sends, DisableAlter,
     and at once the position is the last target and a PTP runs from there. Before
     DisableAlter carried the state at rest, the gateway sent the planner its last
