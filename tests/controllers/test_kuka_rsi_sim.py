@@ -415,10 +415,15 @@ def test_fault_delay_for_a_while(pc: Responder) -> None:
 def test_fault_lose_both_directions(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
+        skipped = kuka.status()["replies"]["overruns"]
         kuka.fault(lose_s=0.3)  # 25 cycles of 12 ms: fewer than Timeout 100
         st = kuka.wait_for(lambda s: s["faults"]["lose_s"] == 0 and s["late_consecutive"] == 0
                            and s["delay"] > 0, what="loss over")
-        assert st["state"] == "running" and st["fault_stats"]["lost_out"] >= 15 and st["delay"] >= 15
+        # a simulator woken late skips whole cycles (as a controller never sends bursts): on a
+        # loaded machine the 25 cycles of the window are partly skipped, not lost
+        skipped = st["replies"]["overruns"] - skipped
+        assert st["state"] == "running" and st["fault_stats"]["lost_out"] + skipped >= 24
+        assert st["delay"] >= st["fault_stats"]["lost_out"] > 0
         gaps = [b["t"] - a["t"] for a, b in pairwise(pc.packets)]
         assert max(gaps) >= 0.2
 
