@@ -12,7 +12,7 @@ from rob6_driver.links.kawasaki_codec import Ack, Hello, KasError, State, cancel
 STATE = b"S 12 0.000 90.000 -30.500 0.000 0.000 0.000 1 0 0 1 3 17 0 2"
 
 
-def test_points_and_cancel():
+def test_points_and_cancel() -> None:
     assert point(1, [10, -20, 30, 0, 45, -90], 0.048, False) == (
         b"P 1 10.000 70.000 -30.000 0.000 -45.000 90.000 48 0\n")
     assert point(2, np.zeros(6), 0.0001, True).endswith(b" 1 1\n")  # at least 1 ms
@@ -20,7 +20,7 @@ def test_points_and_cancel():
     assert cancel(5) == b"C 5\n"
 
 
-def test_the_controllers_lines():
+def test_the_controllers_lines() -> None:
     assert parse(b"H rob6-kas 1 64") == Hello(64)
     assert parse(b"A 17 0 3\r") == Ack(17, 0, 3)
     st = parse(STATE)
@@ -45,7 +45,7 @@ def test_the_controllers_lines():
     (b"A " + b"1" * 200, "a line of 203 characters (at most 120)"),
     (b"A \xff 0 1", "a line that is not ASCII"),
 ])
-def test_bad_lines_are_refused_with_a_reason(line, error):
+def test_bad_lines_are_refused_with_a_reason(line: bytes, error: str) -> None:
     with pytest.raises(KasError) as exc:
         parse(line)
     assert str(exc.value) == error
@@ -57,7 +57,7 @@ def test_bad_lines_are_refused_with_a_reason(line, error):
     (KawasakiSettings(period_s=0), "ROB6_KAS_PERIOD=0: expected seconds, more than 0 and at most 1"),
     (KawasakiSettings(period_s=float("nan")), "ROB6_KAS_PERIOD=nan: expected seconds, more than 0 and at most 1"),
 ])
-def test_settings_that_cannot_work(settings, error):
+def test_settings_that_cannot_work(settings: KawasakiSettings, error: str) -> None:
     with pytest.raises(ValueError) as exc:
         settings.check()
     assert str(exc.value) == error

@@ -15,6 +15,7 @@ fixed difference of the two flange frames.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -45,13 +46,14 @@ SCREWS = [
 FLANGE_AT_ZERO = np.array([A1, 0.0, D1 + A2 + D4 + D6])
 
 
-def _rotation(axis, angle: float) -> np.ndarray:
+def _rotation(axis: tuple[float, float, float], angle: float) -> np.ndarray:
     w = np.asarray(axis, float)
     k = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
-    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+    rotation: np.ndarray = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+    return rotation
 
 
-def controller_flange(q_controller_deg) -> tuple[np.ndarray, np.ndarray]:
+def controller_flange(q_controller_deg: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The FS03N's flange (rotation, position mm) for the controller's joint angles."""
     transform = np.eye(4)
     for (axis, on_axis), angle in zip(SCREWS, np.radians(q_controller_deg), strict=True):
@@ -63,12 +65,12 @@ def controller_flange(q_controller_deg) -> tuple[np.ndarray, np.ndarray]:
     return transform[:3, :3], transform[:3, :3] @ FLANGE_AT_ZERO + transform[:3, 3]
 
 
-def rob6_flange(kin: Kinematics, q_deg) -> tuple[np.ndarray, np.ndarray]:
+def rob6_flange(kin: Kinematics, q_deg: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     pose = kin.fk(np.asarray(q_deg, float))[0]
     return pose[:, :3], pose[:, 3]
 
 
-def test_the_documented_table():
+def test_the_documented_table() -> None:
     assert to_controller_deg([0.0] * 6).tolist() == [0.0, 90.0, 0.0, 0.0, 0.0, 0.0]
     assert to_controller_deg([10, 20, 30, 40, 50, 60]).tolist() == [10.0, 110.0, -30.0, -40.0, -50.0, -60.0]
     assert from_controller_deg([10.0, 110.0, -30.0, -40.0, -50.0, -60.0]).tolist() == [10, 20, 30, 40, 50, 60]
@@ -79,7 +81,7 @@ def test_the_documented_table():
     assert point(7, [0, 0, 0, 0, 0, 0], 0.048, False) == b"P 7 0.000 90.000 0.000 0.000 0.000 0.000 48 0\n"
 
 
-def test_the_arm_stretched_forward_is_where_both_say():
+def test_the_arm_stretched_forward_is_where_both_say() -> None:
     """rob6's zero (robots.md: flange at (700, 0, 250)) is the controller's (0, 90, 0, 0, 0, 0)."""
     kin = Kinematics(ROBOT)
     _, ours = rob6_flange(kin, np.zeros(6))
@@ -88,7 +90,7 @@ def test_the_arm_stretched_forward_is_where_both_say():
     assert theirs == pytest.approx([700.0, 0.0, 250.0], abs=1e-9)
 
 
-def test_forward_kinematics_agree_through_the_convention():
+def test_forward_kinematics_agree_through_the_convention() -> None:
     kin = Kinematics(ROBOT)
     rng = np.random.default_rng(15)
     lo, hi = np.array(ROBOT.turn_min), np.array(ROBOT.turn_max)
@@ -114,7 +116,7 @@ def test_forward_kinematics_agree_through_the_convention():
     ((1, 1, -1, -1, -1, -1), (0, 0, 0, 0, 0, 0)),  # no J2 offset
     ((1, 1, -1, -1, -1, -1), (0, 90, 90, 0, 0, 0)),  # a J3 offset
 ])
-def test_the_check_would_catch_another_convention(sign, offset):
+def test_the_check_would_catch_another_convention(sign: tuple[int, ...], offset: tuple[int, ...]) -> None:
     kin = Kinematics(ROBOT)
     rng = np.random.default_rng(1)
     qs = rng.uniform(-50, 50, (6, 6))
@@ -129,7 +131,7 @@ def test_the_check_would_catch_another_convention(sign, offset):
     assert differs
 
 
-def test_the_ranges_rob6_and_the_controller_share():
+def test_the_ranges_rob6_and_the_controller_share() -> None:
     """rob6's kaw_fs table copies the data sheet's numbers, which are the controller's: in rob6's
     convention the controller allows q2 in -150 .. 60 and q3 in -120 .. 150. Every position
     rob6's limits allow maps into the controller's range except q3 below -120, which the link

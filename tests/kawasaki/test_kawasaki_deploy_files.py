@@ -43,7 +43,7 @@ def programs() -> dict[str, list[str]]:
     return out
 
 
-def test_the_four_programs_and_their_blocks():
+def test_the_four_programs_and_their_blocks() -> None:
     progs = programs()
     assert sorted(progs) == ["rob6_init", "rob6_line", "rob6_motion", "rob6_pc", "rob6_state"]
     for name, lines in progs.items():
@@ -60,7 +60,7 @@ def test_the_four_programs_and_their_blocks():
             assert target in labels, f"{name}: GOTO {target} has no label"
 
 
-def test_the_instructions_the_readme_names():
+def test_the_instructions_the_readme_names() -> None:
     for word in ("TCP_LISTEN", "TCP_ACCEPT", "TCP_RECV", "TCP_SEND", "TCP_CLOSE", "$DECODE", "$MID", "VAL(",
                  "JMOVE #PPOINT(", "ACCURACY", "CP ON", "SPEED", "BREAK", "HERE", "DECOMPOSE", "TWAIT"):
         assert word in SOURCE, word
@@ -78,7 +78,7 @@ def _globals() -> dict[str, float]:
     return values
 
 
-def test_the_globals_are_what_the_link_and_the_simulator_assume():
+def test_the_globals_are_what_the_link_and_the_simulator_assume() -> None:
     g = _globals()
     assert g["kport"] == kawasaki.DEFAULT_PORT == 49200
     assert g["kcap"] == 64  # the simulator's default --capacity
@@ -90,7 +90,7 @@ def test_the_globals_are_what_the_link_and_the_simulator_assume():
     assert "* 1.05" in SOURCE and arm.SPEED_TOLERANCE == 1.05
 
 
-def test_the_protocol_document_and_the_codes():
+def test_the_protocol_document_and_the_codes() -> None:
     for code, meaning in kawasaki_codec.ACK_CODES.items():
         assert f"`{code}` " in PROTOCOL, (code, meaning)
     assert "at most **120 characters**" in PROTOCOL and kawasaki_codec.MAX_LINE == 120
@@ -100,6 +100,6 @@ def test_the_protocol_document_and_the_codes():
 
 
 @pytest.mark.parametrize("q", [[0, 0, 0, 0, 0, 0], [-159.999, -60, 119.999, -359.999, -134.999, 359.999]])
-def test_the_longest_point_fits_a_line(q):
+def test_the_longest_point_fits_a_line(q: list[float]) -> None:
     line = kawasaki_codec.point(999_999, np.array(q, float), 99.999, True)
     assert len(line) <= kawasaki_codec.MAX_LINE
