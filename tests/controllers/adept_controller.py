@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import re
 
-from tests.controllers.sim_process import SimProcess
+from tests.controllers.sim_process import PointsControllerProcess
 
 
-class AdeptController(SimProcess):
+class AdeptController(PointsControllerProcess):
     """Starts ``python -m adept_sm_sim`` on free ports; extra CLI flags via ``args``."""
 
     module = "adept_sm_sim"
@@ -36,24 +36,9 @@ class AdeptController(SimProcess):
         self.io = (g[6], int(g[7])) if g[6] else None
         return g[4], int(g[5])
 
-    def estop(self) -> None:
-        self._ok({"cmd": "estop"})
-
-    def release(self) -> None:
-        self._ok({"cmd": "estop_release"})
-
     def drives(self, on: bool) -> None:
         self._ok({"cmd": "drives", "on": on})
-
-    def error(self, code: int) -> None:
-        self._ok({"cmd": "error", "code": code})
-
-    def clear_error(self) -> None:
-        self._ok({"cmd": "clear_error"})
 
     def drop_connection(self, port: str) -> bool:
         dropped: bool = self._ok({"cmd": "drop_connection", "port": port})["dropped"]
         return dropped
-
-    def slow_ack(self, ms: float) -> None:
-        self._ok({"cmd": "slow_ack", "ms": ms})

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import re
 
-from tests.controllers.sim_process import SimProcess
+from tests.controllers.sim_process import PointsControllerProcess
 
 
-class KawasakiController(SimProcess):
+class KawasakiController(PointsControllerProcess):
     """Starts ``python -m kawasaki_as_sim`` (on a free port unless ``args`` give one)."""
 
     module = "kawasaki_as_sim"
@@ -29,27 +29,12 @@ class KawasakiController(SimProcess):
         self.port = (g[0], int(g[1]))
         return g[2], int(g[3])
 
-    def estop(self) -> None:
-        self._ok({"cmd": "estop"})
-
-    def release(self) -> None:
-        self._ok({"cmd": "estop_release"})
-
     def motor(self, on: bool) -> None:
         self._ok({"cmd": "motor", "on": on})
 
     def teach(self, on: bool) -> None:
         self._ok({"cmd": "teach", "on": on})
 
-    def error(self, code: int) -> None:
-        self._ok({"cmd": "error", "code": code})
-
-    def clear_error(self) -> None:
-        self._ok({"cmd": "clear_error"})
-
     def drop_connection(self) -> bool:
         dropped: bool = self._ok({"cmd": "drop_connection"})["dropped"]
         return dropped
-
-    def slow_ack(self, ms: float) -> None:
-        self._ok({"cmd": "slow_ack", "ms": ms})

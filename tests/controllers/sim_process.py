@@ -178,6 +178,26 @@ class SimProcess:
             time.sleep(0.02)
 
 
+class PointsControllerProcess(SimProcess):
+    """The control commands the simulators of controllers rob6 streams points to (Adept,
+    Kawasaki) share: E-stop, controller errors, slow acknowledgements."""
+
+    def estop(self) -> None:
+        self._ok({"cmd": "estop"})
+
+    def release(self) -> None:
+        self._ok({"cmd": "estop_release"})
+
+    def error(self, code: int) -> None:
+        self._ok({"cmd": "error", "code": code})
+
+    def clear_error(self) -> None:
+        self._ok({"cmd": "clear_error"})
+
+    def slow_ack(self, ms: float) -> None:
+        self._ok({"cmd": "slow_ack", "ms": ms})
+
+
 def _wait(proc: subprocess.Popen[str], timeout: float) -> int | None:
     """The exit code, or None when the process is still running after ``timeout``."""
     try:
