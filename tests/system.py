@@ -150,30 +150,27 @@ class Client:
     def read_lines(self, count: int, timeout: float | None = None) -> str:
         """Exactly ``count`` lines (or what came before EOF/timeout)."""
         self.sock.settimeout(timeout or self.timeout)
-        while self.buffer.count(b"\n") < count:
-            try:
-                chunk = self.sock.recv(65536)
-            except TimeoutError:
-                break
-            if not chunk:
-                break
-            self.buffer += chunk
+        while self.buffer.count(b"\n") < count and self._receive():
+            pass
         lines = self.buffer.split(b"\n")
         taken = b"".join(line + b"\n" for line in lines[:count]) if len(lines) > count else self.buffer
         self.buffer = self.buffer[len(taken):]
         return taken.decode("latin-1")
 
+    def _receive(self) -> bool:
+        """Add what the socket has to the buffer; False when it timed out or closed."""
+        try:
+            chunk = self.sock.recv(65536)
+        except TimeoutError:
+            return False
+        self.buffer += chunk
+        return bool(chunk)
+
     def read_quiet(self, quiet: float = 0.15) -> str:
         """Whatever arrives until nothing more comes for ``quiet`` seconds."""
         self.sock.settimeout(quiet)
-        while True:
-            try:
-                chunk = self.sock.recv(65536)
-            except TimeoutError:
-                break
-            if not chunk:
-                break
-            self.buffer += chunk
+        while self._receive():
+            pass
         data, self.buffer = self.buffer, b""
         return data.decode("latin-1")
 
@@ -213,13 +210,18 @@ def zenoh_router(robot_id: str) -> Iterator[BusSettings]:
         router.close()
 
 
-def driver_state(system: System) -> JointState:
-    """The driver's state, asked over the system's Zenoh router like any service would."""
+def ask_driver(system: System, request: str, message: Any) -> Any:
+    """The driver's answer to ``request``, asked over the system's Zenoh router like any service would."""
     bus = Bus(BusSettings(robot=system.robot, robot_id=system.robot_id,
                           connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
     try:
         bus.wait_for(["driver"], 10)
-        state: JointState = bus.request("driver", "state", Empty())
-        return state
+        return bus.request("driver", request, message)
     finally:
         bus.close()
+
+
+def driver_state(system: System) -> JointState:
+    """The driver's state, asked over the system's Zenoh router like any service would."""
+    state: JointState = ask_driver(system, "state", Empty())
+    return state

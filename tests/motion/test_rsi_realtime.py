@@ -15,13 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
-from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints, reply, wait_until
+from tests.motion.realtime_rig import link_status, recorded_states
 from tests.motion.test_realtime_system import assert_within_limits
 from tests.system import free_port, running
 
@@ -58,26 +56,9 @@ def assert_no_jump(status: dict) -> None:
     assert np.all(np.array(status["max_ak_step"]) <= RATED * ROBOT.cycle_s), status["max_ak_step"]
 
 
-def link_status(system):
-    bus = Bus(BusSettings(robot="kr16rt", robot_id=system.robot_id,
-                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
-    try:
-        bus.wait_for(["driver"], 10)
-        return bus.request("driver", "link", LinkQuery())
-    finally:
-        bus.close()
-
-
 def connected_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(t, q) of every recorded cycle while the robot was connected (while waiting or
-    lost the driver repeats its last state a few times a second)."""
-    rows = {}
-    for path in directory.glob("*_system_*.mcap"):
-        for r in read_records(path, ["/driver/joint_state"]):
-            if r.data.get("link", "connected") == "connected":
-                rows[r.data["cycle"]] = (r.data["t"], r.data["q"])
-    cycles = sorted(rows)
-    return np.array([rows[c][0] for c in cycles]), np.array([rows[c][1] for c in cycles])
+    """(t, q) of every recorded cycle while the robot was connected."""
+    return recorded_states(directory, connected_only=True)
 
 
 def session(client) -> None:
