@@ -38,12 +38,12 @@ queue and the arm stops after the point under way.
 from __future__ import annotations
 
 import logging
-import math
 import select
 import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Unpack
 
 from rob6.messages import LinkEvent, LinkStatus
 from rob6.robots import RobotModel
@@ -64,7 +64,7 @@ from .kawasaki_codec import (
     parse,
     point,
 )
-from .streamed_points import Joints, LinkDown, StreamedPointsLink
+from .streamed_points import Joints, LinkDown, StreamedPointsLink, Timeouts, check_address, check_period
 from .streaming import endpoint_name, send_all
 
 log = logging.getLogger("rob6.driver")
@@ -72,14 +72,9 @@ log = logging.getLogger("rob6.driver")
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 49200
 DEFAULT_PERIOD_S = 0.048
-ACK_TIMEOUT_S = 2.0
-STATE_TIMEOUT_S = 1.0
 HELLO_TIMEOUT_S = 2.0
-RETRY_S = 0.5
 FAULT_GRACE_S = 0.3
 ARRIVAL_TOL_DEG = 0.002  # the wire carries 1e-3 deg
-NO_PROGRESS_S = 2.0
-SETTLE_MAX_S = 4.0
 
 Message = Hello | Ack | State
 
@@ -94,12 +89,8 @@ class KawasakiSettings:
 
     def check(self) -> None:
         """ValueError (one line, naming the setting) when a value cannot work."""
-        if not self.host.strip():
-            raise ValueError("ROB6_KAS_HOST is empty: give the controller's address")
-        if not 1 <= int(self.port) <= 65535:
-            raise ValueError(f"ROB6_KAS_PORT={self.port}: expected a TCP port 1..65535")
-        if not (math.isfinite(self.period_s) and 0 < self.period_s <= 1.0):
-            raise ValueError(f"ROB6_KAS_PERIOD={self.period_s}: expected seconds, more than 0 and at most 1")
+        check_address("ROB6_KAS", self.host, ("PORT", self.port))
+        check_period("ROB6_KAS", self.period_s)
 
 
 class KawasakiLink(StreamedPointsLink):
@@ -107,10 +98,7 @@ class KawasakiLink(StreamedPointsLink):
     arrival_tol_deg = ARRIVAL_TOL_DEG
 
     def __init__(self, core: MotionCore, robot: RobotModel, settings: KawasakiSettings, publish: Publish,
-                 on_event: Callable[[LinkEvent], None] | None = None, *,
-                 ack_timeout_s: float = ACK_TIMEOUT_S, state_timeout_s: float = STATE_TIMEOUT_S,
-                 retry_s: float = RETRY_S, no_progress_s: float = NO_PROGRESS_S,
-                 settle_max_s: float = SETTLE_MAX_S) -> None:
+                 on_event: Callable[[LinkEvent], None] | None = None, **timeouts: Unpack[Timeouts]) -> None:
         if not robot.is_kawa:
             raise ValueError(f"the kawasaki link drives the Kawasaki FS03N (kaw_fs), not {robot.name}")
         settings.check()
@@ -123,10 +111,8 @@ class KawasakiLink(StreamedPointsLink):
         self._sequence = 0  # the wire's number of the last message sent
         self.cancels = 0
         self.underruns = 0  # as the controller last reported them
-        super().__init__(core, robot, settings, publish, on_event,
-                         waiting_reason=f"robot not connected (waiting for the Kawasaki AS program at {self.name})",
-                         ack_timeout_s=ack_timeout_s, state_timeout_s=state_timeout_s, retry_s=retry_s,
-                         no_progress_s=no_progress_s, settle_max_s=settle_max_s)
+        waiting = f"robot not connected (waiting for the Kawasaki AS program at {self.name})"
+        super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:

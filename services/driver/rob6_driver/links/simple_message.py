@@ -58,12 +58,12 @@ wire), see ``to_controller_deg`` and deploy/adept/README.md.
 from __future__ import annotations
 
 import logging
-import math
 import select
 import socket
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Unpack
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -90,7 +90,7 @@ from .simple_message_codec import (
     RobotStatus,
     SimpleMessageError,
 )
-from .streamed_points import Joints, LinkDown, StreamedPointsLink
+from .streamed_points import Joints, LinkDown, StreamedPointsLink, Timeouts, check_address, check_period
 from .streaming import endpoint_name as _name, send_all as _send_all
 
 log = logging.getLogger("rob6.driver")
@@ -104,19 +104,12 @@ DEFAULT_BYTE_ORDER = "big"
 DEFAULT_PERIOD_S = 0.048
 #: how far (in periods) the controller runs behind rob6 when it honours durations
 LEAD_PERIODS = 1
-ACK_TIMEOUT_S = 2.0
-STATE_TIMEOUT_S = 1.0
-RETRY_S = 0.5
 #: a connection closed by the controller this soon without a word: probably another client
 CLOSED_AT_ONCE_S = 0.5
 #: how long a refused point or a closed motion connection waits for STATUS to say why
 FAULT_GRACE_S = 0.3
 #: arrival: the controller's position within this of the final setpoint (deg)
 ARRIVAL_TOL_DEG = 0.05
-#: a motion fails when the robot has not moved for this long before arriving
-NO_PROGRESS_S = 2.0
-#: ... or has not arrived this long after rob6's trajectory ended
-SETTLE_MAX_S = 4.0
 
 # ---------------------------------------------------------------------- the Viper's joints
 #: controller joint (deg) = sign * rob6 joint (deg) + offset. The V+ program moves to
@@ -135,11 +128,13 @@ WIRE_DECIMALS = 4
 
 
 def to_controller_deg(q_rob6_deg: ArrayLike) -> Joints:
-    return TO_CONTROLLER_SIGN * np.asarray(q_rob6_deg, float) + TO_CONTROLLER_OFFSET_DEG
+    q: Joints = TO_CONTROLLER_SIGN * np.asarray(q_rob6_deg, float) + TO_CONTROLLER_OFFSET_DEG
+    return q
 
 
 def from_controller_deg(q_ctrl_deg: ArrayLike) -> Joints:
-    return (np.asarray(q_ctrl_deg, float) - TO_CONTROLLER_OFFSET_DEG) * TO_CONTROLLER_SIGN
+    q: Joints = (np.asarray(q_ctrl_deg, float) - TO_CONTROLLER_OFFSET_DEG) * TO_CONTROLLER_SIGN
+    return q
 
 
 def to_wire(q_rob6_deg: ArrayLike) -> list[float]:
@@ -169,16 +164,11 @@ class AdeptSettings:
 
     def check(self) -> None:
         """ValueError (one line, naming the setting) when a value cannot work."""
-        if not self.host.strip():
-            raise ValueError("ROB6_SM_HOST is empty: give the controller's address")
-        for name, port in (("ROB6_SM_MOTION_PORT", self.motion_port), ("ROB6_SM_STATE_PORT", self.state_port),
-                           ("ROB6_SM_IO_PORT", self.io_port)):
-            if not 1 <= int(port) <= 65535:
-                raise ValueError(f"{name}={port}: expected a TCP port 1..65535")
+        check_address("ROB6_SM", self.host, ("MOTION_PORT", self.motion_port), ("STATE_PORT", self.state_port),
+                      ("IO_PORT", self.io_port))
         if self.byte_order not in BYTE_ORDERS:
             raise ValueError(f"ROB6_SM_BYTE_ORDER={self.byte_order!r}: expected big or little")
-        if not (math.isfinite(self.period_s) and 0 < self.period_s <= 1.0):
-            raise ValueError(f"ROB6_SM_PERIOD={self.period_s}: expected seconds, more than 0 and at most 1")
+        check_period("ROB6_SM", self.period_s)
 
 
 class AdeptLink(StreamedPointsLink):
@@ -186,10 +176,7 @@ class AdeptLink(StreamedPointsLink):
     arrival_tol_deg = ARRIVAL_TOL_DEG
 
     def __init__(self, core: MotionCore, robot: RobotModel, settings: AdeptSettings, publish: Publish,
-                 on_event: Callable[[LinkEvent], None] | None = None, *,
-                 ack_timeout_s: float = ACK_TIMEOUT_S, state_timeout_s: float = STATE_TIMEOUT_S,
-                 retry_s: float = RETRY_S, no_progress_s: float = NO_PROGRESS_S,
-                 settle_max_s: float = SETTLE_MAX_S) -> None:
+                 on_event: Callable[[LinkEvent], None] | None = None, **timeouts: Unpack[Timeouts]) -> None:
         if not robot.is_adept:
             raise ValueError(f"the simple_message link drives the Adept Viper s850 (ad850), not {robot.name}")
         settings.check()
@@ -212,11 +199,8 @@ class AdeptLink(StreamedPointsLink):
         self._rest_q: Joints = core.state().q
         self._talked = False  # a request went out on the current motion connection
         self.stops = 0
-        super().__init__(core, robot, settings, publish, on_event,
-                         waiting_reason=(f"robot not connected (waiting for simple_message at "
-                                         f"{host}:{settings.motion_port}/{settings.state_port})"),
-                         ack_timeout_s=ack_timeout_s, state_timeout_s=state_timeout_s, retry_s=retry_s,
-                         no_progress_s=no_progress_s, settle_max_s=settle_max_s)
+        waiting = f"robot not connected (waiting for simple_message at {host}:{settings.motion_port}/{settings.state_port})"
+        super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
         self.lead_s = LEAD_PERIODS * self.period_s
 
     # ------------------------------------------------------------------ life cycle

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import queue
 import socket
 import threading
@@ -33,7 +34,7 @@ from abc import abstractmethod
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, TypedDict, Unpack
 
 import numpy as np
 import numpy.typing as npt
@@ -50,7 +51,14 @@ log = logging.getLogger("rob6.driver")
 
 Joints = npt.NDArray[np.float64]
 
+ACK_TIMEOUT_S = 2.0
+STATE_TIMEOUT_S = 1.0
+RETRY_S = 0.5
 CONNECT_TIMEOUT_S = 2.0
+#: a motion fails when the robot has not moved for this long before arriving
+NO_PROGRESS_S = 2.0
+#: ... or has not arrived this long after rob6's trajectory ended
+SETTLE_MAX_S = 4.0
 #: a position that changes less than this between state messages stands still (deg)
 REST_TOL_DEG = 1e-3
 STOP_WAIT_S = 0.5
@@ -62,6 +70,33 @@ class StreamSettings(Protocol):
 
     @property
     def period_s(self) -> float: ...
+
+
+class Timeouts(TypedDict, total=False):
+    """How long a link waits, seconds (the defaults above): for an acknowledgement, a state
+    message, the next connection attempt, the robot to move on and to arrive."""
+
+    ack_timeout_s: float
+    state_timeout_s: float
+    retry_s: float
+    no_progress_s: float
+    settle_max_s: float
+
+
+def check_address(prefix: str, host: str, *ports: tuple[str, int]) -> None:
+    """ValueError (one line, naming the setting ``<prefix>_<name>``) when the controller's
+    host is empty or a port (name, number) is not a TCP port."""
+    if not host.strip():
+        raise ValueError(f"{prefix}_HOST is empty: give the controller's address")
+    for name, port in ports:
+        if not 1 <= int(port) <= 65535:
+            raise ValueError(f"{prefix}_{name}={port}: expected a TCP port 1..65535")
+
+
+def check_period(prefix: str, period_s: float) -> None:
+    """ValueError (one line, naming ``<prefix>_PERIOD``) when the time between points cannot work."""
+    if not (math.isfinite(period_s) and 0 < period_s <= 1.0):
+        raise ValueError(f"{prefix}_PERIOD={period_s}: expected seconds, more than 0 and at most 1")
 
 
 @dataclass
@@ -85,17 +120,16 @@ class StreamedPointsLink(Link):
     arrival_tol_deg = 0.0
 
     def __init__(self, core: MotionCore, robot: RobotModel, settings: StreamSettings, publish: Publish,
-                 on_event: Callable[[LinkEvent], None] | None, *, waiting_reason: str,
-                 ack_timeout_s: float, state_timeout_s: float, retry_s: float, no_progress_s: float,
-                 settle_max_s: float) -> None:
+                 on_event: Callable[[LinkEvent], None] | None, waiting_reason: str,
+                 **timeouts: Unpack[Timeouts]) -> None:
         self.core = core
         self.robot = robot
         self.on_event = on_event
-        self.ack_timeout_s = ack_timeout_s
-        self.state_timeout_s = state_timeout_s
-        self.retry_s = retry_s
-        self.no_progress_s = no_progress_s
-        self.settle_max_s = settle_max_s
+        self.ack_timeout_s = timeouts.get("ack_timeout_s", ACK_TIMEOUT_S)
+        self.state_timeout_s = timeouts.get("state_timeout_s", STATE_TIMEOUT_S)
+        self.retry_s = timeouts.get("retry_s", RETRY_S)
+        self.no_progress_s = timeouts.get("no_progress_s", NO_PROGRESS_S)
+        self.settle_max_s = timeouts.get("settle_max_s", SETTLE_MAX_S)
         self.decimation = max(1, round(settings.period_s / core.dt))
         self.period_s = self.decimation * core.dt
         self.runner: CycleRunner[CoreState] = CycleRunner(self._cycle, core.dt, publish, name="driver-cycle")
