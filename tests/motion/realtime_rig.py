@@ -5,7 +5,6 @@ robot, moving it away and back, and a PTP/LIN/Alter session."""
 
 from __future__ import annotations
 
-import socket
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -20,21 +19,20 @@ from rob6.robots import RobotModel
 from rob6_recorder.reader import read_records
 from tests.controllers.sim_process import SimProcess, Status
 from tests.motion.link_session import joints, reply, wait_until
-from tests.system import System, ask_driver
+from tests.system import System, ask_driver, free_port
 
 Joints = npt.NDArray[np.float64]
 
 
 def free_tcp_ports(n: int) -> list[int]:
-    """``n`` distinct TCP ports free on 127.0.0.1 right now."""
-    socks = [socket.socket() for _ in range(n)]
-    try:
-        for sock in socks:
-            sock.bind(("127.0.0.1", 0))
-        return [sock.getsockname()[1] for sock in socks]
-    finally:
-        for sock in socks:
-            sock.close()
+    """``n`` distinct TCP ports nothing listens on, below the ephemeral range (``TEST_PORTS``):
+    a port of that range can be taken meanwhile as a connection's own port, even by rob6's
+    link connecting to it while nothing listens there (a TCP self-connect)."""
+    ports: list[int] = []
+    while len(ports) < n:
+        if (port := free_port()) not in ports:
+            ports.append(port)
+    return ports
 
 
 def link_status(system: System) -> LinkStatus:

@@ -24,6 +24,7 @@ joint ranges and what its state says (``_link_up``, ``_sending_up``, ``_controll
 from __future__ import annotations
 
 import contextlib
+import errno
 import logging
 import math
 import queue
@@ -451,6 +452,11 @@ class StreamedPointsLink(Link):
         where = what.format(endpoint_name(addr))
         try:
             sock = socket.create_connection(addr, timeout=CONNECT_TIMEOUT_S)
+            if sock.getsockname() == sock.getpeername():
+                # nothing listened on a port of the local ephemeral range and the connection
+                # got it as its own port (a TCP self-connect): it would hold the port forever
+                sock.close()
+                raise ConnectionRefusedError(errno.ECONNREFUSED, "nothing listens there (the connection met itself)")
         except OSError as exc:
             text = exc.strerror or str(exc) or type(exc).__name__
             if self._connect_errors.get(where) != text:
