@@ -18,12 +18,12 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
-from rob6.messages import Empty, LinkQuery
+from rob6.messages import Empty, LinkQuery, LinkStatus
 from tests.system import free_port, running
 
 from .latency import percentiles
@@ -128,37 +128,49 @@ ADEPT_START = [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]
 ADEPT_PTP = ([30.0, -50.0, 50.0, 10.0, 20.0, -20.0], [-20.0, -70.0, 60.0, -10.0, 40.0, 20.0], ADEPT_START)
 
 
-def adept_stream(timing: str, seconds: float) -> dict[str, Any]:
-    """PTP moves, then MoveRTJoints every 16 ms for ``seconds``, on ad850 over simple_message."""
-    motion, state = free_port(), free_port()
-    extra = {"ROB6_LINK": "simple_message", "ROB6_SM_MOTION_PORT": str(motion), "ROB6_SM_STATE_PORT": str(state)}
-    sim = ControllerSim("adept_sm_sim", "--motion-port", str(motion), "--state-port", str(state),
-                        "--timing", timing)
+def streamed_points_run(robot: str, extra_env: dict[str, str], sim: ControllerSim, what: str,
+                        start: list[float], ptp: Sequence[list[float]], alter: str, seconds: float,
+                        lin_y_mm: float | None = None) -> tuple[dict[str, Any], dict[str, Any], LinkStatus, list[float]]:
+    """A link that streams points (Adept, Kawasaki) against its controller simulator ``sim``
+    (closed at the end): wait for ``what`` to come up at ``start``, PTP to each of ``ptp``,
+    a LIN ``lin_y_mm`` along y and back to ``start`` (when given), then ``alter`` and
+    MoveRTJoints every 16 ms for ``seconds``. The controller's status before and after,
+    the link's status (latencies since the PTP moves began) and the moves' durations."""
     try:
         with tempfile.TemporaryDirectory() as logs, \
-                running("ad850", dummy=False, log_dir=logs, extra_env=extra) as system:
+                running(robot, dummy=False, log_dir=logs, extra_env=extra_env) as system:
             bus = system.bus("bench")
             try:
                 bus.wait_for(["driver"], 10)
                 with system.client() as client:
-                    start = " ".join(map(str, ADEPT_START))
+                    home = " ".join(map(str, start))
                     deadline = time.monotonic() + 30
-                    while client.ask("MovePTPJoints " + start, lines=1, timeout=60) != "true\n":
+                    while client.ask("MovePTPJoints " + home, lines=1, timeout=60) != "true\n":
                         client.read_lines(1, timeout=1)  # the "false" after the ERROR line
-                        assert time.monotonic() < deadline, "the Adept link did not come up"
+                        assert time.monotonic() < deadline, f"{what} did not come up"
                         time.sleep(0.2)
                     before = sim.status()
                     bus.request("driver", "link", LinkQuery(reset=True))
-                    moves = []
-                    for target in ADEPT_PTP:
+                    moves: list[float] = []
+                    for target in ptp:
                         began = time.perf_counter()
                         assert client.ask("MovePTPJoints " + " ".join(map(str, target)), timeout=60) == "true\n"
                         moves.append(time.perf_counter() - began)
-                    assert client.ask("EnableAdeptAlter") == "true\n"
+                    if lin_y_mm is not None:
+                        pose = [float(x) for x in client.ask("GetPositionHomRowWise").split()]
+                        pose[7] += lin_y_mm
+                        assert client.ask("EnableLin") == "true\n"
+                        began = time.perf_counter()
+                        assert client.ask("MoveLINHomRowWise " + " ".join(f"{x:f}" for x in pose),
+                                          timeout=60) == "true\n"
+                        moves.append(time.perf_counter() - began)
+                        assert client.ask("DisableLin") == "true\n"
+                        assert client.ask("MovePTPJoints " + home, timeout=60) == "true\n"
+                    assert client.ask(alter) == "true\n"
                     period, n = 0.016, int(seconds / 0.016)
                     began = time.perf_counter()
                     for k in range(n):
-                        q = list(ADEPT_START)
+                        q = list(start)
                         q[0] = 10.0 * np.sin(2 * np.pi * 0.2 * k * period)
                         client.send("MoveRTJoints " + " ".join(f"{x:f}" for x in q) + "\n")
                         client.read_lines(1)
@@ -167,12 +179,23 @@ def adept_stream(timing: str, seconds: float) -> dict[str, Any]:
                             time.sleep(delay)
                     time.sleep(0.5)
                     assert client.ask("DisableAlter", timeout=10) == "true\n"
-                    link = bus.request("driver", "link", LinkQuery())
+                    link: LinkStatus = bus.request("driver", "link", LinkQuery())
                     after = sim.status()
             finally:
                 bus.close()
     finally:
         sim.close()
+    return before, after, link, moves
+
+
+def adept_stream(timing: str, seconds: float) -> dict[str, Any]:
+    """PTP moves, then MoveRTJoints every 16 ms for ``seconds``, on ad850 over simple_message."""
+    motion, state = free_port(), free_port()
+    extra = {"ROB6_LINK": "simple_message", "ROB6_SM_MOTION_PORT": str(motion), "ROB6_SM_STATE_PORT": str(state)}
+    sim = ControllerSim("adept_sm_sim", "--motion-port", str(motion), "--state-port", str(state),
+                        "--timing", timing)
+    before, after, link, moves = streamed_points_run("ad850", extra, sim, "the Adept link", ADEPT_START, ADEPT_PTP,
+                                                     "EnableAdeptAlter", seconds)
     return {"received": after["points_received"] - before["points_received"],
             "acked": after["points_acknowledged"] - before["points_acknowledged"],
             "refused": after["points_refused"] - before["points_refused"],
@@ -249,12 +272,12 @@ def live_realtime_table(seconds: float, table: Table) -> None:
           [("off", *row(off)), ("on, every channel watched", *row(on))])
 
 
-def ros_realtime_table(seconds: float, table) -> None:
+def ros_realtime_table(seconds: float, table: Table) -> None:
     """The ROS 2 service's cost on the real-time path: the RSI Alter stream with ROB6_ROS=0,
     then with it on and a subscriber of /joint_states."""
     off, on = stream("rsi", seconds, ros=False), stream("rsi", seconds, ros=True)
 
-    def row(r: dict) -> tuple[str, ...]:
+    def row(r: dict[str, Any]) -> tuple[str, ...]:
         lat = r["latency_us"] or [float("nan")] * 3
         return (f"{r['late']} / {r['trips']}", f"{r['cycles']} / {r['missed']}",
                 f"{lat[1] / 1000:.3f} / {lat[2] / 1000:.3f}", "%.3f / %.3f" % r["rtt"], f"{r['joint_states']:,}")

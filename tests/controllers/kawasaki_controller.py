@@ -8,126 +8,26 @@
 
 from __future__ import annotations
 
-import io
-import json
 import re
-import socket
-import subprocess
-import sys
-import threading
-import time
 
-READY = re.compile(r"kawasaki-as-sim ready: port ([\d.]+):(\d+), control ([\d.]+):(\d+)$")
+from tests.controllers.sim_process import PointsControllerProcess
 
 
-class KawasakiController:
+class KawasakiController(PointsControllerProcess):
     """Starts ``python -m kawasaki_as_sim`` (on a free port unless ``args`` give one)."""
 
-    def __init__(self, *args: str, start_timeout: float = 20.0):
-        self.args = ["--port", "0", "--control", "127.0.0.1:0", *args]
-        self.start_timeout = start_timeout
-        self.proc: subprocess.Popen | None = None
-        self.port: tuple[str, int] | None = None
-        self.control: tuple[str, int] | None = None
-        self.stderr_lines: list[str] = []
-        self._ctl: socket.socket | None = None
-        self._stderr_thread: threading.Thread | None = None
-        self._ctl_file: io.BufferedRWPair | None = None
+    module = "kawasaki_as_sim"
+    label = "kawasaki-as-sim"
+    ready_line = re.compile(r"kawasaki-as-sim ready: port ([\d.]+):(\d+), control ([\d.]+):(\d+)$")
 
-    # ---- lifecycle -----------------------------------------------------------
-    def start(self) -> KawasakiController:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "kawasaki_as_sim", *self.args],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        )
-        self._stderr_thread = threading.Thread(target=self._drain_stderr, daemon=True)
-        self._stderr_thread.start()
-        line = self._read_ready()
-        m = READY.match(line)
-        if not m:
-            self.stop()
-            raise RuntimeError(f"kawasaki-as-sim printed {line!r} instead of its ready line; "
-                               f"stderr: {self.stderr_lines}")
-        g = m.groups()
-        self.port, self.control = (g[0], int(g[1])), (g[2], int(g[3]))
-        self._ctl = socket.create_connection(self.control, timeout=10)
-        self._ctl_file = self._ctl.makefile("rwb")
-        return self
+    def __init__(self, *args: str, start_timeout: float = 20.0) -> None:
+        super().__init__(["--port", "0", "--control", "127.0.0.1:0", *args], start_timeout)
+        self.port: tuple[str, int]  # (host, port) of the AS program's server: set by start()
 
-    def _read_ready(self) -> str:
-        proc, stderr_thread = self.proc, self._stderr_thread
-        assert proc is not None and proc.stdout is not None and stderr_thread is not None, "not started"
-        stdout = proc.stdout
-        box: list[str] = []
-        t = threading.Thread(target=lambda: box.append(stdout.readline()), daemon=True)
-        t.start()
-        t.join(self.start_timeout)
-        if not box:
-            self.stop()
-            raise RuntimeError(f"kawasaki-as-sim did not get ready within {self.start_timeout} s; "
-                               f"stderr: {self.stderr_lines}")
-        if not box[0]:
-            code = proc.wait(10)
-            stderr_thread.join(5)
-            raise RuntimeError(f"kawasaki-as-sim exited with code {code} before its ready line; "
-                               f"stderr: {self.stderr_lines}")
-        return box[0].rstrip("\n")
-
-    def _drain_stderr(self) -> None:
-        assert self.proc is not None and self.proc.stderr is not None, "not started"
-        for line in self.proc.stderr:
-            self.stderr_lines.append(line.rstrip("\n"))
-
-    def stop(self, timeout: float = 10.0) -> int | None:
-        """SIGTERM, then the exit code (SIGKILL if it does not exit in time)."""
-        if self._ctl is not None:
-            self._ctl.close()
-            self._ctl = None
-        if self.proc is None:
-            return None
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        assert self._stderr_thread is not None  # started right after proc
-        self._stderr_thread.join(5)
-        return self.proc.returncode
-
-    def __enter__(self) -> KawasakiController:
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
-
-    # ---- control channel ---------------------------------------------------------
-    def request(self, req: dict | str) -> dict:
-        """One request (a dict, or a raw line to test bad input) and its reply."""
-        line = req if isinstance(req, str) else json.dumps(req)
-        assert self._ctl_file is not None, "not started"
-        self._ctl_file.write(line.encode() + b"\n")
-        self._ctl_file.flush()
-        reply = self._ctl_file.readline()
-        if not reply:
-            raise ConnectionError(f"control channel closed; stderr: {self.stderr_lines}")
-        return json.loads(reply)
-
-    def _ok(self, req: dict) -> dict:
-        reply = self.request(req)
-        if not reply.get("ok"):
-            raise RuntimeError(f"{req} refused: {reply.get('error')}")
-        return reply
-
-    def status(self) -> dict:
-        return self._ok({"cmd": "status"})
-
-    def estop(self) -> None:
-        self._ok({"cmd": "estop"})
-
-    def release(self) -> None:
-        self._ok({"cmd": "estop_release"})
+    def _ready(self, groups: tuple[str, ...]) -> tuple[str, int]:
+        g = groups
+        self.port = (g[0], int(g[1]))
+        return g[2], int(g[3])
 
     def motor(self, on: bool) -> None:
         self._ok({"cmd": "motor", "on": on})
@@ -135,25 +35,6 @@ class KawasakiController:
     def teach(self, on: bool) -> None:
         self._ok({"cmd": "teach", "on": on})
 
-    def error(self, code: int) -> None:
-        self._ok({"cmd": "error", "code": code})
-
-    def clear_error(self) -> None:
-        self._ok({"cmd": "clear_error"})
-
     def drop_connection(self) -> bool:
-        return self._ok({"cmd": "drop_connection"})["dropped"]
-
-    def slow_ack(self, ms: float) -> None:
-        self._ok({"cmd": "slow_ack", "ms": ms})
-
-    def wait_for(self, predicate, timeout: float = 15.0, what: str = "condition") -> dict:
-        """Poll status() until predicate(status) holds; the last status."""
-        deadline = time.monotonic() + timeout
-        while True:
-            st = self.status()
-            if predicate(st):
-                return st
-            if time.monotonic() > deadline:
-                raise AssertionError(f"timed out waiting for {what}; last status {st}")
-            time.sleep(0.02)
+        dropped: bool = self._ok({"cmd": "drop_connection"})["dropped"]
+        return dropped

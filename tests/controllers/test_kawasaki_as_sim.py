@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import socket
 import time
+from collections.abc import Iterator
 
 import pytest
 
@@ -21,7 +22,7 @@ ZERO = "0.000 90.000 0.000 0.000 0.000 0.000"  # rob6's zero, the controller's j
 
 
 class Client:
-    def __init__(self, addr):
+    def __init__(self, addr: tuple[str, int]) -> None:
         self.sock = socket.create_connection(addr, timeout=10)
         self.buffer = b""
         self.states: list[list[str]] = []
@@ -62,20 +63,20 @@ class Client:
 
 
 @pytest.fixture
-def sim():
+def sim() -> Iterator[KawasakiController]:
     with KawasakiController() as ctl:
         yield ctl
 
 
 @pytest.fixture
-def client(sim):
+def client(sim: KawasakiController) -> Iterator[Client]:
     c = Client(sim.port)
     assert c.line() == "H rob6-kas 1 64"
     yield c
     c.close()
 
 
-def test_hello_and_the_state_at_ten_hertz_or_more(client):
+def test_hello_and_the_state_at_ten_hertz_or_more(client: Client) -> None:
     first = client.state()
     began = time.monotonic()
     for _ in range(10):
@@ -88,7 +89,7 @@ def test_hello_and_the_state_at_ten_hertz_or_more(client):
     assert time.monotonic() - began < 5.0
 
 
-def test_a_motion_starts_at_three_points_and_ends_exactly_on_the_final_one(sim, client):
+def test_a_motion_starts_at_three_points_and_ends_exactly_on_the_final_one(sim: KawasakiController, client: Client) -> None:
     assert client.send("P 1 10.000 90.000 0.000 0.000 0.000 0.000 500 0") == ["A", "1", "0", "1"]
     assert client.send("P 2 15.000 90.000 0.000 0.000 0.000 0.000 250 0") == ["A", "2", "0", "2"]
     time.sleep(0.3)  # two blended points never start (whatever the wait): the program waits for a third
@@ -102,7 +103,7 @@ def test_a_motion_starts_at_three_points_and_ends_exactly_on_the_final_one(sim, 
     assert st["underruns"] == 0 and st["max_speed_ratio"] <= 1.0
 
 
-def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim, client):
+def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim: KawasakiController, client: Client) -> None:
     for n in (1, 2, 3):
         client.send(f"P {n} {2 * n}.000 90.000 0.000 0.000 0.000 0.000 100 0")
     st = sim.wait_for(lambda s: not s["moving"] and s["done"] == 3, what="the arm to stop at point 3")
@@ -112,7 +113,7 @@ def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim, client):
     assert st["position_ctrl_deg"][0] == 7.0 and st["underruns"] == 1
 
 
-def test_cancel_drops_the_queue_and_the_arm_stops_after_the_segment_under_way(sim, client):
+def test_cancel_drops_the_queue_and_the_arm_stops_after_the_segment_under_way(sim: KawasakiController, client: Client) -> None:
     for n in range(1, 11):
         assert client.send(f"P {n} {n * 3}.000 90.000 0.000 0.000 0.000 0.000 200 {int(n == 10)}")[2] == "0"
     sim.wait_for(lambda s: s["done"] >= 1, what="the first point")
@@ -134,12 +135,12 @@ def test_cancel_drops_the_queue_and_the_arm_stops_after_the_segment_under_way(si
     ("P 1 0 90 121 0 0 0 48 0", "2"),  # JT3 beyond +120
     ("P 1 20 90 0 0 0 0 48 0", "3"),  # JT1 20 deg in 48 ms: 417 deg/s, rated 360
 ])
-def test_what_the_program_refuses(sim, client, line, code):
+def test_what_the_program_refuses(sim: KawasakiController, client: Client, line: str, code: str) -> None:
     assert client.send(line)[:3] == ["A", "1", code]
     assert sim.status()["position_ctrl_deg"] == [0.0, 90.0, 0.0, 0.0, 0.0, 0.0]
 
 
-def test_a_line_too_long_and_sequence_numbers(sim, client):
+def test_a_line_too_long_and_sequence_numbers(sim: KawasakiController, client: Client) -> None:
     assert client.send("P 1 " + "0" * 130)[2] == "1"
     assert client.send("P 5 1.000 90.000 0.000 0.000 0.000 0.000 1000 0")[2] == "0"
     assert client.send("P 5 2.000 90.000 0.000 0.000 0.000 0.000 1000 0")[2] == "6"  # not above 5
@@ -147,7 +148,7 @@ def test_a_line_too_long_and_sequence_numbers(sim, client):
     assert sim.status()["malformed"] == 1
 
 
-def test_a_full_queue_refuses():
+def test_a_full_queue_refuses() -> None:
     with KawasakiController("--capacity", "3") as sim:
         c = Client(sim.port)
         assert c.line() == "H rob6-kas 1 3"
@@ -160,7 +161,7 @@ def test_a_full_queue_refuses():
         c.close()
 
 
-def test_one_client_at_a_time_and_a_dropped_connection(sim, client):
+def test_one_client_at_a_time_and_a_dropped_connection(sim: KawasakiController, client: Client) -> None:
     second = socket.create_connection(sim.port, timeout=10)
     assert second.recv(100) == b""  # closed at once, no hello
     second.close()
@@ -179,7 +180,7 @@ def test_one_client_at_a_time_and_a_dropped_connection(sim, client):
     again.close()
 
 
-def test_estop_brakes_refuses_and_wants_the_motor_switched_on(sim, client):
+def test_estop_brakes_refuses_and_wants_the_motor_switched_on(sim: KawasakiController, client: Client) -> None:
     client.send("P 1 30.000 90.000 0.000 0.000 0.000 0.000 2000 0")
     client.send("P 2 60.000 90.000 0.000 0.000 0.000 0.000 2000 1")
     sim.wait_for(lambda s: s["position_ctrl_deg"][0] > 3.0, what="the arm to move")
@@ -198,7 +199,7 @@ def test_estop_brakes_refuses_and_wants_the_motor_switched_on(sim, client):
     assert client.send(f"P 5 {here:.3f} 90.000 0.000 0.000 0.000 0.000 100 1")[2] == "0"
 
 
-def test_teach_mode_stops_and_refuses(sim, client):
+def test_teach_mode_stops_and_refuses(sim: KawasakiController, client: Client) -> None:
     client.send("P 1 30.000 90.000 0.000 0.000 0.000 0.000 2000 1")
     sim.wait_for(lambda s: s["moving"], what="the motion")
     sim.teach(True)
@@ -216,10 +217,10 @@ def test_teach_mode_stops_and_refuses(sim, client):
     ('{"cmd": "slow_ack", "ms": "x"}', "slow_ack: 'ms' must be a number >= 0"),
     ("[1]", "expected a JSON object with a string 'cmd'"),
 ])
-def test_the_control_channel_says_what_is_wrong(sim, request_, error):
+def test_the_control_channel_says_what_is_wrong(sim: KawasakiController, request_: str, error: str) -> None:
     assert sim.request(request_) == {"ok": False, "error": error}
 
 
-def test_a_start_pose_outside_the_range_is_refused_in_one_line():
+def test_a_start_pose_outside_the_range_is_refused_in_one_line() -> None:
     with pytest.raises(RuntimeError, match="exited with code 2"):
         KawasakiController("--start-pose", "0 0 -130 0 0 0").start()

@@ -502,6 +502,26 @@ def test_rsi_profile_drives_the_kr_c4_container(built: None, entry_points: None)
         REPORT["rsi: controller after the move"] = {k: status[k] for k in ("cycle_ms", "late_total", "rtt_ms")}
 
 
+def follow_then_move(port: int, target: list[float], controller: Callable[[], dict[str, Any]]
+                     ) -> tuple[float, dict[str, Any]]:
+    """A link that streams points to a controller at rob6's zero: wait until rob6 follows it
+    (a move to where the arm stands is accepted; until then: ERROR: driver: robot not
+    connected ...), then a PTP to ``target``. The move's seconds and the controller's status."""
+    with connect(port) as client:
+        t = time.monotonic()
+        while (reply := client.ask("MovePTPJoints 0 0 0 0 0 0", timeout=30)) != "true\n":
+            reply += client.read_lines(1)  # ERROR: ... then false
+            assert reply.startswith("ERROR: driver: robot not connected") and reply.endswith("\nfalse\n"), reply
+            assert time.monotonic() - t < 30, f"rob6 does not follow the controller: {reply!r}"
+            time.sleep(0.2)
+        assert client.ask("GetPositionJoints") == "0.000000 " * 5 + "0.000000\n"
+        t = time.monotonic()
+        assert client.ask("MovePTPJoints " + " ".join(f"{x:g}" for x in target), timeout=60) == "true\n"
+        moved_s = time.monotonic() - t
+        assert [float(x) for x in client.ask("GetPositionJoints").split()] == target
+        return moved_s, controller()
+
+
 # ---------------------------------------------------------------------- tests: adept profile
 def test_adept_profile_drives_the_adept_container(built: None, entry_points: None) -> None:
     """`ROB6_ROBOT=ad850 ROB6_LINK=simple_message compose --profile adept up`: the driver
@@ -518,21 +538,7 @@ def test_adept_profile_drives_the_adept_container(built: None, entry_points: Non
         start = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # adept-sm-sim's default start pose (rob6's convention)
         assert before["position_rob6_deg"] == start and not before["in_motion"], before
         target = [30.0, -50.0, 50.0, 10.0, 20.0, -20.0]
-        with connect(stack.port) as client:
-            # ready once the controller has reported its position: a move to where the arm
-            # stands is then accepted (until then: ERROR: driver: robot not connected ...)
-            t = time.monotonic()
-            while (reply := client.ask("MovePTPJoints 0 0 0 0 0 0", timeout=30)) != "true\n":
-                reply += client.read_lines(1)  # ERROR: ... then false
-                assert reply.startswith("ERROR: driver: robot not connected") and reply.endswith("\nfalse\n"), reply
-                assert time.monotonic() - t < 30, f"rob6 does not follow the controller: {reply!r}"
-                time.sleep(0.2)
-            assert client.ask("GetPositionJoints") == "0.000000 " * 5 + "0.000000\n"
-            t = time.monotonic()
-            assert client.ask("MovePTPJoints " + " ".join(f"{x:g}" for x in target), timeout=60) == "true\n"
-            moved_s = time.monotonic() - t
-            assert [float(x) for x in client.ask("GetPositionJoints").split()] == target
-            status = adept()
+        moved_s, status = follow_then_move(stack.port, target, adept)
         # the controller's own arm is at the target and at rest: true means the robot arrived
         assert all(abs(a - b) < 2e-4 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
         assert not status["in_motion"] and status["queue_length"] == 0, status
@@ -563,21 +569,7 @@ def test_kawasaki_profile_drives_the_kawasaki_container(built: None, entry_point
         start = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # kawasaki-as-sim's default start pose (rob6's convention)
         assert before["position_rob6_deg"] == start and not before["moving"], before
         target = [30.0, -20.0, 50.0, 10.0, 20.0, -20.0]
-        with connect(stack.port) as client:
-            # ready once the controller has reported its position: a move to where the arm
-            # stands is then accepted (until then: ERROR: driver: robot not connected ...)
-            t = time.monotonic()
-            while (reply := client.ask("MovePTPJoints 0 0 0 0 0 0", timeout=30)) != "true\n":
-                reply += client.read_lines(1)  # ERROR: ... then false
-                assert reply.startswith("ERROR: driver: robot not connected") and reply.endswith("\nfalse\n"), reply
-                assert time.monotonic() - t < 30, f"rob6 does not follow the controller: {reply!r}"
-                time.sleep(0.2)
-            assert client.ask("GetPositionJoints") == "0.000000 " * 5 + "0.000000\n"
-            t = time.monotonic()
-            assert client.ask("MovePTPJoints " + " ".join(f"{x:g}" for x in target), timeout=60) == "true\n"
-            moved_s = time.monotonic() - t
-            assert [float(x) for x in client.ask("GetPositionJoints").split()] == target
-            status = kawasaki()
+        moved_s, status = follow_then_move(stack.port, target, kawasaki)
         # the controller's own arm is at the target and at rest: true means the robot arrived
         assert all(abs(a - b) < 1.5e-3 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
         assert not status["moving"] and status["queued"] == 0, status

@@ -12,21 +12,21 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from rob6.bus import Bus
-from rob6.config import BusSettings
-from rob6.messages import LinkQuery
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.kawasaki_controller import KawasakiController
-from tests.motion.link_session import joints, reply, wait_until
-from tests.motion.test_adept_realtime import free_tcp_ports
+from tests.motion.link_session import reply, wait_until
+from tests.motion.realtime_rig import StreamedRig, fmt, free_tcp_ports, recorded_states
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import running
+from tests.system import Client, System, link_status, running
 
 pytestmark = pytest.mark.slow
 
@@ -36,7 +36,7 @@ START = [0.0, -30.0, 40.0, 0.0, 30.0, 0.0]
 POSITION_TOL = 1.5e-3
 
 
-def kawasaki_system(port: int, **kwargs):
+def kawasaki_system(port: int, **kwargs: Any) -> AbstractContextManager[System]:
     return running("kaw_fs", dummy=False, extra_env={
         "ROB6_LINK": "kawasaki", "ROB6_KAS_HOST": "127.0.0.1", "ROB6_KAS_PORT": str(port)}, **kwargs)
 
@@ -45,87 +45,16 @@ def controller(port: int, *args: str) -> KawasakiController:
     return KawasakiController("--port", str(port), *args)
 
 
-def link_status(system):
-    bus = Bus(BusSettings(robot="kaw_fs", robot_id=system.robot_id,
-                          connect=(f"tcp/127.0.0.1:{system.router_port}",)), "test")
-    try:
-        bus.wait_for(["driver"], 10)
-        return bus.request("driver", "link", LinkQuery())
-    finally:
-        bus.close()
+RIG = StreamedRig(ROBOT, START, POSITION_TOL, moving_key="moving")
+robot_at, connected, arrived, long_move, back_home = RIG.robot_at, RIG.connected, RIG.arrived, RIG.long_move, RIG.back_home
 
 
-def robot_at(ctl) -> np.ndarray:
-    return np.array(ctl.status()["position_rob6_deg"])
-
-
-def fmt(q) -> str:
-    return " ".join(f"{x:f}" for x in q)
-
-
-def connected(client, ctl, system) -> np.ndarray:
-    """Wait until rob6 moves the robot again and follows it: a motion to where the robot stands
-    is accepted (it sends nothing) and rob6's position is the robot's."""
-    def ready():
-        here = robot_at(ctl)
-        if reply(client, "MovePTPJoints " + fmt(here)) != "true\n":
-            return None
-        q = joints(client)
-        return q if np.allclose(q, robot_at(ctl), atol=POSITION_TOL) else None
-    q = wait_until(ready, what="rob6 to follow the controller")
-    assert link_status(system).state == "connected"
-    return q
-
-
-def arrived(ctl, target) -> dict:
-    return ctl.wait_for(lambda st: not st["moving"] and np.allclose(st["position_rob6_deg"], target,
-                                                                    atol=POSITION_TOL),
-                        timeout=20, what=f"the robot at {target}")
-
-
-def session(client, ctl) -> None:
+def session(client: Client, ctl: KawasakiController) -> None:
     """PTP, LIN and Alter (EnableAlter, MoveRTJoints every 16 ms)."""
-    for ptp_target in (START, [30.0, -20.0, 50.0, 10.0, 20.0, -20.0], START):
-        assert reply(client, "MovePTPJoints " + fmt(ptp_target)) == "true\n"
-        assert np.allclose(robot_at(ctl), ptp_target, atol=POSITION_TOL)  # true: the robot is there
-    assert client.ask("GetPositionJoints") == "0.000000 -30.000000 40.000000 0.000000 30.000000 0.000000\n"
-    pose = [float(x) for x in client.ask("GetPositionHomRowWise").split()]
-    pose[7] += 60.0  # 60 mm along y, a straight line
-    assert client.ask("EnableLin") == "true\n"
-    assert reply(client, "MoveLINHomRowWise " + fmt(pose)) == "true\n"
-    assert np.allclose([float(x) for x in client.ask("GetPositionHomRowWise").split()], pose, atol=1e-3)
-    assert np.allclose(robot_at(ctl), joints(client), atol=POSITION_TOL)
-    assert client.ask("DisableLin") == "true\n"
-    assert client.ask("EnableAlter") == "true\n"
-    here = joints(client)
-    began = time.monotonic()
-    for k in range(250):
-        target = here.copy()
-        target[0] += 3.0 * np.sin(2 * np.pi * 0.5 * k * ROBOT.cycle_s)
-        assert reply(client, "MoveRTJoints " + fmt(target)) == "true\n"
-        # pace the targets at the controller cycle like an Alter client does; a late one only
-        # makes the motion slower, never changes what is asserted
-        delay = began + (k + 1) * ROBOT.cycle_s - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-    final = here.copy()
-    final[0] += 2.0
-    assert reply(client, "MoveRTJoints " + fmt(final)) == "true\n"
-    arrived(ctl, final)
-    assert np.allclose(joints(client), final, atol=1e-6)
-    assert client.ask("DisableAlter") == "true\n"
+    RIG.session(client, ctl, via=[30.0, -20.0, 50.0, 10.0, 20.0, -20.0], lin_y_mm=60.0, alter="EnableAlter")
 
 
-def recorded_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
-    rows = {}
-    for path in directory.glob("*_system_*.mcap"):
-        for r in read_records(path, ["/driver/joint_state"]):
-            rows[r.data["cycle"]] = (r.data["t"], r.data["q"])
-    cycles = sorted(rows)
-    return np.array([rows[c][0] for c in cycles]), np.array([rows[c][1] for c in cycles])
-
-
-def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path):
+def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> None:
     (port,) = free_tcp_ports(1)
     with kawasaki_system(port, log_dir=str(tmp_path)) as system, system.client() as client:
         waiting = f"ERROR: driver: robot not connected (waiting for the Kawasaki AS program at 127.0.0.1:{port})\n"
@@ -152,30 +81,14 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def kawasaki():
+def kawasaki() -> Iterator[tuple[System, int]]:
     """One rob6 system on the kawasaki link for the fault tests; each test brings its own controller."""
     (port,) = free_tcp_ports(1)
     with kawasaki_system(port) as system:
         yield system, port
 
 
-def long_move(client, ctl) -> None:
-    """Start a PTP of a few seconds (J1 0 -> 60) without waiting for its reply."""
-    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-    target = list(START)
-    target[0] = 60.0
-    client.send("MovePTPJoints " + fmt(target) + "\n")
-    wait_until(lambda: float(robot_at(ctl)[0]) > 5.0, what="the robot to move")
-
-
-def back_home(client, ctl, system) -> None:
-    here = connected(client, ctl, system)
-    assert 5.0 < here[0] < 60.0  # where the fault caught it: rob6 continues from there
-    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-    assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
-
-
-def test_estop_mid_motion_then_released_and_motor_on(kawasaki):
+def test_estop_mid_motion_then_released_and_motor_on(kawasaki: tuple[System, int]) -> None:
     system, port = kawasaki
     with controller(port) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -194,7 +107,7 @@ def test_estop_mid_motion_then_released_and_motor_on(kawasaki):
         assert sum(ctl.status()["refused"].values()) == refused  # nothing sent while it could not move
 
 
-def test_motor_power_off_mid_motion(kawasaki):
+def test_motor_power_off_mid_motion(kawasaki: tuple[System, int]) -> None:
     system, port = kawasaki
     with controller(port) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -205,7 +118,7 @@ def test_motor_power_off_mid_motion(kawasaki):
         back_home(client, ctl, system)
 
 
-def test_teach_mode_and_a_controller_error_mid_motion(kawasaki):
+def test_teach_mode_and_a_controller_error_mid_motion(kawasaki: tuple[System, int]) -> None:
     system, port = kawasaki
     with controller(port) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -222,7 +135,7 @@ def test_teach_mode_and_a_controller_error_mid_motion(kawasaki):
         back_home(client, ctl, system)
 
 
-def test_connection_dropped_mid_motion_and_restored(kawasaki):
+def test_connection_dropped_mid_motion_and_restored(kawasaki: tuple[System, int]) -> None:
     system, port = kawasaki
     with controller(port) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -237,7 +150,7 @@ def test_connection_dropped_mid_motion_and_restored(kawasaki):
         assert link_status(system).runs > runs
 
 
-def test_slow_then_missing_acknowledgements(kawasaki):
+def test_slow_then_missing_acknowledgements(kawasaki: tuple[System, int]) -> None:
     system, port = kawasaki
     with controller(port) as ctl, system.client() as client:
         connected(client, ctl, system)
@@ -259,7 +172,7 @@ def test_slow_then_missing_acknowledgements(kawasaki):
         assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
-def test_a_point_outside_the_controllers_range_is_never_sent(kawasaki):
+def test_a_point_outside_the_controllers_range_is_never_sent(kawasaki: tuple[System, int]) -> None:
     """rob6 allows q3 down to -150, the controller only to -120 (JT3 +120): the link stops the
     motion at the border with a clear error instead of sending the point."""
     system, port = kawasaki
@@ -278,12 +191,12 @@ def test_a_point_outside_the_controllers_range_is_never_sent(kawasaki):
         assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
 
 
-def test_the_kawasaki_link_on_another_robot_is_refused_in_one_line():
+def test_the_kawasaki_link_on_another_robot_is_refused_in_one_line() -> None:
     result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "ad850", "--link", "kawasaki"],
-                            capture_output=True, text=True, timeout=60)
+                            check=False, capture_output=True, text=True, timeout=60)
     assert (result.returncode, result.stderr) == (
         78, "rob6-driver: --link kawasaki drives the Kawasaki FS03N (kaw_fs), not ad850; use --link sim\n")
     result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kaw_fs", "--link", "kawasaki",
-                             "--kas-port", "0"], capture_output=True, text=True, timeout=60)
+                             "--kas-port", "0"], check=False, capture_output=True, text=True, timeout=60)
     assert (result.returncode, result.stderr) == (
         78, "rob6-driver: ROB6_KAS_PORT=0: expected a TCP port 1..65535\n")

@@ -10,11 +10,10 @@ Assertions are about positions, limits, texts and recovery, never about how fast
 
 from __future__ import annotations
 
-import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
@@ -25,7 +24,8 @@ import pytest
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController
-from tests.motion.link_session import joints, reply, wait_until
+from tests.motion.link_session import reply, wait_until
+from tests.motion.realtime_rig import StreamedRig, fmt, free_tcp_ports, recorded_states
 from tests.motion.test_realtime_system import assert_within_limits
 from tests.system import Client, System, link_status, running
 
@@ -35,17 +35,6 @@ ROBOT = get_robot("ad850")
 START = [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]
 #: float32 radians on the wire, rob6 rounds what it reads to 1e-4 deg
 POSITION_TOL = 2e-4
-
-
-def free_tcp_ports(n: int) -> list[int]:
-    socks = [socket.socket() for _ in range(n)]
-    try:
-        for sock in socks:
-            sock.bind(("127.0.0.1", 0))
-        return [sock.getsockname()[1] for sock in socks]
-    finally:
-        for sock in socks:
-            sock.close()
 
 
 def adept_system(motion: int, state: int, order: str = "big", **kwargs: Any) -> AbstractContextManager[System]:
@@ -58,73 +47,13 @@ def controller(motion: int, state: int, *args: str, order: str = "big") -> Adept
     return AdeptController("--motion-port", str(motion), "--state-port", str(state), *args, byte_order=order)
 
 
-def robot_at(ctl: AdeptController) -> np.ndarray:
-    return np.array(ctl.status()["position_rob6_deg"])
-
-
-def connected(client: Client, ctl: AdeptController, system: System) -> np.ndarray:
-    """Wait until rob6 can move the robot again and follows it: a motion to where the robot
-    stands is accepted (it sends nothing), and rob6's position is the robot's."""
-    def ready() -> np.ndarray | None:
-        here = robot_at(ctl)
-        if reply(client, "MovePTPJoints " + fmt(here)) != "true\n":
-            return None
-        q = joints(client)
-        return q if np.allclose(q, robot_at(ctl), atol=POSITION_TOL) else None
-    q: np.ndarray = wait_until(ready, what="rob6 to follow the controller")
-    assert link_status(system).state == "connected"
-    return q
-
-
-def arrived(ctl: AdeptController, target: Sequence[float] | np.ndarray) -> dict[str, Any]:
-    """The controller at rest on target (rob6's degrees)."""
-    return ctl.wait_for(lambda st: not st["in_motion"] and np.allclose(st["position_rob6_deg"], target,
-                                                                       atol=POSITION_TOL),
-                        timeout=20, what=f"the robot at {target}")
-
-
-def fmt(q: Iterable[float]) -> str:
-    return " ".join(f"{x:f}" for x in q)
+RIG = StreamedRig(ROBOT, START, POSITION_TOL, moving_key="in_motion")
+robot_at, connected, arrived, long_move, back_home = RIG.robot_at, RIG.connected, RIG.arrived, RIG.long_move, RIG.back_home
 
 
 def session(client: Client, ctl: AdeptController) -> None:
     """PTP, LIN and Alter (EnableAdeptAlter, MoveRTJoints every 16 ms)."""
-    for ptp_target in (START, [30.0, -50.0, 50.0, 10.0, 20.0, -20.0], START):
-        assert reply(client, "MovePTPJoints " + fmt(ptp_target)) == "true\n"
-        assert np.allclose(robot_at(ctl), ptp_target, atol=POSITION_TOL)  # true: the robot is there
-    assert client.ask("GetPositionJoints") == "0.000000 -60.000000 40.000000 0.000000 30.000000 0.000000\n"
-    pose = [float(x) for x in client.ask("GetPositionHomRowWise").split()]
-    pose[7] += 100.0  # 100 mm along y, a straight line
-    assert client.ask("EnableLin") == "true\n"
-    assert reply(client, "MoveLINHomRowWise " + fmt(pose)) == "true\n"
-    assert np.allclose([float(x) for x in client.ask("GetPositionHomRowWise").split()], pose, atol=1e-3)
-    assert np.allclose(robot_at(ctl), joints(client), atol=POSITION_TOL)
-    assert client.ask("DisableLin") == "true\n"
-    assert client.ask("EnableAdeptAlter") == "true\n"
-    here = joints(client)
-    began = time.monotonic()
-    for k in range(250):
-        target = here.copy()
-        target[0] += 3.0 * np.sin(2 * np.pi * 0.5 * k * ROBOT.cycle_s)
-        assert reply(client, "MoveRTJoints " + fmt(target)) == "true\n"
-        delay = began + (k + 1) * ROBOT.cycle_s - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-    final = here.copy()
-    final[0] += 2.0
-    assert reply(client, "MoveRTJoints " + fmt(final)) == "true\n"
-    arrived(ctl, final)
-    assert np.allclose(joints(client), final, atol=1e-6)
-    assert client.ask("DisableAlter") == "true\n"
-
-
-def recorded_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
-    rows = {}
-    for path in directory.glob("*_system_*.mcap"):
-        for r in read_records(path, ["/driver/joint_state"]):
-            rows[r.data["cycle"]] = (r.data["t"], r.data["q"])
-    cycles = sorted(rows)
-    return np.array([rows[c][0] for c in cycles]), np.array([rows[c][1] for c in cycles])
+    RIG.session(client, ctl, via=[30.0, -50.0, 50.0, 10.0, 20.0, -20.0], lin_y_mm=100.0, alter="EnableAdeptAlter")
 
 
 @pytest.mark.parametrize("order, timing", [("big", "vplus"), ("little", "duration")])
@@ -160,22 +89,6 @@ def adept() -> Iterator[tuple[System, int, int]]:
     motion, state = free_tcp_ports(2)
     with adept_system(motion, state) as system:
         yield system, motion, state
-
-
-def long_move(client: Client, ctl: AdeptController) -> None:
-    """Start a PTP of ~3 s (J1 0 -> 60) without waiting for its reply."""
-    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-    target = list(START)
-    target[0] = 60.0
-    client.send("MovePTPJoints " + fmt(target) + "\n")
-    wait_until(lambda: float(robot_at(ctl)[0]) > 5.0, what="the robot to move")
-
-
-def back_home(client: Client, ctl: AdeptController, system: System) -> None:
-    here = connected(client, ctl, system)
-    assert 5.0 < here[0] < 60.0  # where the fault caught it: rob6 continues from there
-    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-    assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
 def test_estop_mid_motion_then_released_and_drives_on(adept: tuple[System, int, int]) -> None:

@@ -22,6 +22,7 @@ from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints, reply, wait_until
+from tests.motion.realtime_rig import recorded_states
 from tests.motion.test_realtime_system import assert_within_limits
 from tests.system import Client, System, free_port, link_status, running
 
@@ -59,15 +60,8 @@ def assert_no_jump(status: dict[str, Any]) -> None:
 
 
 def connected_states(directory: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(t, q) of every recorded cycle while the robot was connected (while waiting or
-    lost the driver repeats its last state a few times a second)."""
-    rows = {}
-    for path in directory.glob("*_system_*.mcap"):
-        for r in read_records(path, ["/driver/joint_state"]):
-            if r.data.get("link", "connected") == "connected":
-                rows[r.data["cycle"]] = (r.data["t"], r.data["q"])
-    cycles = sorted(rows)
-    return np.array([rows[c][0] for c in cycles]), np.array([rows[c][1] for c in cycles])
+    """(t, q) of every recorded cycle while the robot was connected."""
+    return recorded_states(directory, connected_only=True)
 
 
 def session(client: Client) -> None:

@@ -74,40 +74,14 @@ def main(settings: BusSettings, log_level: str, dummy: bool, link: str, rsi_list
     robot = get_robot(settings.robot)
     sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,
                        byte_order=sm_byte_order, period_s=sm_period)
-    if link in ("simple_message", "adept"):
-        if not robot.is_adept:
-            service.fail("driver", f"--link {link} drives the Adept Viper s850 (ad850), not {robot.name}; "
-                         "use --link sim", EXIT_REFUSED)
-        if dummy:
-            service.fail("driver", f"--link {link} moves a real robot in real time: --dummy is not possible",
-                         EXIT_REFUSED)
-        try:
-            sm.check()
-        except ValueError as exc:
-            service.fail("driver", str(exc), EXIT_REFUSED)
     kas = KawasakiSettings(host=kas_host, port=kas_port, period_s=kas_period)
+    if link in ("simple_message", "adept"):
+        _check_link(link, robot.is_adept, "the Adept Viper s850 (ad850)", robot.name, dummy, sm.check)
     if link == "kawasaki":
-        if not robot.is_kawa:
-            service.fail("driver", f"--link kawasaki drives the Kawasaki FS03N (kaw_fs), not {robot.name}; "
-                         "use --link sim", EXIT_REFUSED)
-        if dummy:
-            service.fail("driver", "--link kawasaki moves a real robot in real time: --dummy is not possible",
-                         EXIT_REFUSED)
-        try:
-            kas.check()
-        except ValueError as exc:
-            service.fail("driver", str(exc), EXIT_REFUSED)
+        _check_link(link, robot.is_kawa, "the Kawasaki FS03N (kaw_fs)", robot.name, dummy, kas.check)
     if link == "rsi":
-        if not robot.is_kuka:
-            service.fail("driver", f"--link rsi drives KUKA robots (kr3, kr16, kr3rt, kr16rt), not {robot.name}; "
-                         "use --link sim", EXIT_REFUSED)
-        if dummy:
-            service.fail("driver", "--link rsi moves a real robot in real time: --dummy is not possible",
-                         EXIT_REFUSED)
-        try:
-            parse_address(rsi_listen)
-        except ValueError as exc:
-            service.fail("driver", str(exc), EXIT_REFUSED)
+        _check_link(link, robot.is_kuka, "KUKA robots (kr3, kr16, kr3rt, kr16rt)", robot.name, dummy,
+                    lambda: parse_address(rsi_listen))
 
     def setup(bus: Bus) -> Callable[[], None]:
         try:
@@ -120,6 +94,20 @@ def main(settings: BusSettings, log_level: str, dummy: bool, link: str, rsi_list
         return driver.shutdown
 
     service.run(settings, "driver", log_level, setup)
+
+
+def _check_link(link: str, fits: bool, drives: str, robot: str, dummy: bool, check: Callable[[], object]) -> None:
+    """Exit (refused, one line) when ``--link link`` cannot run: the robot is not one it
+    ``drives``, ``--dummy`` is asked for, or its settings fail their ``check``."""
+    if not fits:
+        service.fail("driver", f"--link {link} drives {drives}, not {robot}; use --link sim", EXIT_REFUSED)
+    if dummy:
+        service.fail("driver", f"--link {link} moves a real robot in real time: --dummy is not possible",
+                     EXIT_REFUSED)
+    try:
+        check()
+    except ValueError as exc:
+        service.fail("driver", str(exc), EXIT_REFUSED)
 
 
 if __name__ == "__main__":

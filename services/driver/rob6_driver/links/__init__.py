@@ -8,7 +8,9 @@ ROS-Industrial simple_message points to an Adept V+ controller (``simple_message
 its codec ``simple_message_codec.py``, the V+ program's I/O port ``adept_io.py``);
 ``kawasaki`` streams them as points to rob6's own AS program on a Kawasaki controller
 (``kawasaki.py``, its codec and the FS03N's joint convention ``kawasaki_codec.py``). The two
-TCP links share ``streaming.py``; none of them touches the motion core.
+TCP links are thin subclasses of ``StreamedPointsLink`` (``streamed_points.py``: health,
+arrival, merging late points, reconnecting), with ``streaming.py``'s socket helpers; none
+of them touches the motion core.
 
 What the service needs from a link is small: ``start``/``stop``, the plant's state for
 each published joint state (``state``, ``late``, ``missed``, ``q_actual``, ``outputs``) and

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 PROTOCOL = "rob6-kas"
 VERSION = 1
@@ -50,16 +51,18 @@ RATED_SPEED_DEG_S = np.array([360.0, 250.0, 225.0, 540.0, 225.0, 540.0])
 WIRE_DECIMALS = 3
 
 
-def to_controller_deg(q_rob6_deg) -> np.ndarray:
-    return TO_CONTROLLER_SIGN * np.asarray(q_rob6_deg, float) + TO_CONTROLLER_OFFSET_DEG
+def to_controller_deg(q_rob6_deg: npt.ArrayLike) -> np.ndarray:
+    q: np.ndarray = TO_CONTROLLER_SIGN * np.asarray(q_rob6_deg, float) + TO_CONTROLLER_OFFSET_DEG
+    return q
 
 
-def from_controller_deg(q_ctrl_deg) -> np.ndarray:
+def from_controller_deg(q_ctrl_deg: npt.ArrayLike) -> np.ndarray:
     q = (np.asarray(q_ctrl_deg, float) - TO_CONTROLLER_OFFSET_DEG) * TO_CONTROLLER_SIGN
-    return np.round(q, WIRE_DECIMALS) + 0.0  # + 0.0: no -0.0
+    rounded: np.ndarray = np.round(q, WIRE_DECIMALS) + 0.0
+    return rounded  # + 0.0: no -0.0
 
 
-def outside_controller_range(q_rob6_deg) -> str:
+def outside_controller_range(q_rob6_deg: npt.ArrayLike) -> str:
     """"" when every joint is inside the controller's range, else which is not."""
     ctrl = to_controller_deg(q_rob6_deg)
     for j in range(6):
@@ -99,7 +102,7 @@ class State:
     underruns: int  # times the queue ran dry before a final point
 
 
-def point(sequence: int, q_rob6_deg, duration_s: float, final: bool) -> bytes:
+def point(sequence: int, q_rob6_deg: npt.ArrayLike, duration_s: float, final: bool) -> bytes:
     """A ``P`` line: the controller's joints (deg, 3 decimals), the time to reach them (ms)."""
     ctrl = to_controller_deg(q_rob6_deg)
     ms = max(1, min(99_999, round(duration_s * 1000)))
