@@ -1,5 +1,6 @@
-"""Point streaming on the Kawasaki link: kaw_fs over ``--link kawasaki`` against kawasaki-as-sim
-(rob6's AS program pair stand-in, TCP): three PTP moves, a LIN move, then MoveRTJoints every
+"""Benchmark of point streaming on the Kawasaki link (kaw_fs against kawasaki-as-sim).
+
+``--link kawasaki`` against the stand-in of rob6's AS program pair (TCP): three PTP moves, a LIN move, then MoveRTJoints every
 16 ms (Alter); points acknowledged, the acknowledgement's latency (driver: point sent ->
 answered; controller: line in -> answer out), points merged for a late answer, and underruns
 of the controller's queue (it ran dry before a final point: the arm stopped mid-motion).

@@ -17,6 +17,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rob6.errors import RefusedError
+
 from .trajectory import SampledTrajectory
 
 #: tolerances of the sampled trajectory against the limits (relative, and absolute for a
@@ -27,7 +29,7 @@ REST_V, REST_A = 1e-3, 1e-2
 MAX_DURATION_S = 3600.0
 
 
-class FollowRefused(Exception):
+class FollowRefused(RefusedError):
     """The trajectory is not one rob6 follows (the message says why, for the goal's error string)."""
 
 

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rob6.bus import Bus, BusError
+from rob6.errors import RefusedError
 from rob6.messages import Ack, Empty, FollowRequest, JointState, MoveReply
 
 from .rmw import TRANSIENT_LOCAL, Node, Qos, Respond
@@ -72,7 +73,9 @@ def _seconds(duration: dict[str, Any]) -> float:
     return float(duration.get("sec", 0)) + float(duration.get("nanosec", 0)) * 1e-9
 
 
-class GoalError(Exception):
+class GoalError(RefusedError):
+    """A goal rob6 does not follow: ``code`` is the FollowJointTrajectory result code."""
+
     def __init__(self, code: int, message: str):
         super().__init__(message)
         self.code = code

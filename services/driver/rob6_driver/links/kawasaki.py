@@ -1,6 +1,7 @@
-"""The kawasaki link: drives a Kawasaki FS03N (``kaw_fs``) through rob6's AS program pair on
-the controller (deploy/kawasaki), one TCP connection to its PC program (``ROB6_KAS_HOST``,
-``ROB6_KAS_PORT``), in the protocol of ``kawasaki_codec.py``.
+"""The kawasaki link: drives a Kawasaki FS03N (``kaw_fs``) through rob6's AS program pair.
+
+The program pair runs on the controller (deploy/kawasaki); the link keeps one TCP connection
+to its PC program (``ROB6_KAS_HOST``, ``ROB6_KAS_PORT``), in the protocol of ``kawasaki_codec.py``.
 
 The clock is the driver's own: every ``robot.cycle_s`` (16 ms) the motion core steps,
 and while the robot moves every ``period_s`` (default 48 ms, three cycles) its setpoint

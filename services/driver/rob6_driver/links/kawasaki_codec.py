@@ -1,5 +1,7 @@
-"""The wire format of rob6's AS program for Kawasaki controllers (deploy/kawasaki/PROTOCOL.md),
-as the driver writes and reads it, and the FS03N's joints in the controller's convention.
+"""The wire format of rob6's AS program for Kawasaki controllers, and the FS03N's joint convention.
+
+The format is deploy/kawasaki/PROTOCOL.md, as the driver writes and reads it; the joints
+are converted between rob6's convention and the controller's.
 
 One message is one line of printable ASCII ended by LF (a CR before it is ignored), at
 most ``MAX_LINE`` characters, fields separated by one or more spaces (AS pads numbers),
@@ -15,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
+from rob6.errors import LinkError
 
 PROTOCOL = "rob6-kas"
 VERSION = 1
@@ -72,7 +76,7 @@ def outside_controller_range(q_rob6_deg: npt.ArrayLike) -> str:
     return ""
 
 
-class KasError(ValueError):
+class KasError(LinkError, ValueError):
     """A line that is not a message of the protocol (the text says why)."""
 
 

@@ -1,5 +1,6 @@
-"""A link that streams acknowledged points from rob6's trajectories over TCP: what the
-simple_message (Adept) and kawasaki links share, their wire left to subclasses.
+"""The base of the links that stream acknowledged points over TCP (simple_message, kawasaki).
+
+What the simple_message (Adept) and kawasaki links share; their wire is left to subclasses.
 
 The clock is the driver's own: every ``core.dt`` the motion core steps, and while the
 robot moves every ``period_s`` (whole cycles) its setpoint becomes one point with the

@@ -1,5 +1,6 @@
-"""What the links that stream points over TCP share (simple_message, kawasaki): sending
-within a deadline, naming an endpoint, and the latency quantiles they report."""
+"""Socket helpers of the TCP links: sending within a deadline, endpoint names, latency quantiles.
+
+Used by the simple_message and kawasaki links and their base (``streamed_points``)."""
 
 from __future__ import annotations
 
