@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
+from harness.system import Client, running
 from rob6.messages import IkBatchRequest
-from tests.system import Client, running
 
 from .busy import busy_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baselines

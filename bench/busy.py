@@ -10,7 +10,7 @@ import os
 import tempfile
 from collections.abc import Callable
 
-from tests.system import running
+from harness.system import running
 
 from .latency import percentiles
 from .workload import MixResult, cpu_hogs, mixed_session

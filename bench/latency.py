@@ -17,7 +17,7 @@ import time
 
 import zenoh
 
-from tests.system import Client
+from harness.system import Client
 
 
 def percentiles(samples: list[float]) -> tuple[float, float]:

@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from harness.system import free_port, running
 from rob6.messages import Empty, LinkQuery, LinkStatus
-from tests.system import free_port, running
 
 from .latency import percentiles
 from .tables import Row, Table

@@ -24,9 +24,10 @@ import os
 import sys
 import time
 
-from tests.deploy import images
-from tests.deploy.compose import run
-from tests.deploy.multihost.topology import (
+from harness import images
+from harness.compose import run
+from harness.system import Client
+from harness.topology import (
     REMOTE_KINEMATICS,
     Call,
     Load,
@@ -37,7 +38,6 @@ from tests.deploy.multihost.topology import (
     percentile,
     recovery,
 )
-from tests.system import Client
 
 from .tables import Row, Table, table
 

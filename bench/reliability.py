@@ -22,10 +22,7 @@ from typing import Any
 
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from rob6.robots import DEFAULT_ROBOT
-from rob6_gateway.commands import _split_command
-from rob6_gateway.framing import _clean
-from tests.reliability.fuzz import (
+from harness.fuzz import (
     FuzzClient,
     TcpFuzzer,
     _blocking_ping,
@@ -37,7 +34,10 @@ from tests.reliability.fuzz import (
     make_dead_gateway,
     vm_rss_kib,
 )
-from tests.system import System
+from harness.system import System
+from rob6.robots import DEFAULT_ROBOT
+from rob6_gateway.commands import _split_command
+from rob6_gateway.framing import _clean
 
 
 def records_session(system: System, examples: int, seed: int = 2) -> int:
@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robot", default=DEFAULT_ROBOT)
     parser.add_argument("--skip-faults", action="store_true")
     opts = parser.parse_args(argv)
-    from tests.system import running
+    from harness.system import running
 
     t0 = time.monotonic()
     crashes = 0
@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     t2 = time.monotonic()
     faults = None
     if not opts.skip_faults:
-        from tests.reliability.faults import run_fault_campaign
+        from harness.faults import run_fault_campaign
         faults = run_fault_campaign()
     t3 = time.monotonic()
 

@@ -51,7 +51,7 @@ class Viewer:
 
 
 def main(url: str) -> None:
-    from tests.live.ws_client import FoxgloveClient
+    from harness.foxglove_client import FoxgloveClient
 
     with FoxgloveClient(url) as viewer:
         viewer.subscribe(*viewer.wait_topics(["/tf", "/driver/joint_state"]))

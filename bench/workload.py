@@ -18,7 +18,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
-from tests.system import Client
+from harness.system import Client
 
 #: a busy process at normal priority: what a lab's other programs do to a robot PC
 HOG = "while True: pass"

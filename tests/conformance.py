@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from harness.system import Client, System
 from tests.conformance_deviations import DEVIATIONS, KAW_FS_FK_BY_DESIGN, KEEP, Modes, bare_command_error
-from tests.system import Client, System
 
 NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 TIMESTAMP = re.compile(r"^\d+\.\d{3}\n$")

@@ -5,7 +5,7 @@ import os
 
 import pytest
 
-from tests.deploy import images
+from harness import images
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 from _pytest.mark import ParameterSet
 
+from harness.system import CONFORMANCE, SHARED, running
 from tests.conformance import replay
-from tests.system import CONFORMANCE, SHARED, running
 
 ROBOTS = ("kr16", "ad850", "kaw_fs", "kr3rt", "kr16rt", "kr3")
 

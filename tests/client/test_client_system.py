@@ -9,8 +9,8 @@ from collections.abc import Iterator, Sequence
 
 import pytest
 
+from harness.system import System, running
 from rob6_client import COMMANDS, AsyncRobot, Rob6ConnectionError, Rob6Error, Rob6Timeout, Robot
-from tests.system import System, running
 
 Q = (10.0, -60.0, 80.0, 20.0, 40.0, 30.0)  # kr16, noflip up lefty
 KR16_SPEED = (0.1872, 0.1872, 0.1872, 0.396, 0.396, 0.738)

@@ -33,11 +33,12 @@ from typing import Any
 import pytest
 from pytest import TempPathFactory
 
+from harness import images
+from harness.compose import compose_cmd, project_containers, run
+from harness.images import BASE_IMAGE, TAG
+from harness.system import CONFORMANCE, Client, free_port
 from tests.conformance import load, same
-from tests.deploy import images, zenoh_probe
-from tests.deploy.compose import compose_cmd, project_containers, run
-from tests.deploy.images import BASE_IMAGE, TAG
-from tests.system import CONFORMANCE, Client, free_port
+from tests.deploy import zenoh_probe
 
 pytestmark = pytest.mark.docker
 

@@ -16,9 +16,9 @@ import pytest
 import zenoh
 from pytest import TempPathFactory
 
+from harness.system import free_port
 from tests.deploy import zenoh_probe
 from tests.deploy.zenoh_probe import local_router, localize_config, secure_profile_checks
-from tests.system import free_port
 
 REPO = Path(__file__).resolve().parents[2]
 ZENOH_DIR = REPO / "deploy" / "zenoh"

@@ -11,8 +11,8 @@ from contextlib import AbstractContextManager
 
 import pytest
 
+from harness.system import Client, System, driver_state, free_port, running
 from tests.controllers.adept_controller import AdeptController
-from tests.system import Client, System, driver_state, free_port, running
 
 pytestmark = pytest.mark.slow
 

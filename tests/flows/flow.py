@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from harness.system import Client
 from rob6_recorder.reader import read_records
-from tests.system import Client
 
 GREETING = "welcome to rob6server 0.1.01 !\n"
 

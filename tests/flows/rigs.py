@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.system import System, driver_state, free_port, link_status, running
 from tests.controllers.adept_controller import AdeptController
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import wait_until
 from tests.motion.test_rsi_realtime import rsi_system
-from tests.system import System, driver_state, free_port, link_status, running
 
 #: where each robot's flows start (a pose the clients home to; inside every limit)
 STARTS = {"kr16rt": [0.0, -80.0, 100.0, 0.0, 30.0, 0.0], "ad850": [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]}

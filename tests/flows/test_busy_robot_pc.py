@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from bench.workload import cpu_hogs, mixed_session
+from harness.system import running
 from tests.flows.rigs import STARTS
-from tests.system import running
 
 pytestmark = pytest.mark.slow
 

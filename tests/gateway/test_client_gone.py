@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
+from harness.system import Client, running
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.motion.test_realtime_system import assert_within_limits, joint_states
-from tests.system import Client, running
 
 TARGET = "MovePTPJoints 60 0 0 0 0 0"  # A1 60 deg at 5 % speed: ~50 s
 

@@ -12,13 +12,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import cast
 
+from harness.fuzz import _DeadBus  # every bus request would fail loudly
+from harness.system import Client, System, driver_state, running
 from rob6.bus import Bus
 from rob6.robots import get_robot
 from rob6_gateway.commands import Gateway, Options
 from rob6_gateway.state import Session
 from rob6_recorder.reader import read_records
-from tests.reliability.fuzz import _DeadBus  # every bus request would fail loudly
-from tests.system import Client, System, driver_state, running
 
 REFUSED_RAW = ("ERROR: DirectAdeptCmd: raw V+ commands cannot reach the controller (neither the simulation "
                "nor the simple_message link has a V+ command channel; only SIGNAL is carried); nothing was sent\n"

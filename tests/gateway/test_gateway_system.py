@@ -10,7 +10,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.system import Client, System, running
+from harness.system import Client, System, running
 
 GATEWAY_AND_DRIVER = ("driver", "gateway")
 

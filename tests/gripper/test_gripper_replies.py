@@ -14,8 +14,8 @@ import os
 import signal
 import time
 
+from harness.system import Client, System, running
 from rob6_gripper.fake_device import FakeSmpDevice
-from tests.system import Client, System, running
 
 #: the protocol description's line count of each command (section 3.4), true/false included
 LINES = {"HasGripper": 1, "GripperMove": 2, "GripperGoHome": 3, "GripperMoveToPosition": 3}

@@ -17,11 +17,11 @@ from typing import Any
 import pytest
 from pytest import MonkeyPatch
 
+from harness.system import zenoh_router
 from rob6.bus import HEDGE_DELAY_S, Bus, BusError, Context, call as bus_call
 from rob6.config import BusSettings
 from rob6.deadlines import REMOTE_POSE_S
 from rob6.messages import OPS, Empty, FkReply, FkRequest, Op, PingReply
-from tests.system import zenoh_router
 
 JOINTS = [10.0, -60.0, 80.0, 20.0, 40.0, 30.0]
 

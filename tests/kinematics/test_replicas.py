@@ -12,9 +12,9 @@ import time
 
 import msgspec
 
+from harness.system import System, running
 from rob6.bus import trace_records
 from rob6.messages import FkRequest, IkBatchRequest
-from tests.system import System, running
 
 
 def _replica(system: System) -> subprocess.Popen[bytes]:

@@ -1,6 +1,6 @@
 import pytest
 
-from tests.system import free_port
+from harness.system import free_port
 
 
 @pytest.fixture

@@ -8,10 +8,10 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
+from harness.foxglove_client import FoxgloveClient
+from harness.system import running
 from rob6.robots import get_robot
 from rob6_recorder.service import URDF_DIR
-from tests.live.ws_client import FoxgloveClient
-from tests.system import running
 
 TARGET = [10.0, -60.0, 80.0, 20.0, 40.0, 30.0]
 SCHEMAS = {"/robot_description": "std_msgs/String", "/tf": "foxglove.FrameTransforms",

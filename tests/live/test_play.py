@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from harness.foxglove_client import FoxgloveClient
 from rob6.robots import get_robot
 from rob6_recorder.service import URDF_DIR
 from rob6_recorder.writer import Recorder
-from tests.live.ws_client import FoxgloveClient
 
 TARGET = [10.0, -60.0, 80.0, 20.0, 40.0, 30.0]
 STEPS = 250  # 1 s at 4 ms
@@ -98,7 +98,7 @@ def test_play_seek_and_pause(recording: tuple[Path, int], live_port: int) -> Non
 
 def test_play_a_system_recording(tmp_path: Path, live_port: int) -> None:
     """A file recorded by the real system plays back: the joints reach the commanded pose."""
-    from tests.system import running
+    from harness.system import running
     with running("kr16", log_dir=str(tmp_path), extra_env={"ROB6_LIVE_PORT": "0"}) as system:
         assert not any("live view:" in line for line in system.output)
         with system.client() as client:

@@ -8,7 +8,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from tests.system import Client
+from harness.system import Client
 
 R = TypeVar("R")
 

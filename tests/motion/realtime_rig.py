@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from harness.system import System, free_port, link_status
 from rob6.robots import RobotModel
 from rob6_recorder.reader import read_records
 from tests.controllers.sim_process import SimProcess, Status
 from tests.motion.link_session import joints, reply, wait_until
-from tests.system import System, free_port, link_status
 
 Joints = npt.NDArray[np.float64]
 

@@ -21,13 +21,13 @@ from typing import Any
 import numpy as np
 import pytest
 
+from harness.system import Client, System, link_status, running
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController
 from tests.motion.link_session import reply, wait_until
 from tests.motion.realtime_rig import StreamedRig, fmt, free_tcp_ports, recorded_states
 from tests.motion.test_realtime_system import assert_within_limits
-from tests.system import Client, System, link_status, running
 
 pytestmark = pytest.mark.slow
 

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.system import running
 from rob6.robots import RobotModel, get_robot
 from rob6.units import UNIT_CYCLE_S
 from rob6_driver.service import REST_STATE_PERIOD_S
 from rob6_recorder.reader import read_records
-from tests.system import running
 
 TOL = 1e-6
 

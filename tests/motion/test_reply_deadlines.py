@@ -13,8 +13,8 @@ from collections.abc import Iterable, Iterator
 
 import pytest
 
+from harness.system import Client, System, running
 from rob6_client import Robot
-from tests.system import Client, System, running
 
 START = [0.0, -10.0, 10.0, 0.0, 30.0, 0.0]
 READ_S = 30.0  # a reply later than this is a hang, whatever the machine's load

@@ -15,11 +15,11 @@ import msgspec
 import pytest
 import zenoh
 
+from harness.system import Client, System, free_port, running
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import JointState
 from rob6.ownership import EXIT_REFUSED
-from tests.system import Client, System, free_port, running
 
 pytestmark = pytest.mark.slow
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from harness.system import Client, System, free_port
 from rob6_recorder.reader import read_records
-from tests.system import Client, System, free_port
 
 pytestmark = pytest.mark.slow
 

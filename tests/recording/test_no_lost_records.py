@@ -15,8 +15,8 @@ import signal
 import time
 from pathlib import Path
 
+from harness.system import System, running
 from rob6_recorder.reader import Record, read_records
-from tests.system import System, running
 
 PERIOD = 0.004  # s between client lines
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
+from harness.system import System, running
 from rob6_recorder.reader import read_records
-from tests.system import System, running
 
 SCRIPT = ["GetRobot", "ForwardCalc 10 -60 80 20 40 30", "MovePTPJoints 10 -60 80 20 40 30",
           "GetPositionJoints", "GetStatus", "BackwardCalc 1 0 0 1000 0 1 0 0 0 0 1 500 noflip up lefty",

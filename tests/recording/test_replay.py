@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
+from harness.system import CONFORMANCE
 from rob6_recorder.cli import main as cli
 from rob6_recorder.playback import replay_joints
 from rob6_recorder.reader import read_records
@@ -24,7 +25,6 @@ from rob6_recorder.session_replay import (
 )
 from rob6_recorder.writer import Recorder
 from tests.recording.rec_helpers import REPLIES, SESSION_LINES, FakeServer, Handler, dict_handler, record_session
-from tests.system import CONFORMANCE
 
 
 @pytest.fixture

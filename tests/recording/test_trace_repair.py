@@ -20,9 +20,9 @@ import msgspec
 import pytest
 import zenoh
 
+from harness.system import zenoh_router
 from rob6.bus import Bus, trace as bus_trace, trace_records
 from rob6.config import BusSettings
-from tests.system import zenoh_router
 
 RECORDS = 80
 

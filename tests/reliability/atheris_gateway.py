@@ -17,7 +17,7 @@ import atheris
 with atheris.instrument_imports():  # before anything imports them, so they are instrumented
     from rob6_gateway import args, commands, framing  # noqa: F401
 
-from tests.reliability.fuzz import COMMAND_NAMES, check_args, check_execute, check_framer, make_dead_gateway
+from harness.fuzz import COMMAND_NAMES, check_args, check_execute, check_framer, make_dead_gateway
 
 GATEWAY, SESSION = make_dead_gateway("kr16")
 

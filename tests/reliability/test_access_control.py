@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from tests.system import Client, free_port, running
+from harness.system import Client, free_port, running
 
 
 def _raw_connect(port: int, source: str = "127.0.0.1") -> bytes:

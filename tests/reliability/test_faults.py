@@ -9,9 +9,9 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.reliability.faults import FAULTS, PROBES, SERVICES, _ask, inject
-from tests.reliability.fuzz import FuzzClient
-from tests.system import System, running
+from harness.faults import FAULTS, PROBES, SERVICES, _ask, inject
+from harness.fuzz import FuzzClient
+from harness.system import System, running
 
 
 @pytest.fixture(scope="module")

@@ -15,8 +15,8 @@ from typing import TypedDict
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from tests.reliability.fuzz import COMMAND_NAMES, EXTREMES_TCP, TcpFuzzer, command_line_strategy, vm_rss_kib
-from tests.system import running
+from harness.fuzz import COMMAND_NAMES, EXTREMES_TCP, TcpFuzzer, command_line_strategy, vm_rss_kib
+from harness.system import running
 
 
 class _Settings(TypedDict):

@@ -11,9 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 from pytest import FixtureRequest
 
-from rob6_gateway.commands import _split_command
-from rob6_gateway.framing import MAX_LINE, Framer
-from tests.reliability.fuzz import (
+from harness.fuzz import (
     COMMAND_NAMES,
     DeadGateway,
     check_args,
@@ -23,6 +21,8 @@ from tests.reliability.fuzz import (
     make_dead_gateway,
     reference_lines,
 )
+from rob6_gateway.commands import _split_command
+from rob6_gateway.framing import MAX_LINE, Framer
 
 FAST = settings(max_examples=1000, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

@@ -17,9 +17,9 @@ from typing import Any
 
 import pytest
 
+from harness.system import Client, System, running
 from rob6.robots import get_robot
 from tests.ros import msgdefs
-from tests.system import Client, System, running
 
 zsdk = pytest.importorskip("zenoh_ros2_sdk")
 from tests.ros.peer import ACTION, JOINTS, WAIT_S, Peer, connect  # noqa: E402

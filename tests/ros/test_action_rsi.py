@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from harness.system import System, free_port
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints
 from tests.motion.test_rsi_realtime import POSITION_TOL, assert_no_jump, connected, rsi_system
-from tests.system import System, free_port
 
 zsdk = pytest.importorskip("zenoh_ros2_sdk")
 from tests.ros import msgdefs  # noqa: E402

@@ -17,8 +17,8 @@ from typing import Any
 
 import pytest
 
+from harness.system import Client, System, running
 from tests.ros import msgdefs
-from tests.system import Client, System, running
 
 zsdk = pytest.importorskip("zenoh_ros2_sdk")
 from zenoh_ros2_sdk import message_registry  # noqa: E402

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import zenoh
 
-from tests.system import System, running
+from harness.system import System, running
 
 EXPECTED_S = 5.0  # the liveliness query's bound: it returns when the router has answered
 

@@ -13,11 +13,11 @@ from collections.abc import Iterator
 
 import pytest
 
+from harness.system import zenoh_router
 from rob6.bus import Bus, BusError, BusTimeout, Context
 from rob6.config import BusSettings
 from rob6.deadlines import HOP_S, QUICK_S
 from rob6.messages import Ack, AlterMode, Empty, ModeRequest, PingReply
-from tests.system import zenoh_router
 
 STOPPING = "waiting for the arm to stop"
 

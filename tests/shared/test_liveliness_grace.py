@@ -12,10 +12,10 @@ from collections.abc import Iterator
 import pytest
 from pytest import MonkeyPatch
 
+from harness.system import zenoh_router
 from rob6.bus import Bus, BusError, call as bus_call
 from rob6.config import BusSettings
 from rob6.messages import Empty, MoveRequest, PingReply
-from tests.system import zenoh_router
 
 
 @pytest.fixture

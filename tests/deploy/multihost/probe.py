@@ -8,9 +8,9 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 
-from tests.deploy.compose import run
-from tests.deploy.images import TAG
-from tests.deploy.multihost.topology import Topology
+from harness.compose import run
+from harness.images import TAG
+from harness.topology import Topology
 
 SCRIPT = r"""
 import json, signal, sys, threading, zenoh

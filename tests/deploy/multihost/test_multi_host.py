@@ -26,10 +26,11 @@ from pathlib import Path
 
 import pytest
 
-from tests.deploy import images
-from tests.deploy.compose import run
-from tests.deploy.images import TAG
-from tests.deploy.multihost.topology import (
+from harness import images
+from harness.compose import run
+from harness.images import TAG
+from harness.system import Client
+from harness.topology import (
     REMOTE_KINEMATICS,
     Call,
     Load,
@@ -42,7 +43,6 @@ from tests.deploy.multihost.topology import (
     percentile,
     recovery,
 )
-from tests.system import Client
 
 pytestmark = pytest.mark.docker
 

@@ -18,16 +18,16 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.deploy import images
-from tests.deploy.compose import run
-from tests.deploy.images import TAG
-from tests.deploy.multihost.topology import (
+from harness import images
+from harness.compose import run
+from harness.images import TAG
+from harness.system import Client
+from harness.topology import (
     Topology,
     alter_session,
     ask_true,
     cannot_run,
 )
-from tests.system import Client
 
 pytestmark = pytest.mark.docker
 

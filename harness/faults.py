@@ -19,8 +19,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from tests.reliability.fuzz import FuzzClient
-from tests.system import System, running
+from harness.fuzz import FuzzClient
+from harness.system import System, running
 
 # service -> (probe command, is the answer a correct one?)
 PROBES: dict[str, tuple[str, Callable[[list[bytes]], bool]]] = {

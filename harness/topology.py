@@ -33,11 +33,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tests.deploy.compose import compose_cmd, project_containers, run
-from tests.deploy.images import TAG
-from tests.system import Client, free_port
+from harness.compose import compose_cmd, project_containers, run
+from harness.images import TAG
+from harness.system import Client, free_port
 
-REPO = Path(__file__).resolve().parents[3]
+REPO = Path(__file__).resolve().parents[1]
 COMPOSE_FILE = REPO / "deploy" / "multihost" / "docker-compose.yml"
 REALTIME_FILE = REPO / "deploy" / "multihost" / "realtime.yml"
 #: Docker's parent cgroup on a cgroup v1 host (cgroupfs driver): its real-time budget bounds

@@ -33,6 +33,7 @@ from typing import NoReturn, cast
 
 from hypothesis import strategies as st
 
+from harness.system import System
 from rob6.bus import Bus
 from rob6.robots import get_robot
 from rob6.status import STATUS_WORDS as _CATEGORIES
@@ -40,7 +41,6 @@ from rob6_gateway.args import Args, ParseError
 from rob6_gateway.commands import COMMANDS, GRIPPER_REPLY_LINES, Close, Gateway, Options, _split_command
 from rob6_gateway.framing import Framer, _clean
 from rob6_gateway.state import Session
-from tests.system import System
 
 COMMAND_NAMES = sorted(COMMANDS)
 STATUS_WORDS = [word for category in _CATEGORIES for word in category]

@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "deploy" / "build-images.sh"
 #: the tag of the images the tests build and run (rob6/<name>:e2e)
 TAG = os.environ.get("ROB6_TAG", "e2e")
