@@ -32,9 +32,9 @@ from typing import Any
 import msgspec
 
 from bench.tables import Table
+from harness.fake_server import FakeServer  # the replay target: a fake rob6 server
 from rob6_recorder.session_replay import load_script, replay
 from rob6_recorder.writer import Recorder
-from tests.recording.rec_helpers import FakeServer  # the replay target: the test suite's fake rob6 server
 
 
 def _state(i: int) -> dict[str, Any]:

@@ -1,14 +1,12 @@
-"""Helpers for the recording tests: a sample URDF, a scripted session, a fake
-rob6 TCP server (asyncio, in a thread) answering from a dict or a transcript."""
+"""The recording tests' fixtures: a sample URDF, a scripted session and the fake server's
+answers from a dict (the fake server itself is ``harness.fake_server``)."""
 
 from __future__ import annotations
 
-import asyncio
-import threading
 import time
-from collections.abc import Callable
 from typing import Any
 
+from harness.fake_server import GREETING, Handler
 from rob6_recorder.writer import Recorder
 
 URDF = """<?xml version="1.0"?>
@@ -22,8 +20,6 @@ URDF = """<?xml version="1.0"?>
     <origin xyz="0.68 0 0"/></joint>
 </robot>
 """
-
-GREETING = "welcome to rob6server 0.1.01 !\n"
 
 #: command line -> reply of the fake kr16 (what the scripted session recorded)
 REPLIES = {
@@ -96,89 +92,6 @@ def record_session(rec: Recorder, session: int = 3, t0: int | None = None, step_
                          "message": "unknown command Foo", "t": t / 1e9})
     put(f"/session/{session}/event", {"session": session, "event": "close", "reason": "quit"})
     return submitted
-
-
-class FakeServer:
-    """A rob6-like TCP server on 127.0.0.1 run by an asyncio loop in a thread.
-
-    ``handler(connection_index, message_bytes) -> (reply_bytes, close_after)`` is
-    called for each line (``per_line=True``) or each received chunk.
-    """
-
-    def __init__(self, handler: Callable[[int, bytes], tuple[bytes, bool]],
-                 greeting: str = GREETING, per_line: bool = True) -> None:
-        self.handler = handler
-        self.greeting = greeting
-        self.per_line = per_line
-        self.connections = 0
-        self.received: list[bytes] = []
-        self.loop = asyncio.new_event_loop()
-        self.port = 0
-        self._ready = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def _run(self) -> None:
-        asyncio.set_event_loop(self.loop)
-        self.server = self.loop.run_until_complete(
-            asyncio.start_server(self._client, "127.0.0.1", 0))
-        self.port = self.server.sockets[0].getsockname()[1]
-        self._ready.set()
-        self.loop.run_forever()
-
-    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        index = self.connections
-        self.connections += 1
-        writer.write(self.greeting.encode("latin-1"))
-        await writer.drain()
-        buf = b""
-        try:
-            while True:
-                data = await reader.read(4096)
-                if not data:
-                    break
-                messages = []
-                if self.per_line:
-                    buf += data
-                    while b"\n" in buf:
-                        line, buf = buf.split(b"\n", 1)
-                        messages.append(line + b"\n")
-                else:
-                    messages.append(data)
-                for msg in messages:
-                    self.received.append(msg)
-                    reply, close = self.handler(index, msg)
-                    if reply:
-                        writer.write(reply)
-                        await writer.drain()
-                    if close:
-                        writer.close()
-                        return
-        except (asyncio.CancelledError, ConnectionError):
-            pass
-        finally:
-            writer.close()
-
-    def __enter__(self) -> FakeServer:
-        self._thread.start()
-        self._ready.wait(5)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        async def stop() -> None:
-            self.server.close()
-            await self.server.wait_closed()
-            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
-            for task in tasks:
-                task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
-            self.loop.stop()
-        asyncio.run_coroutine_threadsafe(stop(), self.loop)
-        self._thread.join(5)
-        self.loop.close()
-
-
-#: a fake server's answer to one received chunk of connection n: (reply bytes, close after it)
-Handler = Callable[[int, bytes], tuple[bytes, bool]]
 
 
 def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = None) -> Handler:

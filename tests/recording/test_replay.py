@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
+from harness.fake_server import FakeServer, Handler
 from harness.system import CONFORMANCE
 from rob6_recorder.cli import main as cli
 from rob6_recorder.playback import replay_joints
@@ -24,7 +25,7 @@ from rob6_recorder.session_replay import (
     replay,
 )
 from rob6_recorder.writer import Recorder
-from tests.recording.rec_helpers import REPLIES, SESSION_LINES, FakeServer, Handler, dict_handler, record_session
+from tests.recording.rec_helpers import REPLIES, SESSION_LINES, dict_handler, record_session
 
 
 @pytest.fixture
