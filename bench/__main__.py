@@ -15,7 +15,8 @@ import time
 
 import numpy as np
 
-from harness.system import Client, running
+from harness.client import Client
+from harness.system import running
 from rob6.messages import IkBatchRequest
 
 from .busy import busy_table

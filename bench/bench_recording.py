@@ -197,7 +197,8 @@ def bench_live(count: int = 2000) -> dict[str, dict[str, list[float]]]:
     subscribed to every channel the live view advertises."""
     from bench.latency import measure
     from bench.viewer import Viewer
-    from harness.system import free_port, running
+    from harness.ports import free_port
+    from harness.system import running
 
     commands = {"GetPositionJoints": ("GetPositionJoints", 1), "PingRobot": ("PingRobot 1 0", 1),
                 "ForwardCalc": ("ForwardCalc 10 -20 30 40 50 60", 2),

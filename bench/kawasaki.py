@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from harness.system import free_port
+from harness.ports import free_port
 
 from .links import ControllerSim, streamed_points_run
 from .tables import Table, table

@@ -17,7 +17,7 @@ import time
 
 import zenoh
 
-from harness.system import Client
+from harness.client import Client
 
 
 def percentiles(samples: list[float]) -> tuple[float, float]:

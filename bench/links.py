@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from harness.system import free_port, running
+from harness.ports import free_port
+from harness.system import running
 from rob6.messages import Empty, LinkQuery, LinkStatus
 
 from .latency import percentiles

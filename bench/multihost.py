@@ -25,8 +25,8 @@ import sys
 import time
 
 from harness import images
+from harness.client import Client
 from harness.compose import run
-from harness.system import Client
 from harness.topology import (
     REMOTE_KINEMATICS,
     Call,

@@ -11,7 +11,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from harness.system import free_port
+from harness.ports import free_port
 
 from .latency import bare_queryable, open_peer, peer_config, percentiles, wait_answered
 

@@ -18,7 +18,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
-from harness.system import Client
+from harness.client import Client
 
 #: a busy process at normal priority: what a lab's other programs do to a robot PC
 HOG = "while True: pass"

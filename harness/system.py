@@ -1,6 +1,8 @@
-"""The system harness of the tests and the benchmarks: start a real rob6 system (``rob6 run``)
-from Python and talk to it like a client (``running``, ``System``, ``Client``), a Zenoh
-router in-process (``zenoh_router``), free ports, and where the ground truth lives.
+"""Start a real rob6 system (``rob6 run``: router, services, gateway) in processes on free ports.
+
+``running``/``System`` start and stop it; ``System.client`` talks to its gateway with
+``harness.client.Client``, ``System.bus`` and ``driver_state``/``link_status`` ask its
+services over its Zenoh router; ``zenoh_router`` is a bare router in this process.
 
 Development only: the product (``shared/rob6``, ``services/*``) never imports it.
 """
@@ -8,55 +10,27 @@ Development only: the product (``shared/rob6``, ``services/*``) never imports it
 from __future__ import annotations
 
 import os
-import random
 import signal
-import socket
 import subprocess
 import sys
 import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
 from typing import Any, TypeVar
 
 import zenoh
 
+from harness.client import Client
+from harness.ports import free_port
 from rob6.bus import Bus, zenoh_config
 from rob6.config import BusSettings
 from rob6.messages import Empty, JointState, LinkQuery, LinkStatus, Struct
 from rob6.robots import DEFAULT_ROBOT
 
-__all__ = ["CONFORMANCE", "REPO", "SHARED", "TEST_PORTS", "Client", "System", "driver_state", "free_port",
-           "running", "zenoh_router"]
-
-REPO = Path(__file__).resolve().parents[1]
-#: the original server's transcripts, kept with the tests (tests/transcripts/ORIGIN.md)
-CONFORMANCE = REPO / "tests" / "transcripts"
-#: where they are refreshed from: the ground truth beside the project, when present
-SHARED = Path(os.environ.get("ROB6_SHARED", REPO.parent / "shared")).resolve()
-
-
-#: Ports handed out for tests: below Linux's ephemeral range (32768-60999), where the
-#: kernel picks the local port of every outgoing connection; a port the kernel gave us
-#: from that range can be taken by someone's connection before our server binds it
-TEST_PORTS = range(20000, 32768)
-
+__all__ = ["System", "ask_driver", "driver_state", "link_status", "running", "zenoh_router"]
 
 R = TypeVar("R")
-
-
-def free_port(kind: int = socket.SOCK_STREAM) -> int:
-    """A port nothing listens on (TCP, or UDP with ``socket.SOCK_DGRAM``), on any address."""
-    for _ in range(200):
-        port = random.choice(TEST_PORTS)
-        with socket.socket(socket.AF_INET, kind) as sock:
-            try:
-                sock.bind(("0.0.0.0", port))
-            except OSError:
-                continue
-            return port
-    raise RuntimeError("no free port for a test")
 
 
 class System:
@@ -137,75 +111,6 @@ def running(robot: str = DEFAULT_ROBOT, **kwargs: Any) -> Iterator[System]:
         yield system
     finally:
         system.stop()
-
-
-class Client:
-    """A raw TCP client of the gateway."""
-
-    def __init__(self, port: int, *, host: str = "127.0.0.1", handshake: bool = True, timeout: float = 10.0) -> None:
-        self.sock = socket.create_connection((host, port), timeout=timeout)
-        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.timeout = timeout
-        self.buffer = b""
-        self.greeting = self.read_lines(1)
-        if handshake:
-            assert self.greeting == "welcome to rob6server 0.1.01 !\n", self.greeting
-            assert self.ask("Hello Robot") == "accepted\n"
-
-    def send(self, data: bytes | str) -> None:
-        self.sock.sendall(data.encode("latin-1") if isinstance(data, str) else data)
-
-    def read_lines(self, count: int, timeout: float | None = None) -> str:
-        """Exactly ``count`` lines (or what came before EOF/timeout)."""
-        self.sock.settimeout(timeout or self.timeout)
-        while self.buffer.count(b"\n") < count and self._receive():
-            pass
-        lines = self.buffer.split(b"\n")
-        taken = b"".join(line + b"\n" for line in lines[:count]) if len(lines) > count else self.buffer
-        self.buffer = self.buffer[len(taken):]
-        return taken.decode("latin-1")
-
-    def _receive(self) -> bool:
-        """One chunk into the buffer; False at the socket's timeout or at EOF."""
-        try:
-            chunk = self.sock.recv(65536)
-        except TimeoutError:
-            return False
-        if not chunk:
-            return False
-        self.buffer += chunk
-        return True
-
-    def read_quiet(self, quiet: float = 0.15) -> str:
-        """Whatever arrives until nothing more comes for ``quiet`` seconds."""
-        self.sock.settimeout(quiet)
-        while self._receive():
-            pass
-        data, self.buffer = self.buffer, b""
-        return data.decode("latin-1")
-
-    def ask(self, command: str, lines: int = 1, timeout: float | None = None) -> str:
-        self.send(command + "\n")
-        return self.read_lines(lines, timeout)
-
-    def closed(self, timeout: float = 2.0) -> bool:
-        """True when the server closed the connection (EOF) within ``timeout``."""
-        self.sock.settimeout(timeout)
-        try:
-            return self.sock.recv(1) == b""
-        except TimeoutError:
-            return False
-        except ConnectionError:
-            return True
-
-    def close(self) -> None:
-        self.sock.close()
-
-    def __enter__(self) -> Client:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 @contextmanager

@@ -33,9 +33,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from harness.client import Client
 from harness.compose import compose_cmd, project_containers, run
 from harness.images import TAG
-from harness.system import Client, free_port
+from harness.ports import free_port
 
 REPO = Path(__file__).resolve().parents[1]
 COMPOSE_FILE = REPO / "deploy" / "multihost" / "docker-compose.yml"

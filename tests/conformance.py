@@ -18,13 +18,20 @@ Rules (docs/COMPATIBILITY.md explains each deliberate difference):
 from __future__ import annotations
 
 import json
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from harness.system import Client, System
+from harness.client import Client
+from harness.system import System
 from tests.conformance_deviations import DEVIATIONS, KAW_FS_FK_BY_DESIGN, KEEP, Modes, bare_command_error
+
+#: the original server's transcripts, kept with the tests (tests/transcripts/ORIGIN.md)
+CONFORMANCE = Path(__file__).resolve().parent / "transcripts"
+#: where they are refreshed from: the ground truth beside the project, when present
+SHARED = Path(os.environ.get("ROB6_SHARED", Path(__file__).resolve().parents[2] / "shared")).resolve()
 
 NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 TIMESTAMP = re.compile(r"^\d+\.\d{3}\n$")

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 from _pytest.mark import ParameterSet
 
-from harness.system import CONFORMANCE, SHARED, running
-from tests.conformance import replay
+from harness.system import running
+from tests.conformance import CONFORMANCE, SHARED, replay
 
 ROBOTS = ("kr16", "ad850", "kaw_fs", "kr3rt", "kr16rt", "kr3")
 

@@ -17,9 +17,9 @@ from typing import Any
 
 import pytest
 
-from harness.system import CONFORMANCE
 from rob6_client import COMMANDS, Rob6ConnectionError, Rob6Error, normalize_status, parse_reply
 from rob6_client.protocol import handshake, run_offline
+from tests.conformance import CONFORMANCE
 
 FILES = sorted(CONFORMANCE.glob("*/*.jsonl"))
 MAX_MESSAGE = 1024  # the original reads at most this much per message (longer sends are split)

@@ -34,10 +34,11 @@ import pytest
 from pytest import TempPathFactory
 
 from harness import images
+from harness.client import Client
 from harness.compose import compose_cmd, project_containers, run
 from harness.images import BASE_IMAGE, TAG
-from harness.system import CONFORMANCE, Client, free_port
-from tests.conformance import load, same
+from harness.ports import free_port
+from tests.conformance import CONFORMANCE, load, same
 from tests.deploy import zenoh_probe
 
 pytestmark = pytest.mark.docker

@@ -16,7 +16,7 @@ import pytest
 import zenoh
 from pytest import TempPathFactory
 
-from harness.system import free_port
+from harness.ports import free_port
 from tests.deploy import zenoh_probe
 from tests.deploy.zenoh_probe import local_router, localize_config, secure_profile_checks
 

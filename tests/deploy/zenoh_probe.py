@@ -28,7 +28,7 @@ from pathlib import Path
 
 import zenoh
 
-from harness.system import free_port
+from harness.ports import free_port
 
 ROBOT_ID = "robot1"
 WAIT_S = 1.0  # how long a reply/sample is awaited before "none"

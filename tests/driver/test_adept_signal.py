@@ -11,7 +11,9 @@ from contextlib import AbstractContextManager
 
 import pytest
 
-from harness.system import Client, System, driver_state, free_port, running
+from harness.client import Client
+from harness.ports import free_port
+from harness.system import System, driver_state, running
 from tests.controllers.adept_controller import AdeptController
 
 pytestmark = pytest.mark.slow

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.system import Client
+from harness.client import Client
 from rob6_recorder.reader import read_records
 
 GREETING = "welcome to rob6server 0.1.01 !\n"

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.system import System, driver_state, free_port, link_status, running
+from harness.ports import free_port
+from harness.system import System, driver_state, link_status, running
 from tests.controllers.adept_controller import AdeptController
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import wait_until

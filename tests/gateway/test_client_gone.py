@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from harness.system import Client, running
+from harness.client import Client
+from harness.system import running
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.motion.test_realtime_system import assert_within_limits, joint_states

@@ -12,8 +12,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import cast
 
+from harness.client import Client
 from harness.fuzz import _DeadBus  # every bus request would fail loudly
-from harness.system import Client, System, driver_state, running
+from harness.system import System, driver_state, running
 from rob6.bus import Bus
 from rob6.robots import get_robot
 from rob6_gateway.commands import Gateway, Options

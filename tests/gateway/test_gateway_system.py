@@ -10,7 +10,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from harness.system import Client, System, running
+from harness.client import Client
+from harness.system import System, running
 
 GATEWAY_AND_DRIVER = ("driver", "gateway")
 

@@ -14,7 +14,8 @@ import os
 import signal
 import time
 
-from harness.system import Client, System, running
+from harness.client import Client
+from harness.system import System, running
 from rob6_gripper.fake_device import FakeSmpDevice
 
 #: the protocol description's line count of each command (section 3.4), true/false included

@@ -20,10 +20,10 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from harness.system import CONFORMANCE as CONF
 from rob6.robots import get_robot
 from rob6_kinematics.calc import Kinematics
 from rob6_kinematics.opw import BRANCHES, FloatArray, Geometry
+from tests.conformance import CONFORMANCE as CONF
 
 ROBOTS = ["kr16", "kr3", "ad850", "kaw_fs"]
 JOINT_TOL = 1e-5  # the brief allows 5e-3 on J6; rob6 uses the original's J6 formula

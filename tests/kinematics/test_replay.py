@@ -21,10 +21,10 @@ from dataclasses import replace
 
 import pytest
 
-from harness.system import CONFORMANCE
 from rob6.robots import get_robot
 from rob6_kinematics.calc import Kinematics
 from rob6_kinematics.opw import Geometry
+from tests.conformance import CONFORMANCE
 from tests.kinematics.kin_replay import JUDGED, Result, replay
 
 # every kinematics transcript there is (kr3's fk/ik were recorded as kr3rt, the same

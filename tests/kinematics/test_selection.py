@@ -28,7 +28,6 @@ from typing import Any, Literal, TypedDict
 import numpy.typing as npt
 import pytest
 
-from harness.system import CONFORMANCE
 from rob6.robots import get_robot
 from rob6.status import PTP_HOM_PATTERN, TOGGLE_ALL, Status, parse_status, status_matches
 from rob6_kinematics import opw
@@ -41,6 +40,7 @@ from rob6_kinematics.selection import (
     select,
     select_from_solutions,
 )
+from tests.conformance import CONFORMANCE
 
 
 def _pattern(words: list[str]) -> Status | None:

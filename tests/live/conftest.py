@@ -1,6 +1,6 @@
 import pytest
 
-from harness.system import free_port
+from harness.ports import free_port
 
 
 @pytest.fixture

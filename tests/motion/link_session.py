@@ -8,7 +8,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from harness.system import Client
+from harness.client import Client
 
 R = TypeVar("R")
 

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from harness.system import System, free_port, link_status
+from harness.ports import free_port
+from harness.system import System, link_status
 from rob6.robots import RobotModel
 from rob6_recorder.reader import read_records
 from tests.controllers.sim_process import SimProcess, Status

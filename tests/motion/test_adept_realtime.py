@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from harness.system import Client, System, link_status, running
+from harness.client import Client
+from harness.system import System, link_status, running
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController

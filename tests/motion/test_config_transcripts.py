@@ -20,9 +20,9 @@ from typing import Any
 import pytest
 from pytest import CaptureFixture
 
-from harness.system import CONFORMANCE
 from rob6.status import parse_status
 from rob6_planner.config import MotionSettings
+from tests.conformance import CONFORMANCE
 
 ROBOTS = ("kr16", "kr16rt", "kr3rt", "ad850", "kaw_fs")
 SCRIPTS = ("limits", "limits_bounds", "misc")

@@ -13,7 +13,8 @@ from collections.abc import Iterable, Iterator
 
 import pytest
 
-from harness.system import Client, System, running
+from harness.client import Client
+from harness.system import System, running
 from rob6_client import Robot
 
 START = [0.0, -10.0, 10.0, 0.0, 30.0, 0.0]

@@ -18,7 +18,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from harness.system import Client, System, free_port, link_status, running
+from harness.client import Client
+from harness.ports import free_port
+from harness.system import System, link_status, running
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController

@@ -15,7 +15,9 @@ import msgspec
 import pytest
 import zenoh
 
-from harness.system import Client, System, free_port, running
+from harness.client import Client
+from harness.ports import free_port
+from harness.system import System, running
 from rob6.bus import Bus
 from rob6.config import BusSettings
 from rob6.messages import JointState

@@ -12,7 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from harness.system import Client, System, free_port
+from harness.client import Client
+from harness.ports import free_port
+from harness.system import System
 from rob6_recorder.reader import read_records
 
 pytestmark = pytest.mark.slow

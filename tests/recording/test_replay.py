@@ -13,7 +13,6 @@ import pytest
 from click.testing import CliRunner
 
 from harness.fake_server import FakeServer, Handler
-from harness.system import CONFORMANCE
 from rob6_recorder.cli import main as cli
 from rob6_recorder.playback import replay_joints
 from rob6_recorder.reader import read_records
@@ -25,6 +24,7 @@ from rob6_recorder.session_replay import (
     replay,
 )
 from rob6_recorder.writer import Recorder
+from tests.conformance import CONFORMANCE
 from tests.recording.rec_helpers import REPLIES, SESSION_LINES, dict_handler, record_session
 
 

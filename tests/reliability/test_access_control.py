@@ -12,7 +12,9 @@ import time
 
 import pytest
 
-from harness.system import Client, free_port, running
+from harness.client import Client
+from harness.ports import free_port
+from harness.system import running
 
 
 def _raw_connect(port: int, source: str = "127.0.0.1") -> bytes:

@@ -17,7 +17,8 @@ from typing import Any
 
 import pytest
 
-from harness.system import Client, System, running
+from harness.client import Client
+from harness.system import System, running
 from rob6.robots import get_robot
 from tests.ros import msgdefs
 

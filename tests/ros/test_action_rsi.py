@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from harness.system import System, free_port
+from harness.ports import free_port
+from harness.system import System
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints
 from tests.motion.test_rsi_realtime import POSITION_TOL, assert_no_jump, connected, rsi_system

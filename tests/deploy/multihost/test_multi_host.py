@@ -27,9 +27,9 @@ from pathlib import Path
 import pytest
 
 from harness import images
+from harness.client import Client
 from harness.compose import run
 from harness.images import TAG
-from harness.system import Client
 from harness.topology import (
     REMOTE_KINEMATICS,
     Call,

@@ -19,9 +19,9 @@ from collections.abc import Iterator
 import pytest
 
 from harness import images
+from harness.client import Client
 from harness.compose import run
 from harness.images import TAG
-from harness.system import Client
 from harness.topology import (
     Topology,
     alter_session,

@@ -1,0 +1,26 @@
+"""Free ports for the servers the tests and the benchmarks start, below the ephemeral range."""
+
+from __future__ import annotations
+
+import random
+import socket
+
+__all__ = ["TEST_PORTS", "free_port"]
+
+#: Ports handed out for tests: below Linux's ephemeral range (32768-60999), where the
+#: kernel picks the local port of every outgoing connection; a port the kernel gave us
+#: from that range can be taken by someone's connection before our server binds it
+TEST_PORTS = range(20000, 32768)
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A port nothing listens on (TCP, or UDP with ``socket.SOCK_DGRAM``), on any address."""
+    for _ in range(200):
+        port = random.choice(TEST_PORTS)
+        with socket.socket(socket.AF_INET, kind) as sock:
+            try:
+                sock.bind(("0.0.0.0", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError("no free port for a test")
