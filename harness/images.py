@@ -1,10 +1,9 @@
-"""The rob6 images every Docker test runs, built once per test run before the first test.
+"""Build the rob6 images (rob6/<name>:TAG) with deploy/build-images.sh, and say why when it fails.
 
-tests/conftest.py calls ``build`` when the run selects a test marked ``docker``, outside
-any test's timeout (a cold build takes far longer than pytest's 300 s per test); the
-Docker suites ask for the ``rob6_images`` fixture, which fails them with the build's one-line
-reason when it failed. ``deploy/build-images.sh`` (``make images``) is the one place that
-knows how to build them; bench/multihost.py runs it too.
+tests/conftest.py calls ``build`` once per test run, before the first test marked ``docker``
+and outside any test's timeout (a cold build takes far longer than pytest's 300 s per test);
+bench/multihost.py calls it before its run. ``deploy/build-images.sh`` (``make images``) is
+the one place that knows how to build them.
 """
 
 from __future__ import annotations
@@ -59,7 +58,3 @@ def build() -> Outcome:
         last = [line for line in (proc.stderr + proc.stdout).splitlines() if line.strip()][-1:] or ["(no output)"]
         outcome.error = f"{SCRIPT.name} exited {proc.returncode}: {last[0].strip()[:300]}"
     return outcome
-
-
-#: set by tests/conftest.py before the first test; None: no Docker test was selected
-OUTCOME: Outcome | None = None

@@ -7,6 +7,9 @@ import pytest
 
 from harness import images
 
+#: the one image build of this test run, made before the first test (absent: no Docker test was selected)
+IMAGES_BUILT = pytest.StashKey[images.Outcome]()
+
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     if os.environ.get("ROB6_SKIP_DOCKER") != "1":
@@ -27,17 +30,17 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     terminal = session.config.pluginmanager.get_plugin("terminalreporter")
     if terminal is not None:
         terminal.write_line(f"building the rob6 images (rob6/*:{images.TAG}) for {len(selected)} Docker tests ...")
-    images.OUTCOME = images.build()
+    outcome = session.config.stash[IMAGES_BUILT] = images.build()
     if terminal is not None:
-        for line in images.OUTCOME.steps:
+        for line in outcome.steps:
             terminal.write_line(line)
-        terminal.write_line(f"rob6 images: {images.OUTCOME.error or 'ready'} ({images.OUTCOME.seconds:.0f} s)")
+        terminal.write_line(f"rob6 images: {outcome.error or 'ready'} ({outcome.seconds:.0f} s)")
 
 
 @pytest.fixture(scope="session")
-def rob6_images() -> images.Outcome:
+def rob6_images(pytestconfig: pytest.Config) -> images.Outcome:
     """The images every Docker test runs; a failed build fails the test with its one-line reason."""
-    outcome = images.OUTCOME
+    outcome = pytestconfig.stash.get(IMAGES_BUILT, None)
     if outcome is None:
         pytest.fail("no rob6 image was built before this test (pytest_collection_finish did not run)", pytrace=False)
     if outcome.error:
