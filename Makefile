@@ -54,7 +54,7 @@ test-fast: install
 
 # ruff: pyflakes, import order, bugbear, E4/E7/E9, pyupgrade, simplify, return, pylint's
 # errors, warnings, conventions and idiom refactors, unused noqa; mypy: strict for every
-# package, bench and tests (pyproject.toml)
+# package, the harness, bench and tests (pyproject.toml)
 check: install
 	$(BIN)/ruff check .
 	$(BIN)/mypy

@@ -1,7 +1,7 @@
 """Benchmark of the multi-host deployment under real network faults (latency, partitions, loss, router kill).
 
 The multi-host figures (issue 14, deploy/MULTI_HOST.md): deploy/multihost/docker-compose.yml
-with real network faults from this machine (tests/deploy/multihost/topology.py).
+with real network faults from this machine (harness/topology.py).
 
     sudo .venv/bin/python -m bench.multihost        # Docker, root (nsenter, iptables); ~6 min
 

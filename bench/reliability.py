@@ -2,12 +2,12 @@
 
     .venv/bin/python -m bench.reliability [--parser-examples 100000] [--tcp-examples 3000]
 
-prints the figures table of RELIABILITY.md (run from the project root: it imports the test
-suite's building blocks).
+prints the figures table of RELIABILITY.md (run from the project root: it imports the
+development harness, ``harness/``).
 
-The building blocks and the invariants every fuzzed input is checked against are the test
-suite's (``tests/reliability/fuzz.py``): this campaign runs them with larger budgets, adds
-the recording check and the fault injection (``tests/reliability/faults.py``).
+The building blocks and the invariants every fuzzed input is checked against are those the
+test suite uses too (``harness/fuzz.py``): this campaign runs them with larger budgets, adds
+the recording check and the fault injection (``harness/faults.py``).
 """
 
 from __future__ import annotations

@@ -1,5 +1,7 @@
-"""Docker helpers shared by the deployment tests: tests/deploy/test_compose_e2e.py and the
-multi-host topology (tests/deploy/multihost/topology.py, which bench/multihost.py uses too)."""
+"""Run docker and docker compose commands for the Docker tests and the multi-host benchmark.
+
+Used by tests/deploy/test_compose_e2e.py and harness/topology.py (which bench/multihost.py uses).
+"""
 
 from __future__ import annotations
 

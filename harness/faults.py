@@ -1,5 +1,7 @@
-"""Fault injection against a real system: SIGKILL, SIGSTOP/SIGCONT and SIGTERM (restart) of
-each service and SIGSTOP/SIGCONT of the Zenoh router, during one client session.
+"""Fault injection against a real system: kill, stop or restart a service or the router mid-session.
+
+The faults: SIGKILL, SIGSTOP/SIGCONT and SIGTERM (restart) of each service and
+SIGSTOP/SIGCONT of the Zenoh router, during one client session.
 
 For every fault: the probe command that needs the faulty service answers an ``ERROR: …``
 line (``<service> unavailable`` or ``<service>: no reply to <command> within …``) or still the right

@@ -1,6 +1,6 @@
-"""A small Foxglove WebSocket (subprotocol ``foxglove.sdk.v1``, the successor of ``foxglove.websocket.v1``) client for the tests.
+"""A small Foxglove WebSocket client of the live view, for the tests and the live-view benchmark.
 
-Collects the server info, the advertised channels and, per subscribed topic, the
+It speaks subprotocol ``foxglove.sdk.v1`` (the successor of ``foxglove.websocket.v1``). Collects the server info, the advertised channels and, per subscribed topic, the
 decoded JSON messages with their timestamps; can fetch an asset. Runs a reader thread.
 """
 

@@ -1,6 +1,7 @@
-"""The gateway fuzzing's building blocks: input generators, reply checks, the in-process
-checks of the framer, the argument parser and the command dispatch, and the TCP fuzzer that
-drives a real system.
+"""The gateway fuzzing's building blocks: input generators, reply checks and the fuzzers.
+
+The in-process checks of the framer, the argument parser and the command dispatch, and the
+TCP fuzzer that drives a real system.
 
 The invariants (every fuzzed input):
 

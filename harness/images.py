@@ -1,4 +1,4 @@
-"""Build the rob6 images (rob6/<name>:TAG) with deploy/build-images.sh, and say why when it fails.
+"""Build the rob6 images (``rob6/<name>:TAG``) with ``deploy/build-images.sh``, and say why when it fails.
 
 tests/conftest.py calls ``build`` once per test run, before the first test marked ``docker``
 and outside any test's timeout (a cold build takes far longer than pytest's 300 s per test);

@@ -3,8 +3,6 @@
 ``running``/``System`` start and stop it; ``System.client`` talks to its gateway with
 ``harness.client.Client``, ``System.bus`` and ``driver_state``/``link_status`` ask its
 services over its Zenoh router; ``zenoh_router`` is a bare router in this process.
-
-Development only: the product (``shared/rob6``, ``services/*``) never imports it.
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
-"""The multi-host topology (deploy/multihost/docker-compose.yml) and its faults, for the tests
-and for bench/multihost.py.
+"""Run the multi-host topology (deploy/multihost/docker-compose.yml) and make its network faults.
+
+Used by tests/deploy/multihost and bench/multihost.py.
 
 A host is a network namespace owned by its holder container (robot-pc, compute1, compute2,
 storage). Faults are made from this machine with the real tools:
@@ -12,7 +13,7 @@ storage). Faults are made from this machine with the real tools:
   with the same address (a pulled cable, not a new machine);
 - ``docker kill`` / ``pause`` of a container (a router, a host).
 
-Images: ``rob6/<service>:<tag>`` as deploy/build-images.sh builds them (tests/deploy/images.py).
+Images: ``rob6/<service>:<tag>`` as deploy/build-images.sh builds them (harness/images.py).
 """
 
 from __future__ import annotations

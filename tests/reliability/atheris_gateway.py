@@ -5,7 +5,7 @@ Not part of the test suite (atheris is not a project dependency). To use it:
     .tools/bin/uv pip install --python .venv/bin/python atheris
     .venv/bin/python -m tests.reliability.atheris_gateway -atheris_runs=200000
 
-The properties are those of ``tests/reliability/fuzz.py`` (``check_framer``, ``check_args``,
+The properties are those of ``harness/fuzz.py`` (``check_framer``, ``check_args``,
 ``check_execute``); any assertion failure or exception is a crash that atheris reports
 with the input that caused it.
 """

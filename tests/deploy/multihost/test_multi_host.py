@@ -5,7 +5,7 @@
 The robot PC (router, gateway, planner, driver, gripper), a compute host (router, two
 kinematics replicas), a second compute host (one replica) and a storage host (recorder),
 each its own network namespace on the lab network; faults are made with iptables/NFQUEUE
-(nfq_netem.py), ``docker network disconnect`` and ``docker kill`` (tests/deploy/multihost/topology.py).
+(nfq_netem.py), ``docker network disconnect`` and ``docker kill`` (harness/topology.py).
 The assertions are about answers (correct, or an error within the timeout, never a hang,
 never a wrong answer) and the motion; the timings are printed and measured by
 ``python -m bench.multihost`` (deploy/MULTI_HOST.md).
