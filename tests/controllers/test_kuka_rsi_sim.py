@@ -23,6 +23,7 @@ from typing import Any
 import pytest
 
 from tests.controllers.rsi_controller import RsiController, RsiControllerError
+from tests.controllers.sim_process import Status
 
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
 SLOW = ("--cycle-ms", "40")  # for tests that need every answer on time
@@ -379,24 +380,27 @@ def test_fault_drop_every(pc: Responder) -> None:
         assert st["delay"] >= 3 and st["state"] == "running"  # unanswered, but never 100 in a row
 
 
-def test_fault_duplicate_every(pc: Responder) -> None:
+def under_fault(pc: Responder, packets: int, **fault: int) -> Status:
+    """The simulator's status once the PC has had ``packets`` packets, ``fault`` set from the
+    start (the packets stay in ``pc.packets``)."""
     with sim(pc) as kuka:
-        kuka.fault(duplicate_every=3)
-        pc.wait(lambda p: len(p) >= 15)
-        st = kuka.status()
-        assert st["fault_stats"]["duplicated"] >= 3
-        assert 0 in ipoc_steps(pc.packets, 12)  # the same packet twice
-        assert st["replies"]["duplicate_replies"] >= 1  # the PC answered both; one counted
+        kuka.fault(**fault)
+        pc.wait(lambda p: len(p) >= packets)
+        return kuka.status()
+
+
+def test_fault_duplicate_every(pc: Responder) -> None:
+    st = under_fault(pc, 15, duplicate_every=3)
+    assert st["fault_stats"]["duplicated"] >= 3
+    assert 0 in ipoc_steps(pc.packets, 12)  # the same packet twice
+    assert st["replies"]["duplicate_replies"] >= 1  # the PC answered both; one counted
 
 
 def test_fault_reorder_every(pc: Responder) -> None:
-    with sim(pc) as kuka:
-        kuka.fault(reorder_every=4)
-        pc.wait(lambda p: len(p) >= 20)
-        st = kuka.status()
-        assert st["fault_stats"]["reordered"] >= 2
-        assert any(s < 0 for s in ipoc_steps(pc.packets, 12))  # an older packet after a newer
-        assert st["delay"] >= 1  # the held packet's answer comes after its cycle
+    st = under_fault(pc, 20, reorder_every=4)
+    assert st["fault_stats"]["reordered"] >= 2
+    assert any(s < 0 for s in ipoc_steps(pc.packets, 12))  # an older packet after a newer
+    assert st["delay"] >= 1  # the held packet's answer comes after its cycle
 
 
 def test_fault_delay_for_a_while(pc: Responder) -> None:

@@ -188,6 +188,16 @@ def rig(request: FixtureRequest) -> Iterator[Rig]:
     fake.close()
 
 
+def moving(rig: Rig, j1: float, points: int) -> Motion:
+    """The link up and a PTP of joint 1 to ``j1`` under way: more than ``points`` points streamed."""
+    fake, core, link, _events = rig
+    link.start()
+    online(core, link)
+    motion, _ = ptp(core, [j1, 0.0, 0.0, 0.0, 0.0, 0.0])
+    wait(lambda: len(fake.points) > points, what="points")
+    return motion
+
+
 def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig: Rig) -> None:
     fake, core, link, events = rig
     port, state_port = fake.settings["motion_port"], fake.settings["state_port"]
@@ -223,10 +233,7 @@ def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig: R
 
 def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig: Rig) -> None:
     fake, core, link, events = rig
-    link.start()
-    online(core, link)
-    motion, _ = ptp(core, [30.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    wait(lambda: len(fake.points) > 10, what="points")
+    motion = moving(rig, 30.0, 10)
     fake.follow = False  # the arm stands where the E-stop caught it
     fake.status.update(e_stopped=1, drives_powered=0)
     assert motion.wait(10)
@@ -252,10 +259,7 @@ def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig: Ri
 
 def test_a_controller_error_and_a_refused_point_end_the_motion_with_their_own_words(rig: Rig) -> None:
     fake, core, link, events = rig
-    link.start()
-    online(core, link)
-    motion, _ = ptp(core, [20.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    wait(lambda: len(fake.points) > 5, what="points")
+    motion = moving(rig, 20.0, 5)
     fake.status.update(error_code=1107, in_error=1)
     assert motion.wait(10) and motion.error == "robot reports controller error 1107"
     fake.status.update(error_code=0, in_error=0)

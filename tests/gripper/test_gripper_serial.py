@@ -10,9 +10,10 @@ from collections.abc import Iterator
 import pytest
 
 from rob6_gripper import smp
-from rob6_gripper.backend import ERROR, GRIPPING, IDLE, MOVING, Result
+from rob6_gripper.backend import ERROR, GRIPPING, IDLE
 from rob6_gripper.fake_device import FakeSmpDevice
 from rob6_gripper.schunk import SchunkGripper
+from tests.gripper.stopping import stopped_mid_move
 
 RT = 0.2  # response timeout used in these tests, s
 SCALE = 5.0  # the fake's simulated time runs 5x faster than the wall clock
@@ -101,16 +102,8 @@ def test_current_refused_by_module(grip: SchunkGripper) -> None:
 def test_state_observable_while_moving_and_stop(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.time_scale = 1.0
     dev.model.w = 0.0
-    res: dict[str, Result] = {}
-    th = threading.Thread(target=lambda: res.setdefault("r", grip.move_to_position(0.070, 5)))
-    th.start()
-    time.sleep(0.25)
-    s = grip.state()
-    assert s.mode == MOVING and s.velocity > 0 and 0.0 < s.position < 0.070
-    assert grip.stop()
-    th.join(2)
-    assert not th.is_alive()
-    assert not res["r"] and "stopped by a stop command" in res["r"].error
+    r = stopped_mid_move(grip, lambda: grip.move_to_position(0.070, 5), 0.070, 0.25)
+    assert not r and "stopped by a stop command" in r.error
     assert commands(dev, smp.CMD_STOP)
 
 

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import math
-import threading
 import time
 
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from rob6_gripper.backend import GRIPPING, IDLE, MOVING, GripperStatus, Result, VirtualClock
+from rob6_gripper.backend import GRIPPING, IDLE, MOVING, GripperStatus, VirtualClock
 from rob6_gripper.sim import GripperModel, GripperParams, SimGripper
+from tests.gripper.stopping import stopped_mid_move
 
 P = GripperParams()
 
@@ -227,17 +227,9 @@ def test_bad_timeout(timeout: float) -> None:
 
 def test_stop_from_another_thread_ends_blocking_call_real_time() -> None:
     g = SimGripper(position=0.0)  # real clock: a full-stroke move takes ~1.1 s
-    result: dict[str, Result] = {}
-    th = threading.Thread(target=lambda: result.setdefault("r", g.move_to_position(0.070)))
     t0 = time.monotonic()
-    th.start()
-    time.sleep(0.15)
-    s = g.state()
-    assert s.mode == MOVING and s.velocity > 0 and 0 < s.position < 0.070
-    assert g.stop()
-    th.join(2)
+    r = stopped_mid_move(g, lambda: g.move_to_position(0.070), 0.070, 0.15)
     assert time.monotonic() - t0 < 0.6
-    r = result["r"]
     assert not r and "stopped by a stop command" in r.error
     time.sleep(0.3)  # braking from <= 82 mm/s takes <= 0.26 s
     assert g.state().mode == IDLE

@@ -9,9 +9,6 @@ Assertions are about positions, limits, texts and recovery, never about how fast
 
 from __future__ import annotations
 
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
@@ -23,11 +20,9 @@ import pytest
 from harness.client import Client
 from harness.system import System, link_status, running
 from rob6.robots import get_robot
-from rob6_recorder.reader import read_records
 from tests.controllers.kawasaki_controller import KawasakiController
 from tests.motion.link_session import reply, wait_until
-from tests.motion.realtime_rig import StreamedRig, fmt, free_tcp_ports, recorded_states
-from tests.motion.test_realtime_system import assert_within_limits
+from tests.motion.realtime_rig import StreamedRig, driver_refusal, fmt, free_tcp_ports
 
 pytestmark = pytest.mark.slow
 
@@ -47,7 +42,8 @@ def controller(port: int, *args: str) -> KawasakiController:
 
 
 RIG = StreamedRig(ROBOT, START, POSITION_TOL, moving_key="moving")
-robot_at, connected, arrived, long_move, back_home = RIG.robot_at, RIG.connected, RIG.arrived, RIG.long_move, RIG.back_home
+robot_at, connected, arrived, interrupted, back_home = (RIG.robot_at, RIG.connected, RIG.arrived, RIG.interrupted,
+                                                        RIG.back_home)
 
 
 def session(client: Client, ctl: KawasakiController) -> None:
@@ -73,12 +69,7 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> N
             assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
             assert link.packets == status["points_accepted"]
             assert client.ask("Quit") == "bye!\n"
-        time.sleep(1.0)  # the recorder writes the last states
-    t, q = recorded_states(tmp_path)
-    assert assert_within_limits(ROBOT, t, q) > 250  # the Alter part alone: 250 targets, one per cycle
-    events = [r.data for path in tmp_path.glob("*_system_*.mcap") for r in read_records(path, ["/driver/link"])]
-    assert [e["event"] for e in events][:2] == ["waiting", "connected"]
-    assert all(e["link"] == "kawasaki" for e in events)
+    RIG.assert_recorded(tmp_path, "kawasaki")  # complete: the launcher stops the recorder last
 
 
 @pytest.fixture(scope="module")
@@ -89,115 +80,102 @@ def kawasaki() -> Iterator[tuple[System, int]]:
         yield system, port
 
 
-def test_estop_mid_motion_then_released_and_motor_on(kawasaki: tuple[System, int]) -> None:
+Rig = tuple[System, KawasakiController, Client]
+
+
+@pytest.fixture
+def rig(kawasaki: tuple[System, int]) -> Iterator[Rig]:
+    """A fault test's start: a controller of its own, rob6 connected to it, and a client."""
     system, port = kawasaki
     with controller(port) as ctl, system.client() as client:
         connected(client, ctl, system)
-        long_move(client, ctl)
-        ctl.estop()
-        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports an E-stop\nfalse\n"
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports an E-stop\nfalse\n"
-        assert reply(client, "EnableAlter") == "ERROR: driver: robot reports an E-stop\nfalse\n"
-        ctl.release()  # the motor power stays off
-        wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START))
-                   == "ERROR: driver: robot reports motor power off\nfalse\n", what="motor power off")
-        refused = sum(ctl.status()["refused"].values())
-        assert refused <= 1  # at most the point that was on its way when the E-stop hit
-        ctl.motor(True)
-        back_home(client, ctl, system)
-        assert sum(ctl.status()["refused"].values()) == refused  # nothing sent while it could not move
+        yield system, ctl, client
 
 
-def test_motor_power_off_mid_motion(kawasaki: tuple[System, int]) -> None:
-    system, port = kawasaki
-    with controller(port) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        long_move(client, ctl)
-        ctl.motor(False)
-        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports motor power off\nfalse\n"
-        ctl.motor(True)
-        back_home(client, ctl, system)
+def test_estop_mid_motion_then_released_and_motor_on(rig: Rig) -> None:
+    system, ctl, client = rig
+    interrupted(client, ctl, ctl.estop, "robot reports an E-stop")
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports an E-stop\nfalse\n"
+    assert reply(client, "EnableAlter") == "ERROR: driver: robot reports an E-stop\nfalse\n"
+    ctl.release()  # the motor power stays off
+    wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START))
+               == "ERROR: driver: robot reports motor power off\nfalse\n", what="motor power off")
+    refused = sum(ctl.status()["refused"].values())
+    assert refused <= 1  # at most the point that was on its way when the E-stop hit
+    ctl.motor(True)
+    back_home(client, ctl, system)
+    assert sum(ctl.status()["refused"].values()) == refused  # nothing sent while it could not move
 
 
-def test_teach_mode_and_a_controller_error_mid_motion(kawasaki: tuple[System, int]) -> None:
-    system, port = kawasaki
-    with controller(port) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        long_move(client, ctl)
-        ctl.teach(True)
-        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports teach mode\nfalse\n"
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports teach mode\nfalse\n"
-        ctl.teach(False)
-        back_home(client, ctl, system)
-        long_move(client, ctl)
-        ctl.error(1502)
-        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports controller error 1502\nfalse\n"
-        ctl.clear_error()
-        back_home(client, ctl, system)
+def test_motor_power_off_mid_motion(rig: Rig) -> None:
+    system, ctl, client = rig
+    interrupted(client, ctl, lambda: ctl.motor(False), "robot reports motor power off")
+    ctl.motor(True)
+    back_home(client, ctl, system)
 
 
-def test_connection_dropped_mid_motion_and_restored(kawasaki: tuple[System, int]) -> None:
-    system, port = kawasaki
-    with controller(port) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        runs = link_status(system).runs
-        long_move(client, ctl)
-        assert ctl.drop_connection()
-        assert client.read_lines(2, timeout=30) == (
-            f"ERROR: driver: kawasaki link lost: the controller at 127.0.0.1:{port} closed the connection\n"
-            "false\n")
-        wait_until(lambda: ctl.status()["client"], what="rob6 to reconnect")
-        back_home(client, ctl, system)  # after the segment under way ran out: no jump back
-        assert link_status(system).runs > runs
+def test_teach_mode_and_a_controller_error_mid_motion(rig: Rig) -> None:
+    system, ctl, client = rig
+    interrupted(client, ctl, lambda: ctl.teach(True), "robot reports teach mode")
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports teach mode\nfalse\n"
+    ctl.teach(False)
+    back_home(client, ctl, system)
+    interrupted(client, ctl, lambda: ctl.error(1502), "robot reports controller error 1502")
+    ctl.clear_error()
+    back_home(client, ctl, system)
 
 
-def test_slow_then_missing_acknowledgements(kawasaki: tuple[System, int]) -> None:
-    system, port = kawasaki
-    with controller(port) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-        merged = link_status(system).late
-        ctl.slow_ack(150)  # three points' time: what rob6 makes meanwhile goes as one point
-        target = [20.0, -20.0, 50.0, 0.0, 30.0, 10.0]
-        assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
-        assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)
-        assert link_status(system).late > merged
-        ctl.slow_ack(3000)  # beyond rob6's 2 s: the controller is taken for lost
-        client.send("MovePTPJoints " + fmt(START) + "\n")
-        assert client.read_lines(2, timeout=30) == (
-            f"ERROR: driver: kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{port} "
-            "for 2000 ms\nfalse\n")
-        ctl.slow_ack(0)
-        connected(client, ctl, system)
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-        assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
+def test_connection_dropped_mid_motion_and_restored(kawasaki: tuple[System, int], rig: Rig) -> None:
+    system, ctl, client = rig
+    port = kawasaki[1]
+    runs = link_status(system).runs
+    interrupted(client, ctl, ctl.drop_connection,
+                f"kawasaki link lost: the controller at 127.0.0.1:{port} closed the connection")
+    wait_until(lambda: ctl.status()["client"], what="rob6 to reconnect")
+    back_home(client, ctl, system)  # after the segment under way ran out: no jump back
+    assert link_status(system).runs > runs
 
 
-def test_a_point_outside_the_controllers_range_is_never_sent(kawasaki: tuple[System, int]) -> None:
+def test_slow_then_missing_acknowledgements(kawasaki: tuple[System, int], rig: Rig) -> None:
+    system, ctl, client = rig
+    port = kawasaki[1]
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    merged = link_status(system).late
+    ctl.slow_ack(150)  # three points' time: what rob6 makes meanwhile goes as one point
+    target = [20.0, -20.0, 50.0, 0.0, 30.0, 10.0]
+    assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
+    assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)
+    assert link_status(system).late > merged
+    ctl.slow_ack(3000)  # beyond rob6's 2 s: the controller is taken for lost
+    client.send("MovePTPJoints " + fmt(START) + "\n")
+    assert client.read_lines(2, timeout=30) == (
+        f"ERROR: driver: kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{port} "
+        "for 2000 ms\nfalse\n")
+    ctl.slow_ack(0)
+    connected(client, ctl, system)
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
+
+
+def test_a_point_outside_the_controllers_range_is_never_sent(rig: Rig) -> None:
     """rob6 allows q3 down to -150, the controller only to -120 (JT3 +120): the link stops the
     motion at the border with a clear error instead of sending the point."""
-    system, port = kawasaki
-    with controller(port) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-        beyond = list(START)
-        beyond[2] = -130.0
-        answer = reply(client, "MovePTPJoints " + fmt(beyond))
-        assert answer.startswith("ERROR: driver: refused to send a point outside the robot's range (joint 3 at -12")
-        assert answer.endswith(" on the controller, outside its range -150 .. 120)\nfalse\n"), answer
-        here = connected(client, ctl, system)
-        assert -120.0 <= here[2] < 40.0  # stopped on the way, inside the controller's range
-        status = ctl.status()
-        assert status["refused"] == {} and status["position_ctrl_deg"][2] <= 120.0
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    system, ctl, client = rig
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    beyond = list(START)
+    beyond[2] = -130.0
+    answer = reply(client, "MovePTPJoints " + fmt(beyond))
+    assert answer.startswith("ERROR: driver: refused to send a point outside the robot's range (joint 3 at -12")
+    assert answer.endswith(" on the controller, outside its range -150 .. 120)\nfalse\n"), answer
+    here = connected(client, ctl, system)
+    assert -120.0 <= here[2] < 40.0  # stopped on the way, inside the controller's range
+    status = ctl.status()
+    assert status["refused"] == {} and status["position_ctrl_deg"][2] <= 120.0
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
 
 
 def test_the_kawasaki_link_on_another_robot_is_refused_in_one_line() -> None:
-    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "ad850", "--link", "kawasaki"],
-                            check=False, capture_output=True, text=True, timeout=60)
-    assert (result.returncode, result.stderr) == (
+    assert driver_refusal("--robot", "ad850", "--link", "kawasaki") == (
         78, "rob6-driver: --link kawasaki drives the Kawasaki FS03N (kaw_fs), not ad850; use --link sim\n")
-    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kaw_fs", "--link", "kawasaki",
-                             "--kas-port", "0"], check=False, capture_output=True, text=True, timeout=60)
-    assert (result.returncode, result.stderr) == (
+    assert driver_refusal("--robot", "kaw_fs", "--link", "kawasaki", "--kas-port", "0") == (
         78, "rob6-driver: ROB6_KAS_PORT=0: expected a TCP port 1..65535\n")

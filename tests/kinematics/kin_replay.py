@@ -118,6 +118,15 @@ def answer(st: State, line: str) -> str | None:
     return None
 
 
+#: the commands with six values that ``track`` follows: the State field each one sets
+SIX_VALUE_SETTERS = {
+    "MovePTPJoints": "q",
+    "SetJointsMaxChange": "max_change",
+    "SetJointsMaxTurnMax": "turn_max",
+    "SetJointsMaxTurnMin": "turn_min",
+}
+
+
 def track(st: State, line: str, reply: str) -> None:
     """Apply the state changes of a non-judged command that the original accepted."""
     cmd, _, args = line.strip("\r\n").partition(" ")
@@ -125,16 +134,10 @@ def track(st: State, line: str, reply: str) -> None:
     if not ok:
         return
     nums, _, _ = leading_numbers(args, 6)
-    if cmd == "MovePTPJoints" and len(nums) == 6:
-        st.q = np.array(nums)
-    elif cmd == "SetJointsMaxChange" and len(nums) == 6:
-        st.max_change = np.array(nums)
+    if cmd in SIX_VALUE_SETTERS and len(nums) == 6:
+        setattr(st, SIX_VALUE_SETTERS[cmd], np.array(nums))
     elif cmd == "ResetJointsMaxChange":
         st.reset_change()
-    elif cmd == "SetJointsMaxTurnMax" and len(nums) == 6:
-        st.turn_max = np.array(nums)
-    elif cmd == "SetJointsMaxTurnMin" and len(nums) == 6:
-        st.turn_min = np.array(nums)
     elif cmd == "ResetJointsMaxTurn":
         st.reset_turn()
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import cache
 from typing import Any, Literal, TypedDict
 
@@ -144,6 +144,25 @@ def _accepted(values: list[float] | None, rec: dict[str, Any]) -> list[float]:
     return values
 
 
+def _joint_move(cmd: str, args: list[str], key: Literal["pos", "virt"], current: list[float], st: _Tracked,
+                status: Callable[[Sequence[float]], Status]) -> tuple[list[float], bool] | None:
+    """A joint move (``JOINT_MOVES`` or ``MovePTPJointsStatus``) as a case to judge: its target
+    and whether rob6's rule allows it; None when it is no case (unreadable, or the wrong mode)."""
+    q = _floats(args, 6)
+    if q is None:
+        return None
+    if cmd == "MovePTPJointsStatus":
+        pat = _pattern(args[6:])
+        if pat is None or key != "pos":
+            return None
+        return q, joint_move_allowed(
+            q, current, st["tmin"], st["tmax"], st["mc"], st["allowed"], status
+        ) and status_matches(pat, status(q), status(current))
+    if (cmd == "RoutetestJoints") != (key == "virt"):
+        return None
+    return q, joint_move_allowed(q, current, st["tmin"], st["tmax"], st["mc"], st["allowed"], status)
+
+
 def replay(robot: str, name: str) -> tuple[dict[str, int], list[Mismatch]]:
     """Returns (matched, mismatches) over the moves of one transcript: matched counts
     {"cartesian": n, "joints": n}; a mismatch is (index, command, words, expected ok,
@@ -203,24 +222,10 @@ def replay(robot: str, name: str) -> tuple[dict[str, int], list[Mismatch]]:
             st["virt"] = None
         elif cmd == "GetPositionJoints" and (position := _floats(reply.split(), 6)) is not None:
             st[key] = position
-        elif cmd in JOINT_MOVES:
-            q = _floats(args, 6)
-            if q is not None and (cmd == "RoutetestJoints") == (key == "virt"):
-                ok = joint_move_allowed(
-                    q, current, st["tmin"], st["tmax"], st["mc"], st["allowed"], status
-                )
-                if ok == (reply == "true"):
-                    matched["joints"] += 1
-                else:
-                    mismatches.append((i, cmd, args, reply == "true", None, ok))
-                if ok:
-                    st[key] = q
-        elif cmd == "MovePTPJointsStatus" and not reply.startswith("ERROR"):
-            q, pat = _floats(args, 6), _pattern(args[6:])
-            if q is not None and pat is not None and key == "pos":
-                ok = joint_move_allowed(
-                    q, current, st["tmin"], st["tmax"], st["mc"], st["allowed"], status
-                ) and status_matches(pat, status(q), status(current))
+        elif cmd in JOINT_MOVES or (cmd == "MovePTPJointsStatus" and not reply.startswith("ERROR")):
+            judged = _joint_move(cmd, args, key, current, st, status)
+            if judged is not None:
+                q, ok = judged
                 if ok == (reply == "true"):
                     matched["joints"] += 1
                 else:

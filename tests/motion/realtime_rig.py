@@ -5,8 +5,10 @@ robot, moving it away and back, and a PTP/LIN/Alter session."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,6 +22,7 @@ from rob6.robots import RobotModel
 from rob6_recorder.reader import read_records
 from tests.controllers.sim_process import SimProcess, Status
 from tests.motion.link_session import joints, reply, wait_until
+from tests.motion.test_realtime_system import assert_within_limits
 
 Joints = npt.NDArray[np.float64]
 
@@ -50,6 +53,13 @@ def recorded_states(directory: Path, connected_only: bool = False) -> tuple[Join
 
 def fmt(q: Sequence[float] | Joints) -> str:
     return " ".join(f"{x:f}" for x in q)
+
+
+def driver_refusal(*args: str) -> tuple[int, str]:
+    """(exit status, stderr) of ``python -m rob6_driver`` with ``args``: a setting it refuses."""
+    result = subprocess.run([sys.executable, "-m", "rob6_driver", *args],
+                            capture_output=True, check=False, text=True, timeout=60)
+    return result.returncode, result.stderr
 
 
 @dataclass(frozen=True)
@@ -92,6 +102,13 @@ class StreamedRig:
         client.send("MovePTPJoints " + fmt(target) + "\n")
         wait_until(lambda: float(self.robot_at(ctl)[0]) > 5.0, what="the robot to move")
 
+    def interrupted(self, client: Any, ctl: SimProcess, fault: Callable[[], bool | None], error: str) -> None:
+        """``long_move``, then ``fault`` on the controller (False: it could not be done) ends the
+        move with ``ERROR: driver: {error}`` and ``false``."""
+        self.long_move(client, ctl)
+        assert fault() is not False
+        assert client.read_lines(2, timeout=30) == f"ERROR: driver: {error}\nfalse\n"
+
     def back_home(self, client: Any, ctl: SimProcess, system: System) -> None:
         """After a fault in ``long_move``: rob6 continues from where the robot stopped, home."""
         here = self.connected(client, ctl, system)
@@ -132,3 +149,13 @@ class StreamedRig:
         self.arrived(ctl, final)
         assert np.allclose(joints(client), final, atol=1e-6)
         assert client.ask("DisableAlter") == "true\n"
+
+    def assert_recorded(self, directory: Path, link: str) -> None:
+        """What the recorder wrote to ``directory`` of a system that ran ``session`` on ``link``:
+        rob6's setpoints, every cycle of a motion (at rest fewer), the controller connected or
+        not, within every limit; the link's events from waiting to connected."""
+        t, q = recorded_states(directory)
+        assert assert_within_limits(self.robot, t, q) > 250  # the Alter part alone: 250 targets, one per cycle
+        events = [r.data for path in directory.glob("*_system_*.mcap") for r in read_records(path, ["/driver/link"])]
+        assert [e["event"] for e in events][:2] == ["waiting", "connected"]
+        assert all(e["link"] == link for e in events)

@@ -10,9 +10,6 @@ Assertions are about positions, limits, texts and recovery, never about how fast
 
 from __future__ import annotations
 
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
@@ -24,11 +21,9 @@ import pytest
 from harness.client import Client
 from harness.system import System, link_status, running
 from rob6.robots import get_robot
-from rob6_recorder.reader import read_records
 from tests.controllers.adept_controller import AdeptController
 from tests.motion.link_session import reply, wait_until
-from tests.motion.realtime_rig import StreamedRig, fmt, free_tcp_ports, recorded_states
-from tests.motion.test_realtime_system import assert_within_limits
+from tests.motion.realtime_rig import StreamedRig, driver_refusal, fmt, free_tcp_ports
 
 pytestmark = pytest.mark.slow
 
@@ -49,7 +44,8 @@ def controller(motion: int, state: int, *args: str, order: str = "big") -> Adept
 
 
 RIG = StreamedRig(ROBOT, START, POSITION_TOL, moving_key="in_motion")
-robot_at, connected, arrived, long_move, back_home = RIG.robot_at, RIG.connected, RIG.arrived, RIG.long_move, RIG.back_home
+robot_at, connected, arrived, interrupted, back_home = (RIG.robot_at, RIG.connected, RIG.arrived, RIG.interrupted,
+                                                        RIG.back_home)
 
 
 def session(client: Client, ctl: AdeptController) -> None:
@@ -75,13 +71,7 @@ def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path: Path, order: 
             assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
             assert link.packets == status["points_acknowledged"]
             assert client.ask("Quit") == "bye!\n"
-        time.sleep(1.0)  # the recorder writes the last states
-    t, q = recorded_states(tmp_path)
-    # rob6's setpoints, every cycle of a motion (at rest fewer), the controller connected or not
-    assert assert_within_limits(ROBOT, t, q) > 250  # the Alter part alone: 250 targets, one per cycle
-    events = [r.data for path in tmp_path.glob("*_system_*.mcap") for r in read_records(path, ["/driver/link"])]
-    assert [e["event"] for e in events][:2] == ["waiting", "connected"]
-    assert all(e["link"] == "simple_message" for e in events)
+    RIG.assert_recorded(tmp_path, "simple_message")  # complete: the launcher stops the recorder last
 
 
 @pytest.fixture(scope="module")
@@ -92,106 +82,92 @@ def adept() -> Iterator[tuple[System, int, int]]:
         yield system, motion, state
 
 
-def test_estop_mid_motion_then_released_and_drives_on(adept: tuple[System, int, int]) -> None:
+Rig = tuple[System, AdeptController, Client]
+
+
+@pytest.fixture
+def rig(adept: tuple[System, int, int]) -> Iterator[Rig]:
+    """A fault test's start: a controller of its own, rob6 connected to it, and a client."""
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
-        long_move(client, ctl)
-        ctl.estop()
-        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports an E-stop\nfalse\n"
-        # a point already waiting for room in the controller's queue when the E-stop hit
-        # is refused by it (a real V+ server does the same); count from when rob6 knew
-        refused_at_fault = ctl.status()["points_refused"]
-        assert refused_at_fault <= 1
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports an E-stop\nfalse\n"
-        assert reply(client, "EnableAdeptAlter") == "ERROR: driver: robot reports an E-stop\nfalse\n"
-        ctl.release()  # the drives stay off
-        wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START))
-                   == "ERROR: driver: robot reports drives off\nfalse\n", what="drives off")
-        ctl.drives(True)
-        back_home(client, ctl, system)
-        assert ctl.status()["points_refused"] == refused_at_fault  # nothing sent while it could not move
+        yield system, ctl, client
 
 
-def test_drives_off_mid_motion(adept: tuple[System, int, int]) -> None:
-    system, motion, state = adept
-    with controller(motion, state) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        long_move(client, ctl)
-        ctl.drives(False)
-        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports drives off\nfalse\n"
-        ctl.drives(True)
-        back_home(client, ctl, system)
+def test_estop_mid_motion_then_released_and_drives_on(rig: Rig) -> None:
+    system, ctl, client = rig
+    interrupted(client, ctl, ctl.estop, "robot reports an E-stop")
+    # a point already waiting for room in the controller's queue when the E-stop hit
+    # is refused by it (a real V+ server does the same); count from when rob6 knew
+    refused_at_fault = ctl.status()["points_refused"]
+    assert refused_at_fault <= 1
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports an E-stop\nfalse\n"
+    assert reply(client, "EnableAdeptAlter") == "ERROR: driver: robot reports an E-stop\nfalse\n"
+    ctl.release()  # the drives stay off
+    wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START))
+               == "ERROR: driver: robot reports drives off\nfalse\n", what="drives off")
+    ctl.drives(True)
+    back_home(client, ctl, system)
+    assert ctl.status()["points_refused"] == refused_at_fault  # nothing sent while it could not move
 
 
-def test_controller_error_mid_motion(adept: tuple[System, int, int]) -> None:
-    system, motion, state = adept
-    with controller(motion, state) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        long_move(client, ctl)
-        ctl.error(1107)
-        assert client.read_lines(2, timeout=30) == "ERROR: driver: robot reports controller error 1107\nfalse\n"
-        assert reply(client, "MovePTPJoints " + fmt(START)) == (
-            "ERROR: driver: robot reports controller error 1107\nfalse\n")
-        ctl.clear_error()
-        back_home(client, ctl, system)
+def test_drives_off_mid_motion(rig: Rig) -> None:
+    system, ctl, client = rig
+    interrupted(client, ctl, lambda: ctl.drives(False), "robot reports drives off")
+    ctl.drives(True)
+    back_home(client, ctl, system)
 
 
-def test_motion_connection_dropped_mid_motion_and_restored(adept: tuple[System, int, int]) -> None:
-    system, motion, state = adept
-    with controller(motion, state) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        long_move(client, ctl)
-        assert ctl.drop_connection("motion")
-        assert client.read_lines(2, timeout=30) == (
-            f"ERROR: driver: simple_message link lost: the controller at 127.0.0.1:{motion} closed the motion "
-            "connection\nfalse\n")
-        wait_until(lambda: ctl.status()["clients"]["motion"], what="rob6 to reconnect")
-        back_home(client, ctl, system)  # after the points already queued ran out: no jump back
-        assert link_status(system).runs >= 2
+def test_controller_error_mid_motion(rig: Rig) -> None:
+    system, ctl, client = rig
+    interrupted(client, ctl, lambda: ctl.error(1107), "robot reports controller error 1107")
+    assert reply(client, "MovePTPJoints " + fmt(START)) == (
+        "ERROR: driver: robot reports controller error 1107\nfalse\n")
+    ctl.clear_error()
+    back_home(client, ctl, system)
 
 
-def test_state_connection_dropped_mid_motion_and_restored(adept: tuple[System, int, int]) -> None:
-    system, motion, state = adept
-    with controller(motion, state) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        long_move(client, ctl)
-        assert ctl.drop_connection("state")
-        assert client.read_lines(2, timeout=30) == (
-            f"ERROR: driver: simple_message link lost: the controller at 127.0.0.1:{state} closed the state "
-            "connection\nfalse\n")
-        back_home(client, ctl, system)
+def test_motion_connection_dropped_mid_motion_and_restored(adept: tuple[System, int, int], rig: Rig) -> None:
+    system, ctl, client = rig
+    motion = adept[1]
+    interrupted(client, ctl, lambda: ctl.drop_connection("motion"),
+                f"simple_message link lost: the controller at 127.0.0.1:{motion} closed the motion connection")
+    wait_until(lambda: ctl.status()["clients"]["motion"], what="rob6 to reconnect")
+    back_home(client, ctl, system)  # after the points already queued ran out: no jump back
+    assert link_status(system).runs >= 2
 
 
-def test_slow_then_missing_acknowledgements(adept: tuple[System, int, int]) -> None:
-    system, motion, state = adept
-    with controller(motion, state) as ctl, system.client() as client:
-        connected(client, ctl, system)
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-        merged = link_status(system).late
-        ctl.slow_ack(150)  # three points' time: what rob6 makes meanwhile goes as one point
-        target = [20.0, -50.0, 50.0, 0.0, 30.0, 10.0]
-        assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
-        assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)
-        assert link_status(system).late > merged
-        ctl.slow_ack(3000)  # beyond rob6's 2 s: the controller is taken for lost
-        client.send("MovePTPJoints " + fmt(START) + "\n")
-        assert client.read_lines(2, timeout=30) == (
-            f"ERROR: driver: simple_message link lost: no acknowledgement from the controller at "
-            f"127.0.0.1:{motion} for 2000 ms\nfalse\n")
-        ctl.slow_ack(0)
-        connected(client, ctl, system)
-        assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-        assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
+def test_state_connection_dropped_mid_motion_and_restored(adept: tuple[System, int, int], rig: Rig) -> None:
+    system, ctl, client = rig
+    state = adept[2]
+    interrupted(client, ctl, lambda: ctl.drop_connection("state"),
+                f"simple_message link lost: the controller at 127.0.0.1:{state} closed the state connection")
+    back_home(client, ctl, system)
+
+
+def test_slow_then_missing_acknowledgements(adept: tuple[System, int, int], rig: Rig) -> None:
+    system, ctl, client = rig
+    motion = adept[1]
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    merged = link_status(system).late
+    ctl.slow_ack(150)  # three points' time: what rob6 makes meanwhile goes as one point
+    target = [20.0, -50.0, 50.0, 0.0, 30.0, 10.0]
+    assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
+    assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)
+    assert link_status(system).late > merged
+    ctl.slow_ack(3000)  # beyond rob6's 2 s: the controller is taken for lost
+    client.send("MovePTPJoints " + fmt(START) + "\n")
+    assert client.read_lines(2, timeout=30) == (
+        f"ERROR: driver: simple_message link lost: no acknowledgement from the controller at "
+        f"127.0.0.1:{motion} for 2000 ms\nfalse\n")
+    ctl.slow_ack(0)
+    connected(client, ctl, system)
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
 
 
 def test_simple_message_on_a_robot_other_than_the_adept_is_refused_in_one_line() -> None:
-    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kr16", "--link", "simple_message"],
-                            capture_output=True, check=False, text=True, timeout=60)
-    assert result.returncode == 78
-    assert result.stderr == ("rob6-driver: --link simple_message drives the Adept Viper s850 (ad850), not kr16; "
-                             "use --link sim\n")
-    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "kaw_fs", "--link", "adept"],
-                            capture_output=True, check=False, text=True, timeout=60)
-    assert (result.returncode, result.stderr) == (
+    assert driver_refusal("--robot", "kr16", "--link", "simple_message") == (
+        78, "rob6-driver: --link simple_message drives the Adept Viper s850 (ad850), not kr16; use --link sim\n")
+    assert driver_refusal("--robot", "kaw_fs", "--link", "adept") == (
         78, "rob6-driver: --link adept drives the Adept Viper s850 (ad850), not kaw_fs; use --link sim\n")

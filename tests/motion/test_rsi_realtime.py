@@ -25,7 +25,7 @@ from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
 from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints, reply, wait_until
-from tests.motion.realtime_rig import recorded_states
+from tests.motion.realtime_rig import driver_refusal, recorded_states
 from tests.motion.test_realtime_system import assert_within_limits
 
 pytestmark = pytest.mark.slow
@@ -234,8 +234,5 @@ def test_controller_vanishes_and_returns(rsi: tuple[System, int]) -> None:
 
 
 def test_rsi_on_a_robot_without_rsi_is_refused_in_one_line() -> None:
-    result = subprocess.run([sys.executable, "-m", "rob6_driver", "--robot", "ad850", "--link", "rsi"],
-                            capture_output=True, check=False, text=True, timeout=60)
-    assert result.returncode == 78
-    assert result.stderr == ("rob6-driver: --link rsi drives KUKA robots (kr3, kr16, kr3rt, kr16rt), "
-                             "not ad850; use --link sim\n")
+    assert driver_refusal("--robot", "ad850", "--link", "rsi") == (
+        78, "rob6-driver: --link rsi drives KUKA robots (kr3, kr16, kr3rt, kr16rt), not ad850; use --link sim\n")

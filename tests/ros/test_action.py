@@ -44,37 +44,36 @@ def peer(system: System) -> Iterator[Peer]:
     peer.close()
 
 
+@pytest.fixture
+def client(system: System) -> Iterator[Client]:
+    """A client of the old protocol (port 5005) for one test."""
+    with Client(system.port) as client:
+        yield client
+
+
 def _joints(client: Client) -> list[float]:
     return [float(v) for v in client.ask("GetPositionJoints").split()]
 
 
-def test_a_goal_moves_the_arm(system: System, peer: Peer) -> None:
-    client = Client(system.port)
-    try:
-        start = _joints(client)
-        target = [start[0] + 8.0, start[1] - 5.0, *start[2:5], start[5] + 10.0]
-        response, goal_id = peer.goal([(0.0, start), (1.5, target)])
-        assert response.accepted
-        result = peer.wait_result(goal_id)
-        assert (result.status, result.result.error_code, result.result.error_string) == (SUCCEEDED, 0, "")
-        assert _joints(client) == pytest.approx(target, abs=1e-4)
-    finally:
-        client.close()
+def test_a_goal_moves_the_arm(client: Client, peer: Peer) -> None:
+    start = _joints(client)
+    target = [start[0] + 8.0, start[1] - 5.0, *start[2:5], start[5] + 10.0]
+    response, goal_id = peer.goal([(0.0, start), (1.5, target)])
+    assert response.accepted
+    result = peer.wait_result(goal_id)
+    assert (result.status, result.result.error_code, result.result.error_string) == (SUCCEEDED, 0, "")
+    assert _joints(client) == pytest.approx(target, abs=1e-4)
 
 
-def test_a_point_outside_the_limits_is_refused_and_nothing_moves(system: System, peer: Peer) -> None:
-    client = Client(system.port)
-    try:
-        start = _joints(client)
-        outside = [start[0], start[1], start[2], start[3], start[4], 10_000.0]
-        response, goal_id = peer.goal([(0.0, start), (2.0, outside)])
-        assert response.accepted  # and ended at once, with the reason
-        result = peer.wait_result(goal_id)
-        assert (result.status, result.result.error_code) == (ABORTED, INVALID_GOAL)
-        assert "joint 6" in result.result.error_string and "turn limits" in result.result.error_string
-        assert _joints(client) == start
-    finally:
-        client.close()
+def test_a_point_outside_the_limits_is_refused_and_nothing_moves(client: Client, peer: Peer) -> None:
+    start = _joints(client)
+    outside = [start[0], start[1], start[2], start[3], start[4], 10_000.0]
+    response, goal_id = peer.goal([(0.0, start), (2.0, outside)])
+    assert response.accepted  # and ended at once, with the reason
+    result = peer.wait_result(goal_id)
+    assert (result.status, result.result.error_code) == (ABORTED, INVALID_GOAL)
+    assert "joint 6" in result.result.error_string and "turn limits" in result.result.error_string
+    assert _joints(client) == start
 
 
 def test_wrong_joint_names_are_invalid_joints(system: System, peer: Peer) -> None:
@@ -122,34 +121,30 @@ def test_cancel_stops_the_arm_within_its_limits(system: System, peer: Peer) -> N
         joint_states.close()
 
 
-def test_one_robot_one_motion(system: System, peer: Peer) -> None:
-    client = Client(system.port)
+def test_one_robot_one_motion(client: Client, peer: Peer) -> None:
+    start = _joints(client)
+    # a goal runs: the old client's motion command gets ERROR and false, nothing else moves
+    target = [start[0] - 20.0, *start[1:]]
+    _response, goal_id = peer.goal([(0.0, start), (3.0, target)])
+    reply = client.ask("MovePTPJoints " + " ".join(f"{v:.6f}" for v in start), lines=2)
+    assert reply.startswith("ERROR: the arm is executing a ROS 2 FollowJointTrajectory goal") and \
+        reply.endswith("false\n"), reply
+    assert peer.wait_result(goal_id).status == SUCCEEDED
+    # the old client moves the arm: a goal is refused, with the reason
+    moving = threading.Thread(target=client.ask, args=("MovePTPJoints " + " ".join(f"{v:.6f}" for v in start),))
+    states: queue.Queue[Any] = queue.Queue()
+    joint_states = zsdk.ROS2Subscriber("/joint_states", "sensor_msgs/msg/JointState", states.put,
+                                       msg_definition=msgdefs.MSG["sensor_msgs/msg/JointState"])
     try:
-        start = _joints(client)
-        # a goal runs: the old client's motion command gets ERROR and false, nothing else moves
-        target = [start[0] - 20.0, *start[1:]]
-        _response, goal_id = peer.goal([(0.0, start), (3.0, target)])
-        reply = client.ask("MovePTPJoints " + " ".join(f"{v:.6f}" for v in start), lines=2)
-        assert reply.startswith("ERROR: the arm is executing a ROS 2 FollowJointTrajectory goal") and \
-            reply.endswith("false\n"), reply
-        assert peer.wait_result(goal_id).status == SUCCEEDED
-        # the old client moves the arm: a goal is refused, with the reason
-        moving = threading.Thread(target=client.ask, args=("MovePTPJoints " + " ".join(f"{v:.6f}" for v in start),))
-        states: queue.Queue[Any] = queue.Queue()
-        joint_states = zsdk.ROS2Subscriber("/joint_states", "sensor_msgs/msg/JointState", states.put,
-                                           msg_definition=msgdefs.MSG["sensor_msgs/msg/JointState"])
-        try:
-            moving.start()
-            while max(abs(v) for v in states.get(timeout=WAIT_S).velocity) < 1e-3:
-                pass  # until the joint states show the arm moving
-            here = [math.degrees(p) for p in states.get(timeout=WAIT_S).position]
-            _response, goal_id = peer.goal([(0.0, here), (3.0, target)])
-            result = peer.wait_result(goal_id)
-            assert (result.status, result.result.error_code) == (ABORTED, INVALID_GOAL)
-            assert "client of the rob6 protocol" in result.result.error_string
-        finally:
-            moving.join(WAIT_S)
-            joint_states.close()
-        assert _joints(client) == pytest.approx(start, abs=1e-4)
+        moving.start()
+        while max(abs(v) for v in states.get(timeout=WAIT_S).velocity) < 1e-3:
+            pass  # until the joint states show the arm moving
+        here = [math.degrees(p) for p in states.get(timeout=WAIT_S).position]
+        _response, goal_id = peer.goal([(0.0, here), (3.0, target)])
+        result = peer.wait_result(goal_id)
+        assert (result.status, result.result.error_code) == (ABORTED, INVALID_GOAL)
+        assert "client of the rob6 protocol" in result.result.error_string
     finally:
-        client.close()
+        moving.join(WAIT_S)
+        joint_states.close()
+    assert _joints(client) == pytest.approx(start, abs=1e-4)

@@ -111,6 +111,12 @@ def command(*names: str, value: bool = False) -> Callable[[Handler], Handler]:
     return register
 
 
+def each(factory: Callable[[str], Handler], *names: str) -> None:
+    """Register each of ``names`` with the handler ``factory`` makes for that name."""
+    for name in names:
+        command(name)(factory(name))
+
+
 def failure(name: str, exc: BusError) -> str:
     """The text of the ``ERROR:`` line for command ``name`` whose service call failed."""
     if isinstance(exc, BusTimeout):  # the gateway's own call: named by the client's command
@@ -410,23 +416,12 @@ def _reset(name: str) -> Handler:
     return handler
 
 
-command("SetJointsMaxSpeed")(_six("SetJointsMaxSpeed"))
-command("SetJointsMaxAcceleration")(_six("SetJointsMaxAcceleration"))
-command("SetJointsMaxChange")(_six("SetJointsMaxChange"))
-command("SetJointsMaxTurnMax")(_six("SetJointsMaxTurnMax"))
-command("SetJointsMaxTurnMin")(_six("SetJointsMaxTurnMin"))
-command("SetMinChangeWeights")(_six("SetMinChangeWeights"))
-command("SetSingleJointMaxSpeed")(_single("SetSingleJointMaxSpeed"))
-command("SetSingleJointMaxAcceleration")(_single("SetSingleJointMaxAcceleration"))
-command("SetSingleJointMaxChange")(_single("SetSingleJointMaxChange"))
-command("SetSingleJointMaxTurnMax")(_single("SetSingleJointMaxTurnMax"))
-command("SetSingleJointMaxTurnMin")(_single("SetSingleJointMaxTurnMin"))
-command("ResetJointsMaxSpeed")(_reset("ResetJointsMaxSpeed"))
-command("ResetJointsMaxAcceleration")(_reset("ResetJointsMaxAcceleration"))
-command("ResetJointsMaxChange")(_reset("ResetJointsMaxChange"))
-command("ResetJointsMaxTurn")(_reset("ResetJointsMaxTurn"))
-command("ResetMinChangeWeights")(_reset("ResetMinChangeWeights"))
-command("ResetAllowedStatus")(_reset("ResetAllowedStatus"))
+each(_six, "SetJointsMaxSpeed", "SetJointsMaxAcceleration", "SetJointsMaxChange", "SetJointsMaxTurnMax",
+     "SetJointsMaxTurnMin", "SetMinChangeWeights")
+each(_single, "SetSingleJointMaxSpeed", "SetSingleJointMaxAcceleration", "SetSingleJointMaxChange",
+     "SetSingleJointMaxTurnMax", "SetSingleJointMaxTurnMin")
+each(_reset, "ResetJointsMaxSpeed", "ResetJointsMaxAcceleration", "ResetJointsMaxChange",
+     "ResetJointsMaxTurn", "ResetMinChangeWeights", "ResetAllowedStatus")
 
 
 @command("GetAllowedStatus", value=True)
@@ -471,10 +466,7 @@ def _adept_setting(name: str) -> Handler:
     return handler
 
 
-command("SetAdeptSpeed")(_adept_setting("SetAdeptSpeed"))
-command("SetAdeptAccel")(_adept_setting("SetAdeptAccel"))
-command("SetAdeptFine")(_adept_setting("SetAdeptFine"))
-command("SetAdeptCoarse")(_adept_setting("SetAdeptCoarse"))
+each(_adept_setting, "SetAdeptSpeed", "SetAdeptAccel", "SetAdeptFine", "SetAdeptCoarse")
 
 
 # ====================================================================== kinematics
@@ -626,11 +618,7 @@ def _mode(name: str) -> Handler:
     return handler
 
 
-command("EnableAlter")(_mode("EnableAlter"))
-command("DisableAlter")(_mode("DisableAlter"))
-command("EnableAdeptAlter")(_mode("EnableAdeptAlter"))
-command("EnableLin")(_mode("EnableLin"))
-command("DisableLin")(_mode("DisableLin"))
+each(_mode, "EnableAlter", "DisableAlter", "EnableAdeptAlter", "EnableLin", "DisableLin")
 
 
 def _alter_move(kind: MotionKind, parse: Callable[[Args], dict[str, Any]]) -> Handler:

@@ -508,6 +508,18 @@ class SimGripper(GripperBackend):
                                 f"{self.model.w:.4f} m", self.model.w)
                 self.clock.wait(self._cv, min(left, self.model.time_to_completion() + 1e-6))
 
+    def _at_once(self, what: str, command: Callable[[], object], *, wake: bool = False) -> Result:
+        """A command the module carries out at once (stop, acknowledge): the position after it;
+        ``wake``: a call waiting for its motion to end looks again."""
+        if not self.present:
+            return fail(f"{what}: no gripper connected")
+        with self._cv:
+            self._sync()
+            command()
+            if wake:
+                self._cv.notify_all()
+            return Result(True, "", self.model.w)
+
     # ---------------------------------------------------------------- interface
     def has_gripper(self) -> bool:
         return self.present
@@ -531,21 +543,10 @@ class SimGripper(GripperBackend):
                          lambda: self.model.command_position(float(metres)), timeout)
 
     def stop(self) -> Result:
-        if not self.present:
-            return fail("stop: no gripper connected")
-        with self._cv:
-            self._sync()
-            self.model.command_stop()
-            self._cv.notify_all()
-            return Result(True, "", self.model.w)
+        return self._at_once("stop", self.model.command_stop, wake=True)
 
     def acknowledge(self) -> Result:
-        if not self.present:
-            return fail("acknowledge: no gripper connected")
-        with self._cv:
-            self._sync()
-            self.model.acknowledge()
-            return Result(True, "", self.model.w)
+        return self._at_once("acknowledge", self.model.acknowledge)
 
     def state(self) -> GripperStatus:
         if not self.present:

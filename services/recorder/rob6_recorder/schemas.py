@@ -145,14 +145,19 @@ SESSION_EVENT = {
     "required": ["session", "event"],
 }
 
+#: what a bus request and its reply both name: the call, the service, the operation, the instance
+_BUS_CALL = {
+    "cid": {"type": "string"},
+    "service": {"type": "string"},
+    "op": {"type": "string"},
+    "instance": {"type": "string"},
+}
+
 BUS_REQUEST = {
     "title": "rob6.BusRequest",
     "type": "object",
     "properties": {
-        "cid": {"type": "string"},
-        "service": {"type": "string"},
-        "op": {"type": "string"},
-        "instance": {"type": "string"},
+        **_BUS_CALL,
         "body": {},
     },
     "required": ["cid"],
@@ -162,10 +167,7 @@ BUS_REPLY = {
     "title": "rob6.BusReply",
     "type": "object",
     "properties": {
-        "cid": {"type": "string"},
-        "service": {"type": "string"},
-        "op": {"type": "string"},
-        "instance": {"type": "string"},
+        **_BUS_CALL,
         "ok": {"type": "boolean"},
         "body": {},
         "error": {"type": ["object", "null"], "properties": {

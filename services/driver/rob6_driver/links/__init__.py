@@ -10,7 +10,8 @@ its codec ``simple_message_codec.py``, the V+ program's I/O port ``adept_io.py``
 (``kawasaki.py``, its codec and the FS03N's joint convention ``kawasaki_codec.py``). The two
 TCP links are thin subclasses of ``StreamedPointsLink`` (``streamed_points.py``: health,
 arrival, merging late points, reconnecting), with ``streaming.py``'s socket helpers; none
-of them touches the motion core.
+of them touches the motion core. The two text codecs (Kawasaki, RSI) read a number as
+``wire_numbers.py`` says.
 
 What the service needs from a link is small: ``start``/``stop``, the plant's state for
 each published joint state (``state``, ``late``, ``missed``, ``q_actual``, ``outputs``) and

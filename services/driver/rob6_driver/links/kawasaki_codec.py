@@ -12,13 +12,14 @@ C) and ``S`` (its state, at least every 100 ms).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from rob6.errors import LinkError
+
+from .wire_numbers import finite_float
 
 PROTOCOL = "rob6-kas"
 VERSION = 1
@@ -167,12 +168,9 @@ def _int(text: str, what: str) -> int:
 
 def _float(text: str) -> float:
     try:
-        value = float(text)
-    except ValueError:
-        raise KasError(f"joint {text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise KasError(f"joint {text!r} is not finite")
-    return value
+        return finite_float(text)
+    except ValueError as why:
+        raise KasError(f"joint {text!r} {why}") from None
 
 
 def _flag(text: str) -> bool:

@@ -28,11 +28,12 @@ it cannot use, never another exception.
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Sequence
 
 from rob6.errors import LinkError
+
+from .wire_numbers import finite_float
 
 AXES = (b"A1", b"A2", b"A3", b"A4", b"A5", b"A6")
 
@@ -84,12 +85,9 @@ def _axes(match: re.Match[bytes] | None, element: str, data: bytes) -> tuple[flo
         if text is None:
             raise RsiParseError(f"<{element}> has no {axis.decode()} in {_preview(data)}")
         try:
-            value = float(text)
-        except ValueError:
-            raise RsiParseError(f"<{element}> {axis.decode()}={text.decode('latin-1')!r} is not a number") from None
-        if not math.isfinite(value):
-            raise RsiParseError(f"<{element}> {axis.decode()}={text.decode('latin-1')!r} is not finite")
-        values.append(value)
+            values.append(finite_float(text))
+        except ValueError as why:
+            raise RsiParseError(f"<{element}> {axis.decode()}={text.decode('latin-1')!r} {why}") from None
     return tuple(values)
 
 
