@@ -121,6 +121,20 @@ def test_cancel_stops_the_arm_within_its_limits(system: System, peer: Peer) -> N
         joint_states.close()
 
 
+def test_a_client_leaving_does_not_stop_a_goal(system: System, peer: Peer) -> None:
+    with Client(system.port) as client:
+        start = _joints(client)
+    target = [start[0] + 10.0, *start[1:]]
+    response, goal_id = peer.goal([(0.0, start), (1.5, target)])
+    assert response.accepted
+    with Client(system.port) as reader:  # another client comes, looks and leaves while the goal runs
+        assert len(reader.ask("GetPositionJoints").split()) == 6
+    result = peer.wait_result(goal_id)
+    assert (result.status, result.result.error_string) == (SUCCEEDED, "")
+    with Client(system.port) as client:
+        assert _joints(client) == pytest.approx(target, abs=1e-4)
+
+
 def test_one_robot_one_motion(client: Client, peer: Peer) -> None:
     start = _joints(client)
     # a goal runs: the old client's motion command gets ERROR and false, nothing else moves

@@ -19,7 +19,7 @@ from typing import Literal
 import numpy as np
 
 from rob6.bus import Bus, BusError, Context
-from rob6.deadlines import PLAN_LIN_S, PLAN_PTP_S, QUICK_S
+from rob6.deadlines import PLAN_LIN_S, QUICK_S
 from rob6.errors import RefusedError
 from rob6.messages import (
     Ack,
@@ -194,11 +194,15 @@ class PlannerService:
 
     def session_end(self, req: SessionEnd, ctx: Context) -> Ack:
         """The client left: no motion goes on without it (Alter, or a move it left during,
-        or one of its moves still being planned). The driver stops whatever runs, with its
-        ramp; answered at rest."""
+        or one of its moves still being planned). The driver stops what a client runs,
+        with its ramp; answered at rest. A ROS 2 goal is not a client's, and goes on."""
+        with self._owner_lock:
+            owner = self._owner
         with self._handover:
             self._ended.append(req.session)
-            self.alter = False
+            alter, self.alter = self.alter, False
+            if owner != CLIENT and not alter:  # nothing of a client's runs: nothing to stop
+                return Ack(ok=True)
             if self._handing_over:  # the stop must come after the driver took the motion
                 ctx.waiting(QUICK_S, "waiting for the driver to take a motion")
                 self._handover.wait_for(lambda: not self._handing_over, QUICK_S)
@@ -235,8 +239,10 @@ class PlannerService:
                 log.info("%s refused: %s", req.kind, busy)
                 return MoveReply(ok=False, reason=busy, busy=busy)
         try:
-            lin = req.kind == "MoveLINHomRowWise"
-            ctx.waiting(PLAN_LIN_S if lin else PLAN_PTP_S, "planning the straight line" if lin else "planning")
+            if req.kind == "MoveLINHomRowWise":  # longer than the caller waits unannounced
+                ctx.waiting(PLAN_LIN_S, "planning the straight line")
+            # a point-to-point plan fits in what the caller waits before any announcement
+            # (PLAN_PTP_S <= ANNOUNCE_S): announcing it would cost a message on every move
             if req.kind in ALTER_MOVES:
                 return self._alter_move(req, ctx.cid)
             with self._lock:
@@ -263,7 +269,10 @@ class PlannerService:
                 return MoveReply(ok=False, reason=BUSY[CLIENT], busy=BUSY[CLIENT], invalid=True)
             try:
                 state: JointState = self.bus.request("driver", "state", Empty(), cid=ctx.cid)
-                if state.moving or state.mode not in ("idle",):
+                # the driver's mode, as its own check of a trajectory (``state.moving`` stays
+                # true for the cycle after a stop ends, from its last step: a goal right after
+                # a cancel was refused)
+                if state.mode != "idle":
                     return MoveReply(ok=False, reason=BUSY[CLIENT], busy=BUSY[CLIENT], invalid=True)
                 c = self._planning_config()
                 limits = JointLimits.from_config(c)  # the protocol's units in deg/s, deg/s^2
