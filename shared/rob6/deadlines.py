@@ -51,6 +51,8 @@ IK_BATCH_S = 5.0
 #: where the robot is (a quick call), its pose there (DoAlterCart) and the configuration
 #: choice for the target (remote poses), the trajectory itself
 PLAN_PTP_S = QUICK_S + 2 * REMOTE_POSE_S + SLACK_S
+# the planner does not announce it: its caller waits ANNOUNCE_S before any announcement
+assert PLAN_PTP_S <= ANNOUNCE_S
 #: a configuration change: the planner's own work, then its quick call to the driver
 #: (the driver enforces the limits too)
 CONFIG_CHANGE_S = QUICK_S + HOP_S
