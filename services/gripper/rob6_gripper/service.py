@@ -14,7 +14,11 @@ from .backend import GripperBackend, Result
 
 log = logging.getLogger("rob6.gripper")
 
-STATE_PERIOD_S = 0.02  # 50 Hz: fast enough to plot a 0.3 s closing motion
+STATE_PERIOD_S = 0.02  # 50 Hz while a command runs or the state changes: enough to plot a 0.3 s closing motion
+#: an idle gripper is sampled this often: a change nobody commanded (a fault, a hand on the
+#: jaws) is seen within it, and then sampled at STATE_PERIOD_S again. At 50 Hz the idle
+#: sampling cost 0.6-1.1 % of a core (docs/PERFORMANCE.md, the idle system)
+STATE_REST_PERIOD_S = 0.2
 STATE_HEARTBEAT_S = 1.0  # an unchanged state is published again this often
 
 
@@ -24,9 +28,22 @@ class GripperService:
         self.backend = backend
         self.timeout = timeout
         self._stop = threading.Event()
+        self._commands = 0  # running now: the state is sampled at STATE_PERIOD_S meanwhile
+        self._commands_lock = threading.Lock()
+        self._wake = threading.Event()  # a command began, or the service stops
         self._publisher = threading.Thread(target=self._publish_state, name="gripper-state", daemon=True)
 
     def command(self, req: GripperCommand, ctx: Context) -> GripperReply:
+        with self._commands_lock:
+            self._commands += 1
+        self._wake.set()
+        try:
+            return self._command(req, ctx)
+        finally:
+            with self._commands_lock:
+                self._commands -= 1
+
+    def _command(self, req: GripperCommand, ctx: Context) -> GripperReply:
         name, value = req.command, req.value
         bound = self.backend.command_bound_s
         if name == "HasGripper":
@@ -54,20 +71,28 @@ class GripperService:
         return GripperState(**self.backend.state().as_dict())
 
     def _publish_state(self) -> None:
-        """Sample the gripper at 50 Hz; publish each change, and at rest a heartbeat every
+        """Sample the gripper at 50 Hz while a command runs or the state changes, else every
+        ``STATE_REST_PERIOD_S``; publish each change, and at rest a heartbeat every
         ``STATE_HEARTBEAT_S`` (an idle gripper cost every subscriber 50 messages a second)."""
         last: GripperState | None = None
         last_sent = 0.0
-        while not self._stop.wait(STATE_PERIOD_S):
+        period = STATE_PERIOD_S
+        while True:
+            self._wake.wait(period)
+            self._wake.clear()
+            if self._stop.is_set():
+                return
             try:
                 state = GripperState(**self.backend.state().as_dict())
                 now = time.monotonic()
-                if state != last or now - last_sent >= STATE_HEARTBEAT_S:
+                changed = state != last
+                if changed or now - last_sent >= STATE_HEARTBEAT_S:
                     self.bus.publish("gripper/state", state)
                     last, last_sent = state, now
+                period = STATE_PERIOD_S if changed or self._commands else STATE_REST_PERIOD_S
             except Exception:
                 log.exception("could not read the gripper state")
-                self._stop.wait(1.0)
+                period = 1.0
 
     def start(self) -> None:
         self.bus.serve({"command": self.command, "state": self.state}, workers=2)
@@ -75,5 +100,6 @@ class GripperService:
 
     def stop(self) -> None:
         self._stop.set()
+        self._wake.set()
         self.backend.stop()
         self.backend.close()

@@ -408,11 +408,13 @@ class _Watcher:
         self._bus = bus
         self._exchanges: set[_Exchange] = set()
         self._lock = threading.Lock()
+        self._watching = threading.Event()  # set while there is an exchange: idle, it sleeps
         threading.Thread(target=self._run, name=f"{bus.service}-bus-watch", daemon=True).start()
 
     def add(self, exchange: _Exchange) -> None:
         with self._lock:
             self._exchanges.add(exchange)
+            self._watching.set()
 
     def discard(self, exchange: _Exchange) -> None:
         with self._lock:
@@ -423,6 +425,11 @@ class _Watcher:
             time.sleep(WATCH_TICK_S)
             with self._lock:
                 exchanges = list(self._exchanges)
+                if not exchanges:
+                    self._watching.clear()
+            if not exchanges:
+                self._watching.wait(1.0)  # woken by the next exchange; a closed bus ends within 1 s
+                continue
             now = time.monotonic()
             for exchange in exchanges:
                 try:
