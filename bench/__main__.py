@@ -20,8 +20,9 @@ from harness.system import running
 from rob6.messages import IkBatchRequest
 
 from .busy import busy_table
+from .kawasaki import kawasaki_table
 from .latency import echo_baseline, measure, percentiles, usage, zenoh_baselines
-from .links import links_table, live_realtime_table, ros_realtime_table
+from .links import adept_table, links_table, live_realtime_table, ros_realtime_table
 from .tables import table
 from .transport import transport_table
 
@@ -244,7 +245,10 @@ def main() -> int:
     idle_table()
     kinematics_tables()
     planner_table()
-    links_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")), table)
+    alter_s = float(os.environ.get("ROB6_BENCH_ALTER_S", "60"))
+    links_table(alter_s, table)
+    adept_table(max(5.0, alter_s / 3), table)
+    kawasaki_table(max(5.0, alter_s / 3), table)
     busy_table(float(os.environ.get("ROB6_BENCH_BUSY_S", "60")), table)
     recording_table()
     live_realtime_table(float(os.environ.get("ROB6_BENCH_ALTER_S", "60")) / 2, table)

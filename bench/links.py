@@ -7,8 +7,8 @@ RSI over real UDP), so the RSI figures stand beside the simulation's in the same
 Then the Adept over simple_message against adept-sm-sim (TCP): PTP moves and Alter
 streaming on ad850 at its 16 ms cycle, once with the simulator honouring the points'
 durations and once ignoring them as the V+ program does: points acknowledged, their
-acknowledgement latency, points merged, and underruns of the controller's queue. And the
-Kawasaki over its AS program against kawasaki-as-sim (TCP), the same figures (bench/kawasaki.py)."""
+acknowledgement latency, points merged, and underruns of the controller's queue (the
+Kawasaki's table, bench/kawasaki.py, uses the same run)."""
 
 from __future__ import annotations
 
@@ -252,9 +252,6 @@ def links_table(seconds: float, table: Table) -> None:
               ("command -> target in the driver p50 / p99, ms", f"{p50s:.3f} / {p99s:.3f}",
                f"{p50r:.3f} / {p99r:.3f}", "p99 <= 4 (one cycle)"),
           ])
-    adept_table(max(5.0, seconds / 3), table)
-    from .kawasaki import kawasaki_table
-    kawasaki_table(max(5.0, seconds / 3), table)
 
 
 def live_realtime_table(seconds: float, table: Table) -> None:
