@@ -175,7 +175,7 @@ class SimProcess:
             if time.monotonic() > deadline:
                 raise self.wait_failure(f"{what} not reached within {timeout} s; last status {st}; "
                                         f"stderr: {self.stderr_lines[-20:]}")
-            time.sleep(0.02)
+            time.sleep(0.02)  # a poll: the simulator tells its status only when asked
 
 
 class PointsControllerProcess(SimProcess):

@@ -102,7 +102,7 @@ def test_current_refused_by_module(grip: SchunkGripper) -> None:
 def test_state_observable_while_moving_and_stop(dev: FakeSmpDevice, grip: SchunkGripper) -> None:
     dev.time_scale = 1.0
     dev.model.w = 0.0
-    r = stopped_mid_move(grip, lambda: grip.move_to_position(0.070, 5), 0.070, 0.25)
+    r = stopped_mid_move(grip, lambda: grip.move_to_position(0.070, 5), 0.070, 0.002)
     assert not r and "stopped by a stop command" in r.error
     assert commands(dev, smp.CMD_STOP)
 

@@ -228,7 +228,7 @@ def test_bad_timeout(timeout: float) -> None:
 def test_stop_from_another_thread_ends_blocking_call_real_time() -> None:
     g = SimGripper(position=0.0)  # real clock: a full-stroke move takes ~1.1 s
     t0 = time.monotonic()
-    r = stopped_mid_move(g, lambda: g.move_to_position(0.070), 0.070, 0.15)
+    r = stopped_mid_move(g, lambda: g.move_to_position(0.070), 0.070, 0.002)
     assert time.monotonic() - t0 < 0.6
     assert not r and "stopped by a stop command" in r.error
     time.sleep(0.3)  # braking from <= 82 mm/s takes <= 0.26 s
