@@ -7,8 +7,9 @@ line goes quiet (``read_quiet``); the handshake (greeting, ``Hello Robot``) by d
 from __future__ import annotations
 
 import socket
+import time
 
-__all__ = ["Client"]
+__all__ = ["Client", "connect"]
 
 
 class Client:
@@ -78,3 +79,23 @@ class Client:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def connect(port: int, *, handshake: bool = True, attempts: int = 50, timeout: float = 10.0) -> Client:
+    """A client of a gateway that may not be listening yet, or busy: it retries as a lab
+    client does (a container's health check holds the one client slot for a few ms)."""
+    for _ in range(attempts):
+        try:
+            client = Client(port, handshake=False, timeout=timeout)
+        except OSError:
+            time.sleep(0.2)  # not listening yet: the container is starting
+            continue
+        if client.greeting.startswith("ERROR: server busy"):
+            client.close()
+            time.sleep(0.1)  # the slot is taken for a moment: a retry, as a lab client does
+            continue
+        assert client.greeting == "welcome to rob6server 0.1.01 !\n", client.greeting
+        if handshake:
+            assert client.ask("Hello Robot") == "accepted\n"
+        return client
+    raise AssertionError(f"cannot connect to the gateway on port {port}")

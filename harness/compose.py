@@ -5,8 +5,10 @@ Used by tests/deploy/test_compose_e2e.py and harness/topology.py (which bench/mu
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
+from collections.abc import Iterable
 from typing import Any
 
 
@@ -33,3 +35,19 @@ def project_containers(project: str, service: str | None = None) -> list[str]:
     if service:
         filters += ["--filter", f"label=com.docker.compose.service={service}"]
     return run(["docker", "ps", "-a", "-q", *filters]).stdout.split()
+
+
+def unhealthy(project: str, services: Iterable[str]) -> list[str]:
+    """What keeps a compose project's ``services`` from being healthy, a line each
+    ("<service>: no container", "<service> <id>: <status>/<health>"); empty: all healthy."""
+    pending = []
+    for service in services:
+        ids = project_containers(project, service)
+        if not ids:
+            pending.append(f"{service}: no container")
+        for cid in ids:
+            state = json.loads(run(["docker", "inspect", "-f", "{{json .State}}", cid]).stdout)
+            health = (state.get("Health") or {}).get("Status", "none")
+            if health != "healthy":
+                pending.append(f"{service} {cid[:12]}: {state['Status']}/{health}")
+    return pending

@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from harness.client import Client
-from harness.compose import compose_cmd, project_containers, run
+from harness.client import Client, connect
+from harness.compose import compose_cmd, project_containers, run, unhealthy
 from harness.images import TAG
 from harness.ports import free_port
 
@@ -168,15 +168,7 @@ class Topology:
         deadline = time.monotonic() + timeout
         wanted = services or self._services()
         while True:
-            pending = []
-            for service in wanted:
-                ids = self.containers(service)
-                if not ids:
-                    pending.append(f"{service}: no container")
-                for cid in ids:
-                    state = json.loads(self.inspect(cid, "{{json .State}}"))
-                    if (state.get("Health") or {}).get("Status", "none") != "healthy":
-                        pending.append(f"{service} {cid[:12]}: {state['Status']}")
+            pending = unhealthy(self.project, wanted)
             if not pending:
                 return
             if time.monotonic() > deadline:
@@ -283,19 +275,7 @@ class Topology:
 
     # ------------------------------------------------------------------ the client's side
     def client(self, attempts: int = 50) -> Client:
-        for _ in range(attempts):
-            try:
-                client = Client(self.port, handshake=False, timeout=15)
-            except OSError:
-                time.sleep(0.2)
-                continue
-            if client.greeting.startswith("ERROR: server busy"):
-                client.close()
-                time.sleep(0.2)
-                continue
-            assert client.ask("Hello Robot") == "accepted\n"
-            return client
-        raise RuntimeError(f"cannot connect to the gateway on port {self.port}")
+        return connect(self.port, attempts=attempts, timeout=15)
 
 
 def backward_line(client: Client) -> str:

@@ -34,8 +34,8 @@ import pytest
 from pytest import TempPathFactory
 
 from harness import images
-from harness.client import Client
-from harness.compose import compose_cmd, project_containers, run
+from harness.client import connect
+from harness.compose import compose_cmd, project_containers, run, unhealthy
 from harness.images import BASE_IMAGE, TAG
 from harness.ports import free_port
 from tests.conformance import CONFORMANCE, load, same
@@ -101,16 +101,7 @@ class Stack:
         """Seconds until every container of ``services`` is healthy; fails with the logs otherwise."""
         start = time.monotonic()
         while True:
-            pending = []
-            for service in services:
-                ids = self.containers(service)
-                if not ids:
-                    pending.append(f"{service}: no container")
-                for cid in ids:
-                    st = self.state(cid)
-                    health = (st.get("Health") or {}).get("Status", "none")
-                    if health != "healthy":
-                        pending.append(f"{service} {cid[:12]}: {st['Status']}/{health}")
+            pending = unhealthy(self.project, services)
             if not pending:
                 return time.monotonic() - start
             if time.monotonic() - start > timeout:
@@ -124,26 +115,6 @@ class Stack:
             return
         self.compose("down", "-v", "--remove-orphans", "-t", "5", check=False, timeout=180)
         self.env_file.unlink(missing_ok=True)
-
-
-def connect(port: int, *, handshake: bool = True, attempts: int = 50) -> Client:
-    """A gateway client; retries while the gateway is busy (a health check holds the slot for
-    a few ms) or not yet listening."""
-    for _ in range(attempts):
-        try:
-            client = Client(port, handshake=False, timeout=10)
-        except OSError:
-            time.sleep(0.2)
-            continue
-        if client.greeting.startswith("ERROR: server busy"):
-            client.close()
-            time.sleep(0.1)
-            continue
-        assert client.greeting == "welcome to rob6server 0.1.01 !\n", client.greeting
-        if handshake:
-            assert client.ask("Hello Robot") == "accepted\n"
-        return client
-    raise AssertionError(f"cannot connect to the gateway on port {port}")
 
 
 def fk_expected() -> str:
@@ -515,7 +486,7 @@ def follow_then_move(port: int, target: list[float], controller: Callable[[], di
             reply += client.read_lines(1)  # ERROR: ... then false
             assert reply.startswith("ERROR: driver: robot not connected") and reply.endswith("\nfalse\n"), reply
             assert time.monotonic() - t < 30, f"rob6 does not follow the controller: {reply!r}"
-            time.sleep(0.2)
+            time.sleep(0.2)  # a retry, as a lab client does until its robot is connected
         assert client.ask("GetPositionJoints") == "0.000000 " * 5 + "0.000000\n"
         t = time.monotonic()
         assert client.ask("MovePTPJoints " + " ".join(f"{x:g}" for x in target), timeout=60) == "true\n"

@@ -138,23 +138,9 @@ def test_connection_dropped_mid_motion_and_restored(kawasaki: tuple[System, int]
 
 def test_slow_then_missing_acknowledgements(kawasaki: tuple[System, int], rig: Rig) -> None:
     system, ctl, client = rig
-    port = kawasaki[1]
-    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-    merged = link_status(system).late
-    ctl.slow_ack(150)  # three points' time: what rob6 makes meanwhile goes as one point
-    target = [20.0, -20.0, 50.0, 0.0, 30.0, 10.0]
-    assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
-    assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)
-    assert link_status(system).late > merged
-    ctl.slow_ack(3000)  # beyond rob6's 2 s: the controller is taken for lost
-    client.send("MovePTPJoints " + fmt(START) + "\n")
-    assert client.read_lines(2, timeout=30) == (
-        f"ERROR: driver: kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{port} "
-        "for 2000 ms\nfalse\n")
-    ctl.slow_ack(0)
-    connected(client, ctl, system)
-    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
-    assert np.allclose(robot_at(ctl), START, atol=POSITION_TOL)
+    RIG.slow_then_missing_acknowledgements(
+        client, ctl, system, [20.0, -20.0, 50.0, 0.0, 30.0, 10.0],
+        f"kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{kawasaki[1]} for 2000 ms")
 
 
 def test_a_point_outside_the_controllers_range_is_never_sent(rig: Rig) -> None:

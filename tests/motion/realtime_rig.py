@@ -20,7 +20,7 @@ from harness.ports import free_port
 from harness.system import System, link_status
 from rob6.robots import RobotModel
 from rob6_recorder.reader import read_records
-from tests.controllers.sim_process import SimProcess, Status
+from tests.controllers.sim_process import PointsControllerProcess, SimProcess, Status
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.test_realtime_system import assert_within_limits
 
@@ -113,6 +113,25 @@ class StreamedRig:
         """After a fault in ``long_move``: rob6 continues from where the robot stopped, home."""
         here = self.connected(client, ctl, system)
         assert 5.0 < here[0] < 60.0  # where the fault caught it: rob6 continues from there
+        assert reply(client, "MovePTPJoints " + fmt(self.start)) == "true\n"
+        assert np.allclose(self.robot_at(ctl), self.start, atol=self.tol)
+
+    def slow_then_missing_acknowledgements(self, client: Any, ctl: PointsControllerProcess, system: System,
+                                           target: list[float], lost: str) -> None:
+        """Acknowledgements three points late: what rob6 makes meanwhile goes as one point and
+        the PTP to ``target`` arrives; beyond rob6's 2 s: the next PTP ends with ``ERROR:
+        driver: {lost}`` and ``false``; once they come in time again, rob6 moves again."""
+        assert reply(client, "MovePTPJoints " + fmt(self.start)) == "true\n"
+        merged = link_status(system).late
+        ctl.slow_ack(150)
+        assert reply(client, "MovePTPJoints " + fmt(target)) == "true\n"
+        assert np.allclose(self.robot_at(ctl), target, atol=self.tol)
+        assert link_status(system).late > merged
+        ctl.slow_ack(3000)
+        client.send("MovePTPJoints " + fmt(self.start) + "\n")
+        assert client.read_lines(2, timeout=30) == f"ERROR: driver: {lost}\nfalse\n"
+        ctl.slow_ack(0)
+        self.connected(client, ctl, system)
         assert reply(client, "MovePTPJoints " + fmt(self.start)) == "true\n"
         assert np.allclose(self.robot_at(ctl), self.start, atol=self.tol)
 
