@@ -414,7 +414,8 @@ class _Watcher:
     def add(self, exchange: _Exchange) -> None:
         with self._lock:
             self._exchanges.add(exchange)
-            self._watching.set()
+            if not self._watching.is_set():  # on every hedged call's path: the wake only when asleep
+                self._watching.set()
 
     def discard(self, exchange: _Exchange) -> None:
         with self._lock:
