@@ -57,10 +57,10 @@ CANCEL_OK, CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL, CANCEL_TERMINATED = 0, 1, 2, 3
 #: rcl_action's status topic: reliable, transient local, depth 1
 STATUS_QOS = Qos(durability=TRANSIENT_LOCAL, depth=1)
 FEEDBACK_PERIOD_S = 0.05
-KEPT_GOALS = 32
+KEPT_GOALS = 32  # finished goals whose results can still be asked for
 #: send_goal answers at the latest after this long (the planner's checks and the driver's
 #: taking the motion take milliseconds; a planner that does not answer ends the goal anyway)
-START_WAIT_S = 5.0  # finished goals whose results can still be asked for
+START_WAIT_S = 5.0
 DEFAULT_START_TOLERANCE_DEG = 1.0
 
 
