@@ -13,7 +13,7 @@ import threading
 
 import zenoh
 
-from .bus import open_session, use_service_runtime
+from .bus import open_session
 from .config import BusSettings
 from .ownership import EXIT_REFUSED
 from .service import fail
@@ -25,7 +25,6 @@ def run(settings: BusSettings, listen: tuple[str, ...]) -> None:
     stop = threading.Event()
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda *_: stop.set())
-    use_service_runtime()
     try:
         session = open_session(settings, mode="router", listen=listen)
     except zenoh.ZError as exc:  # almost always: the port is taken

@@ -19,7 +19,7 @@ from collections.abc import Callable
 import msgspec
 
 from . import logs
-from .bus import Bus, use_service_runtime
+from .bus import Bus
 from .config import BusSettings
 from .errors import ServiceError
 from .messages import SERVICES, Verbosity
@@ -104,7 +104,6 @@ def run(settings: BusSettings, name: str, log_level: str,
         exit_code = EXIT_REFUSED
         stop.set()
 
-    use_service_runtime()
     bus = Bus(settings, name)
     ownership = claim(bus, stand_down)
     logging.getLogger().addHandler(logs.BusLogHandler(bus))

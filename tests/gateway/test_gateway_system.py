@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import os
-import re
 import signal
 import socket
 import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
@@ -28,17 +26,6 @@ def test_separate_processes(system: System) -> None:
     pids = system.pids()
     assert {"router", "driver", "gateway"} <= set(pids)
     assert len(set(pids.values())) == len(pids)
-
-
-@pytest.mark.skipif("ZENOH_RUNTIME" in os.environ, reason="ZENOH_RUNTIME set: the processes follow it")
-def test_every_process_runs_zenoh_on_two_threads(system: System) -> None:
-    """rob6.bus.session.SERVICE_RUNTIME in each kind of entry point: the router, a service
-    (rob6.service.run) and the gateway (its own life cycle): Zenoh's pools there are the
-    application's and the sending one, nothing handed over starts a pool of its own."""
-    for name, pid in system.pids().items():
-        names = {Path(f"/proc/{pid}/task/{tid}/comm").read_text().strip() for tid in os.listdir(f"/proc/{pid}/task")}
-        pools = {n.rsplit("-", 1)[0] for n in names if re.fullmatch(r"(app|acc|tx|rx|net)-\d+", n)}
-        assert pools == {"app", "tx"}, (name, sorted(names))
 
 
 @pytest.mark.parametrize("terminator", [b"\n", b"\r\n"])

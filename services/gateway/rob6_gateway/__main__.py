@@ -12,7 +12,7 @@ import time
 import click
 
 from rob6 import logs, service
-from rob6.bus import Bus, use_service_runtime
+from rob6.bus import Bus
 from rob6.config import BusSettings, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
@@ -53,7 +53,6 @@ def main(settings: BusSettings, log_level: str, port: int, bind: str, allow_shut
 
 def _serve(settings: BusSettings, port: int, bind: str, options: Options, allow: AddressFilter | None,
            pause_s: float, idle_timeout: float) -> None:
-    use_service_runtime()
     bus = Bus(settings, "gateway")
     stop = threading.Event()
     stood_down: list[str] = []  # an earlier gateway of this robot appeared (see rob6.ownership)

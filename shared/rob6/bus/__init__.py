@@ -77,7 +77,7 @@ from .core import Bus
 from .errors import BusError, BusTimeout, CallAbandoned
 from .pubsub import decode
 from .serve import Context, Handler
-from .session import open_session, use_service_runtime, zenoh_config
+from .session import open_session, zenoh_config
 from .trace import trace_records
 
 __all__ = [
@@ -92,6 +92,5 @@ __all__ = [
     "new_cid",
     "open_session",
     "trace_records",
-    "use_service_runtime",
     "zenoh_config",
 ]

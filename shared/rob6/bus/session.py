@@ -5,7 +5,6 @@ key expressions (``rob6/<id>/...``)."""
 
 from __future__ import annotations
 
-import os
 import threading
 from typing import Any
 
@@ -14,21 +13,6 @@ import zenoh
 
 from ..config import BusSettings
 from .codec import Decoders
-
-#: Zenoh's thread pools in a rob6 service or router: one thread receives, routes and keeps
-#: the timers, one more sends. Zenoh's default is five pools (two receiving threads, one
-#: each for accepting, timers, the application and sending), and a message that crosses
-#: from one to another costs a wake-up and a context switch, the dearest thing on a small
-#: PC (docs/PERFORMANCE.md: a bus request 10-15 % faster at p50). ZettaScale's own latency
-#: tests run with this setting. ``ZENOH_RUNTIME`` in the environment still decides.
-SERVICE_RUNTIME = ("(rx: (handover: app), net: (handover: app), acc: (handover: app), "
-                   "app: (worker_threads: 1), tx: (worker_threads: 1))")
-
-
-def use_service_runtime() -> None:
-    """Give this process ``SERVICE_RUNTIME`` unless ``ZENOH_RUNTIME`` is set: call it before the
-    process's first Zenoh session, as Zenoh reads it once, when its first pool starts."""
-    os.environ.setdefault("ZENOH_RUNTIME", SERVICE_RUNTIME)
 
 
 def zenoh_config(settings: BusSettings, *, mode: str | None = None,
