@@ -12,12 +12,18 @@ import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 
 import zenoh
 
 from harness.client import Client
+from rob6.bus.trace import TRACE_BATCH_S
+
+from .bare_zenoh import QUERY_KEY, RECORD, Batcher, open_peer
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def percentiles(samples: list[float]) -> tuple[float, float]:
@@ -80,44 +86,38 @@ def echo_baseline(count: int) -> list[float]:
         listener.close()
 
 
-_BARE_QUERYABLE = """
-import json, sys, zenoh
-config = zenoh.Config()
-for key, value in json.loads(sys.argv[1]).items():
-    config.insert_json5(key, json.dumps(value))
-session = zenoh.open(config)
-queryable = session.declare_queryable("bench/bare", lambda query: query.reply(query.key_expr, b"pong"))
-print("ready", flush=True)
-sys.stdin.read()
-"""
-
-
 def peer_config(**settings: object) -> dict[str, object]:
     """Zenoh settings (key -> value) of a bare peer: no scouting, and ``settings``."""
     return {"mode": "peer", "scouting/multicast/enabled": False, **settings}
 
 
-def open_peer(settings: dict[str, object]) -> zenoh.Session:
-    config = zenoh.Config()
-    for key, value in settings.items():
-        config.insert_json5(key, json.dumps(value))
-    return zenoh.open(config)
+def bare_process(role: str, settings: dict[str, object], *args: str) -> subprocess.Popen[str]:
+    """A ``bench.bare_zenoh`` program (``queryable``, ``recorder``), ready when returned;
+    it ends when its standard input closes (``end``)."""
+    process = subprocess.Popen([sys.executable, "-m", "bench.bare_zenoh", role, json.dumps(settings), *args],
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=_ROOT)
+    assert process.stdout is not None and process.stdout.readline().strip() == "ready"
+    return process
 
 
 def bare_queryable(settings: dict[str, object]) -> subprocess.Popen[str]:
-    """A process with one queryable, ``bench/bare``, answering ``pong``; ready when returned.
-    Kill it when done."""
-    server = subprocess.Popen([sys.executable, "-c", _BARE_QUERYABLE, json.dumps(settings)],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    assert server.stdout is not None and server.stdout.readline().strip() == "ready"
-    return server
+    """A process with one queryable, ``bench/bare``, answering ``pong`` (``bench.bare_zenoh``)."""
+    return bare_process("queryable", settings)
+
+
+def end(process: subprocess.Popen[str]) -> None:
+    """Close a ``bare_process``'s standard input and wait for its clean end."""
+    assert process.stdin is not None
+    process.stdin.close()
+    if process.wait(10) != 0:
+        raise RuntimeError(f"{process.args!r} ended with {process.returncode}")
 
 
 #: how long a fresh peer may take to reach the bare queryable before the benchmark fails
 REACH_S = 10.0
 
 
-def wait_answered(session: zenoh.Session, key: str = "bench/bare") -> None:
+def wait_answered(session: zenoh.Session, key: str = QUERY_KEY) -> None:
     """Return once ``key`` answers ``session`` (peers find each other through the router or
     their direct link a moment after they open); RuntimeError after ``REACH_S``."""
     deadline = time.monotonic() + REACH_S
@@ -129,27 +129,42 @@ def wait_answered(session: zenoh.Session, key: str = "bench/bare") -> None:
     raise RuntimeError(f"{key} did not answer within {REACH_S:.0f} s")
 
 
-def zenoh_baselines(router_port: int, count: int, warmup: int = 200) -> dict[str, list[float]]:
+def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int = 250) -> dict[str, list[float]]:
     """The bare Zenoh query round trip between two Python processes (peers beside the same
-    router as rob6's services, linked directly to each other as they are), received two
-    ways, interleaved so both see the same moment of the machine: ``blocking``, the reply
-    taken on the asking thread (``for reply in session.get(...)``), the floor of a request
-    that crosses the bus; ``asyncio``, awaited on an event loop through
-    ``call_soon_threadsafe`` (what the gateway did before it served on threads)."""
-    # peers beside the router, with a direct link between them, as rob6's processes have
+    router as rob6's services, linked directly to each other as they are), three ways:
+
+    - ``blocking``: the reply taken on the asking thread (``for reply in session.get(...)``),
+      the floor of a request that crosses the bus;
+    - ``asyncio``: awaited on an event loop through ``call_soon_threadsafe`` (what the
+      gateway did before it served on threads), interleaved with ``blocking``;
+    - ``recorded``: ``blocking``, with both ends batching a record of each exchange to a
+      bare recording process (``bench.bare_zenoh``), the floor of a recorded request. Its
+      batches outlive the exchange by ``TRACE_BATCH_S``, so it runs in blocks of ``block``
+      queries in turn with the other two, each block after the last batch has gone.
+    """
     settings = peer_config(**{"connect/endpoints": [f"tcp/127.0.0.1:{router_port}"],
                               "listen/endpoints": ["tcp/127.0.0.1:0"]})
+    folder = tempfile.TemporaryDirectory()
+    records = os.path.join(folder.name, "records")
     server = bare_queryable(settings)
+    recording = bare_process("recorder", settings, records)
     session = open_peer(settings)
-    blocking: list[float] = []
-    bridged: list[float] = []
+    samples: dict[str, list[float]] = {"blocking": [], "asyncio": [], "recorded": []}
     try:
-        def blocking_once() -> float:
+        batcher = Batcher(session, "asker")
+
+        def blocking_once(payload: bytes = b"") -> float:
             start = time.perf_counter()
-            replies = list(session.get("bench/bare", consolidation=zenoh.ConsolidationMode.NONE))
+            replies = list(session.get(QUERY_KEY, payload=payload, consolidation=zenoh.ConsolidationMode.NONE))
             elapsed = time.perf_counter() - start
             if len(replies) != 1 or replies[0].ok is None:
                 raise RuntimeError("the bare queryable did not answer once")
+            return elapsed
+
+        def recorded_once() -> float:
+            t_in = time.time()
+            elapsed = blocking_once(RECORD)
+            batcher.add(b'{"t_in":%.6f,"t_out":%.6f,"line":"%s","reply":"pong"}' % (t_in, time.time(), RECORD))
             return elapsed
 
         async def bridged_once() -> float:
@@ -160,7 +175,7 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200) -> dict[str
                 loop.call_soon_threadsafe(future.set_result, reply.ok is not None)
 
             start = time.perf_counter()
-            session.get("bench/bare", zenoh.handlers.Callback(on_reply), consolidation=zenoh.ConsolidationMode.NONE)
+            session.get(QUERY_KEY, zenoh.handlers.Callback(on_reply), consolidation=zenoh.ConsolidationMode.NONE)
             if not await asyncio.wait_for(future, 5):
                 raise RuntimeError("the bare queryable answered with an error")
             return time.perf_counter() - start
@@ -169,16 +184,33 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200) -> dict[str
             for i in range(warmup + count):
                 one, other = blocking_once(), await bridged_once()
                 if i >= warmup:
-                    blocking.append(one)
-                    bridged.append(other)
+                    samples["blocking"].append(one)
+                    samples["asyncio"].append(other)
+                if i >= warmup and (i - warmup) % block == block - 1:
+                    samples["recorded"] += [recorded_once() for _ in range(block)]
+                    time.sleep(3 * TRACE_BATCH_S)  # the last batch goes before the next block
 
         wait_answered(session)
         asyncio.run(run())
-        return {"blocking": blocking, "asyncio": bridged}
+        expected, deadline = 2 * len(samples["recorded"]), time.monotonic() + REACH_S
+        while (recorded := _count(records, b'"reply":"pong"')) < expected and time.monotonic() < deadline:
+            time.sleep(0.05)  # the last batches on their way
+        if recorded != expected:
+            raise RuntimeError(f"the bare recording has {recorded} records of {expected}")
+        end(server)
+        end(recording)
+        return samples
     finally:
         session.close()
-        server.kill()
-        server.wait()
+        for process in (server, recording):
+            process.kill()
+            process.wait()
+        folder.cleanup()
+
+
+def _count(path: str, record: bytes) -> int:
+    with open(path, "rb") as f:
+        return f.read().count(record)
 
 
 def usage(pids: list[int], seconds: float) -> tuple[float, float, float]:

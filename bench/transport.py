@@ -13,7 +13,8 @@ import zenoh
 
 from harness.ports import free_port
 
-from .latency import bare_queryable, open_peer, peer_config, percentiles, wait_answered
+from .bare_zenoh import QUERY_KEY, open_peer
+from .latency import bare_queryable, peer_config, percentiles, wait_answered
 
 #: what ``lowlatency`` needs on both ends (QoS off)
 _LOWLATENCY = {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
@@ -38,7 +39,7 @@ def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -
             for i in range(warmup + count):  # interleaved: every variant sees the same moments
                 for k, session in enumerate(sessions):
                     start = time.perf_counter()
-                    replies = list(session.get("bench/bare", consolidation=zenoh.ConsolidationMode.NONE))
+                    replies = list(session.get(QUERY_KEY, consolidation=zenoh.ConsolidationMode.NONE))
                     elapsed = time.perf_counter() - start
                     if len(replies) != 1 or replies[0].ok is None:
                         raise RuntimeError("the bare queryable did not answer once")

@@ -1,0 +1,101 @@
+"""Bare Zenoh programs for the floors: a queryable, a recording process, and record batching.
+
+The floor of a bus crossing is a bare query between two processes (``queryable`` answers
+``pong``). The floor of a *recorded* one adds what recording costs at its barest: both ends
+queue a record of the exchange, a thread of each sends what gathered every
+``TRACE_BATCH_S`` as one message (``Batcher``, as rob6's services batch their records), and a
+third process appends every batch to a file (``recorder``). Plain Zenoh and the standard
+library only: none of rob6's layers.
+
+    python -m bench.bare_zenoh queryable SETTINGS_JSON
+    python -m bench.bare_zenoh recorder SETTINGS_JSON FILE
+
+Each prints ``ready`` once declared and runs until its standard input closes.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+from queue import Empty, SimpleQueue
+
+import zenoh
+
+from rob6.bus.trace import TRACE_BATCH_S
+
+QUERY_KEY = "bench/bare"
+RECORDS_KEY = "bench/records"
+#: the payload of a query whose exchange is recorded
+RECORD = b"record"
+
+
+def open_peer(settings: dict[str, object]) -> zenoh.Session:
+    """A Zenoh session with ``settings`` (key -> value) inserted into the default config."""
+    config = zenoh.Config()
+    for key, value in settings.items():
+        config.insert_json5(key, json.dumps(value))
+    return zenoh.open(config)
+
+
+class Batcher:
+    """Records (JSON bytes) queued by ``add`` leave as one JSON array on
+    ``RECORDS_KEY/<name>`` ``TRACE_BATCH_S`` after the first of them, from a thread of
+    their own, never dropped (blocking congestion control)."""
+
+    def __init__(self, session: zenoh.Session, name: str):
+        self._queue: SimpleQueue[bytes] = SimpleQueue()
+        self._publisher = session.declare_publisher(f"{RECORDS_KEY}/{name}",
+                                                    congestion_control=zenoh.CongestionControl.BLOCK)
+        threading.Thread(target=self._send, name=f"{name}-records", daemon=True).start()
+
+    def add(self, record: bytes) -> None:
+        self._queue.put(record)
+
+    def _send(self) -> None:
+        while True:
+            batch = [self._queue.get()]
+            time.sleep(TRACE_BATCH_S)
+            while True:
+                try:
+                    batch.append(self._queue.get_nowait())
+                except Empty:
+                    break
+            self._publisher.put(b"[" + b",".join(batch) + b"]")
+
+
+def queryable(session: zenoh.Session) -> list[object]:
+    """``QUERY_KEY`` answers ``pong``; a query with the payload ``RECORD`` is then recorded
+    (what it asked and what it got, timed, as a service records what it served)."""
+    batcher = Batcher(session, "queryable")
+
+    def on_query(query: zenoh.Query) -> None:
+        started = time.time()
+        asked = query.payload.to_bytes() if query.payload is not None else b""
+        query.reply(query.key_expr, b"pong")
+        query.drop()
+        if asked == RECORD:
+            batcher.add(b'{"t":%.6f,"dt":%.6f,"request":"%s","reply":"pong"}' % (started, time.time() - started, asked))
+
+    return [batcher, session.declare_queryable(QUERY_KEY, on_query)]
+
+
+def recorder(session: zenoh.Session, path: str) -> list[object]:
+    """Every batch on ``RECORDS_KEY/*`` appended to the file ``path`` as it came."""
+    out = open(path, "ab", buffering=0)  # noqa: SIM115  (open while the process runs; each batch written as it comes)
+    return [out, session.declare_subscriber(f"{RECORDS_KEY}/*", lambda sample: out.write(sample.payload.to_bytes()))]
+
+
+def main(argv: list[str]) -> None:
+    role, settings = argv[0], json.loads(argv[1])
+    session = open_peer(settings)
+    held = queryable(session) if role == "queryable" else recorder(session, argv[2])
+    print("ready", flush=True)
+    sys.stdin.read()
+    del held
+    session.close()
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
