@@ -45,24 +45,36 @@ class Batcher:
     their own, never dropped (blocking congestion control)."""
 
     def __init__(self, session: zenoh.Session, name: str):
-        self._queue: SimpleQueue[bytes] = SimpleQueue()
+        self._queue: SimpleQueue[bytes | None] = SimpleQueue()
         self._publisher = session.declare_publisher(f"{RECORDS_KEY}/{name}",
                                                     congestion_control=zenoh.CongestionControl.BLOCK)
-        threading.Thread(target=self._send, name=f"{name}-records", daemon=True).start()
+        self._sender = threading.Thread(target=self._send, name=f"{name}-records", daemon=True)
+        self._sender.start()
 
     def add(self, record: bytes) -> None:
         self._queue.put(record)
 
+    def close(self) -> None:
+        """What was added still leaves; then the thread ends."""
+        self._queue.put(None)
+        self._sender.join(5.0)
+
     def _send(self) -> None:
-        while True:
-            batch = [self._queue.get()]
+        while (first := self._queue.get()) is not None:
             time.sleep(TRACE_BATCH_S)
-            while True:
+            batch, closing = [first], False
+            while not closing:
                 try:
-                    batch.append(self._queue.get_nowait())
+                    record = self._queue.get_nowait()
                 except Empty:
                     break
+                if record is None:
+                    closing = True
+                else:
+                    batch.append(record)
             self._publisher.put(b"[" + b",".join(batch) + b"]")
+            if closing:
+                return
 
 
 def queryable(session: zenoh.Session) -> list[object]:
@@ -93,7 +105,9 @@ def main(argv: list[str]) -> None:
     held = queryable(session) if role == "queryable" else recorder(session, argv[2])
     print("ready", flush=True)
     sys.stdin.read()
-    del held
+    for item in held:
+        if isinstance(item, Batcher):
+            item.close()
     session.close()
 
 

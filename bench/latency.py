@@ -142,6 +142,8 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
       batches outlive the exchange by ``TRACE_BATCH_S``, so it runs in blocks of ``block``
       queries in turn with the other two, each block after the last batch has gone.
     """
+    block = min(block, count)
+    # peers beside the router, with a direct link between them, as rob6's processes have
     settings = peer_config(**{"connect/endpoints": [f"tcp/127.0.0.1:{router_port}"],
                               "listen/endpoints": ["tcp/127.0.0.1:0"]})
     folder = tempfile.TemporaryDirectory()
@@ -149,10 +151,9 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
     server = bare_queryable(settings)
     recording = bare_process("recorder", settings, records)
     session = open_peer(settings)
+    batcher = Batcher(session, "asker")
     samples: dict[str, list[float]] = {"blocking": [], "asyncio": [], "recorded": []}
     try:
-        batcher = Batcher(session, "asker")
-
         def blocking_once(payload: bytes = b"") -> float:
             start = time.perf_counter()
             replies = list(session.get(QUERY_KEY, payload=payload, consolidation=zenoh.ConsolidationMode.NONE))
@@ -201,6 +202,7 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
         end(recording)
         return samples
     finally:
+        batcher.close()
         session.close()
         for process in (server, recording):
             process.kill()
