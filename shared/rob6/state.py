@@ -17,6 +17,15 @@ from .messages import JointState
 STATE_STALE_S = 0.25  # a joint state older than this means the driver is not running
 
 
+def replaces(state: JointState, kept: JointState | None) -> bool:
+    """Whether a published ``state`` replaces the ``kept`` one: a later cycle of the same
+    driver, or another driver instance (a restarted driver counts its cycles again). An
+    older cycle, or the same one again, is a publication from before a move that the move's
+    reply already reported, arriving after it over another link: kept out, or a read right
+    after the move would show where the robot was, and the next move would start there."""
+    return kept is None or state.instance != kept.instance or state.cycle > kept.cycle
+
+
 class JointStateMirror:
     def __init__(self, bus: Bus):
         self.bus = bus
@@ -29,9 +38,7 @@ class JointStateMirror:
     def _on_state(self, _key: str, payload: bytes) -> None:
         state = self._decoder.decode(payload)
         with self._lock:
-            # a later cycle, or a restarted driver (its clock started again); the same cycle
-            # again may be a publication from before a move that a reply already reported
-            if self._state is None or state.cycle > self._state.cycle or state.t < self._state.t:
+            if replaces(state, self._state):
                 self._state, self._seen = state, time.monotonic()
 
     def update(self, state: JointState) -> None:
