@@ -19,9 +19,10 @@ from harness.client import Client
 from harness.system import running
 from rob6.messages import IkBatchRequest
 
+from .background import background_table
 from .busy import busy_table
 from .kawasaki import kawasaki_table
-from .latency import echo_baseline, measure, measure_beside, percentiles, usage, zenoh_baselines
+from .latency import cpu_seconds, echo_baseline, measure, measure_beside, percentiles, usage, zenoh_baselines
 from .links import adept_table, links_table, live_realtime_table, ros_realtime_table
 from .tables import table
 from .transport import transport_table
@@ -55,32 +56,38 @@ GOALS = {"gateway": f"p50 <= original ({ORIGINAL_PING_MS} ms)", "mirror": "p50 <
 
 
 def gateway_latency(services: tuple[str, ...] = (), log_dir: str | None = None,
-                    zenoh_floor: bool = False) -> dict[str, list[float]]:
+                    zenoh_floor: bool = False) -> tuple[dict[str, list[float]], dict[str, dict[str, float]]]:
+    """Each command's round trips, and the CPU time each process of the system used per
+    request while they ran (command -> process -> us)."""
     results = {}
+    cpu: dict[str, dict[str, float]] = {}
     with running("kr16", dummy=True, services=services, log_dir=log_dir) as system:
         if zenoh_floor:
             for receive, samples in zenoh_baselines(system.router_port, COUNT).items():
                 results[f"bare Zenoh query, {receive}"] = samples
+        pids = system.pids()
         with system.client() as client:
             pose = client.ask("ForwardCalc 10 -20 30 40 50 60", 2).replace("\n", " ")
             for command, lines, kind in COMMANDS:
+                name = command.split()[0]
+                before = {process: cpu_seconds(pid) for process, pid in pids.items()}
                 if command == "MoveRTJoints":
                     assert client.ask("EnableAlter") == "true\n"
-                    results[command] = measure_alternating(
+                    results[name] = measure_alternating(
                         client, ("MoveRTJoints 0.00 0 0 0 0 0\n", "MoveRTJoints 0.01 0 0 0 0 0\n"), COUNT)
                     client.ask("DisableAlter", timeout=10)
-                    continue
-                if command == "MovePTPJoints":
-                    results[command] = measure_alternating(
+                elif command == "MovePTPJoints":
+                    results[name] = measure_alternating(
                         client, ("MovePTPJoints 10 -60 80 20 40 30\n", "MovePTPJoints 11 -60 80 20 40 30\n"), COUNT)
-                    continue
-                request = f"BackwardCalc {pose}" if command == "BackwardCalc" else command
-                name = command.split()[0]
-                if kind in ("gateway", "mirror") and name != "CM_PING":  # measured in turn with CM_PING
-                    results[name], results[f"CM_PING beside {name}"] = measure_beside(client, request, lines, COUNT)
+                elif kind in ("gateway", "mirror") and name != "CM_PING":  # measured in turn with CM_PING
+                    results[name], results[f"CM_PING beside {name}"] = measure_beside(client, command, lines, COUNT)
                 else:
+                    request = f"BackwardCalc {pose}" if command == "BackwardCalc" else command
                     results[name] = measure(client, request, lines, COUNT)
-    return results
+                requests = len(results[name]) + len(results.get(f"CM_PING beside {name}", ()))
+                cpu[name] = {process: (cpu_seconds(pid) - before[process]) / requests * 1e6
+                             for process, pid in pids.items()}
+    return results, cpu
 
 
 def measure_alternating(client: Client, lines: tuple[str, str], count: int, warmup: int = 200) -> list[float]:
@@ -103,8 +110,8 @@ def measure_alternating(client: Client, lines: tuple[str, str], count: int, warm
 def gateway_tables() -> None:
     echo = echo_baseline(COUNT)
     with tempfile.TemporaryDirectory() as logs:
-        on = gateway_latency(log_dir=logs, zenoh_floor=True)
-    off = gateway_latency(services=("driver", "kinematics", "planner", "gripper", "gateway"))
+        on, cpu = gateway_latency(log_dir=logs, zenoh_floor=True)
+    off, _ = gateway_latency(services=("driver", "kinematics", "planner", "gripper", "gateway"))
     ping50, _ = percentiles(on["CM_PING"])
     echo50, echo99 = percentiles(echo)
     zenoh50, zenoh99 = percentiles(on["bare Zenoh query, blocking"])
@@ -151,6 +158,12 @@ def gateway_tables() -> None:
                              f"{(p50_on / p50_off - 1) * 100:+.1f} %", f"{(p99_on / p99_off - 1) * 100:+.1f} %"))
     table("Recording overhead (p50 / p99 ms, recorder and ROS node off vs on, same run)",
           ("request", "off", "on", "p50 overhead (goal <= 10 %)", "p99 overhead"), overhead)
+    processes = sorted({process for per in cpu.values() for process in per},
+                       key=lambda process: -sum(per.get(process, 0.0) for per in cpu.values()))
+    table("CPU per request by process (us; the round trips above, recording on; /proc, 10 ms steps)",
+          ("request", *processes, "all"),
+          [(name, *(f"{per.get(process, 0.0):.0f}" for process in processes), f"{sum(per.values()):.0f}")
+           for name, per in cpu.items()])
 
 
 def fmt_ms(samples: list[float]) -> tuple[str, str]:
@@ -258,6 +271,7 @@ def recording_table() -> None:
 
 def main() -> int:
     gateway_tables()
+    background_table(COUNT, table)
     transport_table(COUNT, table)
     idle_table()
     kinematics_tables()

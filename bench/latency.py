@@ -215,26 +215,28 @@ def _count(path: str, record: bytes) -> int:
         return f.read().count(record)
 
 
+def cpu_seconds(pid: int) -> float:
+    """The CPU time process ``pid`` has used so far, all its threads, in seconds (10 ms steps)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime, in clock ticks
+
+
 def usage(pids: list[int], seconds: float) -> tuple[float, float, float]:
     """CPU (share of one core), resident memory summed (MB) and proportional set size summed
     (MB) of ``pids`` together, over ``seconds``. The RSS sum counts every shared page (the
     Python interpreter, Zenoh's library, numpy) once per process; PSS divides each shared page
     among the processes that map it, so its sum is the memory the system occupies."""
-    def cpu_seconds() -> float:
-        total = 0
-        for pid in pids:
-            with open(f"/proc/{pid}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-            total += int(fields[11]) + int(fields[12])  # utime + stime, in clock ticks
-        return total / os.sysconf("SC_CLK_TCK")
+    def cpu_total() -> float:
+        return sum(cpu_seconds(pid) for pid in pids)
 
     def kilobytes(path: str, field: str) -> int:
         with open(path) as f:
             return next(int(line.split()[1]) for line in f if line.startswith(field))
 
-    before, start = cpu_seconds(), time.monotonic()
+    before, start = cpu_total(), time.monotonic()
     time.sleep(seconds)
-    cpu = (cpu_seconds() - before) / (time.monotonic() - start)
+    cpu = (cpu_total() - before) / (time.monotonic() - start)
     rss = sum(kilobytes(f"/proc/{pid}/status", "VmRSS:") for pid in pids)
     pss = sum(kilobytes(f"/proc/{pid}/smaps_rollup", "Pss:") for pid in pids)
     return cpu, rss / 1024, pss / 1024

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import re
@@ -288,11 +289,39 @@ def test_bus_trace_adapter() -> None:
                b'"body":{"joints":[[0,0,0,0,0,0]]}},"reply":{"v":1,"cid":"abc","ok":false,'
                b'"error":{"code":"invalid","message":"x"}}}')
     (req, rep) = bus_trace_records("kinematics", "fk", payload, received_ns=5)
-    assert req == ("/bus/kinematics/fk/request", 1_700_000_000_500_000_000, 1_700_000_000_500_000_000,
-                   {"cid": "abc", "service": "kinematics", "op": "fk", "instance": "k-1",
-                    "body": {"joints": [[0, 0, 0, 0, 0, 0]]}})
+    assert req[:3] == ("/bus/kinematics/fk/request", 1_700_000_000_500_000_000, 1_700_000_000_500_000_000)
+    assert json.loads(req[3]) == {"cid": "abc", "service": "kinematics", "op": "fk", "instance": "k-1",
+                                  "body": {"joints": [[0, 0, 0, 0, 0, 0]]}}
     assert rep[0] == "/bus/kinematics/fk/reply" and rep[1] == 1_700_000_000_502_000_000 and rep[2] == 5
-    assert rep[3]["ok"] is False and rep[3]["error"]["code"] == "invalid" and rep[3]["cid"] == "abc"
+    assert json.loads(rep[3]) == {"cid": "abc", "service": "kinematics", "op": "fk", "instance": "k-1",
+                                  "ok": False, "body": None, "dt": 0.002,
+                                  "error": {"code": "invalid", "message": "x"}}
+
+
+def test_bus_trace_adapter_passes_the_bodies_through_as_sent() -> None:
+    """The bodies are not decoded and printed again: numbers keep the service's digits."""
+    from rob6_recorder.adapters import bus_trace_records
+
+    payload = (b'{"t":2.0,"dt":0.5,"instance":"k-1","request":{"v":1,"cid":"c1","body":{"q":[1.50,-0.0]}},'
+               b'"reply":{"v":1,"cid":"c1","ok":true,"instance":"k-1","body":{"q":[1.000001]}}}')
+    (req, rep) = bus_trace_records("kinematics", "fk", payload)
+    assert req == ("/bus/kinematics/fk/request", 2_000_000_000, 2_000_000_000,
+                   b'{"cid":"c1","service":"kinematics","op":"fk","instance":"k-1","body":{"q":[1.50,-0.0]}}')
+    assert rep == ("/bus/kinematics/fk/reply", 2_500_000_000, 2_500_000_000,
+                   b'{"cid":"c1","service":"kinematics","op":"fk","instance":"k-1","ok":true,'
+                   b'"body":{"q":[1.000001]},"dt":0.5}')
+
+
+def test_bus_trace_adapter_keeps_a_trace_of_unexpected_shape() -> None:
+    """A trace whose fields are not what a service writes still gives both records (what is
+    there kept as the body), with the time it was received."""
+    from rob6_recorder.adapters import bus_trace_records
+
+    (req, rep) = bus_trace_records("driver", "ping", b'{"t":"x","dt":true,"request":null,"reply":[1,2]}', 7)
+    assert req[1:3] == (7, 7) and rep[1:3] == (7, 7)
+    assert json.loads(req[3])["body"] is None
+    assert json.loads(rep[3]) == {"cid": "", "service": "driver", "op": "ping", "instance": "", "ok": False,
+                                  "body": [1, 2], "dt": 0.0}
 
 
 def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk() -> None:

@@ -1,0 +1,91 @@
+"""Benchmark of the floor beside background work: a bare query while a busy loop runs.
+
+A recorded system does work beside each request (the recorder decodes and writes, the
+services send their records). This table shows what work of that size costs a bare Zenoh
+query on this machine when it is nobody's work at all: a separate process that spins for
+a share of every period and sleeps for the rest, at the lowest priority Linux has
+(``SCHED_IDLE``: it runs only on a CPU nothing else wants). Blocks of queries run in turn
+alone and beside each load.
+
+    python -m bench.background spin SHARE PERIOD_S
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+
+import zenoh
+
+from harness.ports import free_port
+
+from .bare_zenoh import QUERY_KEY, open_peer
+from .latency import bare_queryable, peer_config, percentiles, wait_answered
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: (share of one core, period in s) of each load, beside none
+LOADS = ((0.05, 0.005), (0.15, 0.005), (0.30, 0.005), (0.15, 0.001))
+
+
+def spin(share: float, period: float) -> None:
+    """Busy for ``share`` of every ``period``, asleep for the rest, at idle priority, until killed."""
+    os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    while True:
+        start = time.perf_counter()
+        while time.perf_counter() - start < share * period:
+            pass
+        time.sleep(period * (1.0 - share))
+
+
+def background_table(count: int, table: Callable[..., None], block: int = 250, warmup: int = 200) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"  # two peers linked directly, as in the transport table
+    server = bare_queryable(peer_config(**{"listen/endpoints": [endpoint]}))
+    session = open_peer(peer_config(**{"connect/endpoints": [endpoint]}))
+    loads = [subprocess.Popen([sys.executable, "-m", "bench.background", "spin", str(share), str(period)], cwd=_ROOT)
+             for share, period in LOADS]
+    samples: list[list[float]] = [[] for _ in range(len(LOADS) + 1)]
+    try:
+        for load in loads:
+            os.kill(load.pid, signal.SIGSTOP)
+        wait_answered(session)
+
+        def query() -> float:
+            start = time.perf_counter()
+            replies = list(session.get(QUERY_KEY, consolidation=zenoh.ConsolidationMode.NONE))
+            if len(replies) != 1 or replies[0].ok is None:
+                raise RuntimeError("the bare queryable did not answer once")
+            return time.perf_counter() - start
+
+        for _ in range(warmup):
+            query()
+        for _ in range(max(1, count // block)):
+            for k in range(len(samples)):  # alone (0), then beside each load in turn
+                for n, load in enumerate(loads, start=1):
+                    os.kill(load.pid, signal.SIGCONT if n == k else signal.SIGSTOP)
+                time.sleep(0.02)
+                samples[k] += [query() for _ in range(block)]
+    finally:
+        for load in loads:
+            load.kill()
+            load.wait()
+        session.close()
+        server.kill()
+        server.wait()
+    alone50, alone99 = percentiles(samples[0])
+    rows = [("alone", f"{alone50:.3f}", f"{alone99:.3f}", "", "")]
+    for (share, period), x in zip(LOADS, samples[1:], strict=True):
+        p50, p99 = percentiles(x)
+        rows.append((f"beside a busy loop: {share:.0%} of a core, {share * period * 1e3:.2f} ms of every "
+                     f"{period * 1e3:.0f} ms", f"{p50:.3f}", f"{p99:.3f}", f"{p50 / alone50:.2f}x", f"{p99 / alone99:.2f}x"))
+    table(f"The bare Zenoh query beside background work at idle priority (ms, {len(samples[0])} each, in turn)",
+          ("background", "p50", "p99", "p50 / alone", "p99 / alone"), rows)
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] != ["spin"]:
+        raise SystemExit("usage: python -m bench.background spin SHARE PERIOD_S")
+    spin(float(sys.argv[2]), float(sys.argv[3]))
