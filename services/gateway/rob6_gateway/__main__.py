@@ -22,6 +22,10 @@ from .server import AddressFilter, Server
 
 log = logging.getLogger("rob6.gateway")
 
+#: how long a stopping gateway gives the session threads to finish and queue their last
+#: records (the launcher allows the gateway 0.5 s in all: rob6.launcher.STOP_ORDER)
+SESSION_END_S = 0.3
+
 
 @click.command()
 @bus_options
@@ -96,6 +100,7 @@ def _serve(settings: BusSettings, port: int, bind: str, options: Options, allow:
         bus.publish("control/shutdown", b"{}", reliable=True)
     listener.shutdown(socket.SHUT_RDWR)  # wakes the accepting thread (a close alone does not)
     listener.close()
+    server.close(SESSION_END_S)
     if ownership is not None:
         ownership.release()
     bus.close()

@@ -16,6 +16,7 @@ or an event loop (docs/PERFORMANCE.md).
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import itertools
 import logging
@@ -135,6 +136,7 @@ class Server:
         self._free = threading.Event()  # no session is active
         self._free.set()
         self._numbers = itertools.count(1)
+        self._threads: list[threading.Thread] = []  # the sessions' threads, ended ones pruned
 
     def serve_forever(self, listener: socket.socket) -> None:
         """Accept clients until ``listener`` is closed; each session on a thread of its own."""
@@ -167,8 +169,22 @@ class Server:
         session = Session(number=next(self._numbers), peer=peer_text, client_gone=connection.poll)
         self._free.clear()
         self.active, self._connection = session, connection
-        threading.Thread(target=self.handle, args=(session, connection), name=f"session-{session.number}",
-                         daemon=True).start()
+        thread = threading.Thread(target=self.handle, args=(session, connection), name=f"session-{session.number}",
+                                  daemon=True)
+        self._threads = [t for t in self._threads if t.is_alive()] + [thread]
+        thread.start()
+
+    def close(self, timeout: float) -> None:
+        """The gateway stops (after the listener closed): the session still open ends as if
+        its client had gone, and every session's thread gets ``timeout`` to finish, so its
+        last records (the reply to Quit, the close event) are queued before the bus closes."""
+        connection = self._connection
+        if self.active is not None and connection is not None:
+            with contextlib.suppress(OSError):  # already closed
+                connection.sock.shutdown(socket.SHUT_RDWR)  # wakes its thread's read
+        deadline = time.monotonic() + timeout
+        for thread in list(self._threads):
+            thread.join(max(0.0, deadline - time.monotonic()))
 
     def handle(self, session: Session, connection: Connection) -> None:
         log.info("session %d: client %s connected", session.number, session.peer)
