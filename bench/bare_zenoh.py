@@ -7,7 +7,7 @@ queue a record of the exchange, a thread of each sends what gathered every
 third process appends every batch to a file (``recorder``). Plain Zenoh and the standard
 library only: none of rob6's layers.
 
-    python -m bench.bare_zenoh queryable SETTINGS_JSON
+    python -m bench.bare_zenoh queryable SETTINGS_JSON [KEY]
     python -m bench.bare_zenoh recorder SETTINGS_JSON FILE
 
 Each prints ``ready`` once declared and runs until its standard input closes.
@@ -26,6 +26,8 @@ import zenoh
 from rob6.bus.trace import TRACE_BATCH_S
 
 QUERY_KEY = "bench/bare"
+#: the key of a second bare queryable beside the first (other Zenoh settings)
+TUNED_KEY = "bench/tuned"
 RECORDS_KEY = "bench/records"
 #: the payload of a query whose exchange is recorded
 RECORD = b"record"
@@ -77,8 +79,8 @@ class Batcher:
                 return
 
 
-def queryable(session: zenoh.Session) -> list[object]:
-    """``QUERY_KEY`` answers ``pong``; a query with the payload ``RECORD`` is then recorded
+def queryable(session: zenoh.Session, key: str = QUERY_KEY) -> list[object]:
+    """``key`` answers ``pong``; a query with the payload ``RECORD`` is then recorded
     (what it asked and what it got, timed, as a service records what it served)."""
     batcher = Batcher(session, "queryable")
 
@@ -90,7 +92,7 @@ def queryable(session: zenoh.Session) -> list[object]:
         if asked == RECORD:
             batcher.add(b'{"t":%.6f,"dt":%.6f,"request":"%s","reply":"pong"}' % (started, time.time() - started, asked))
 
-    return [batcher, session.declare_queryable(QUERY_KEY, on_query)]
+    return [batcher, session.declare_queryable(key, on_query)]
 
 
 def recorder(session: zenoh.Session, path: str) -> list[object]:
@@ -102,7 +104,7 @@ def recorder(session: zenoh.Session, path: str) -> list[object]:
 def main(argv: list[str]) -> None:
     role, settings = argv[0], json.loads(argv[1])
     session = open_peer(settings)
-    held = queryable(session) if role == "queryable" else recorder(session, argv[2])
+    held = queryable(session, *argv[2:]) if role == "queryable" else recorder(session, argv[2])
     print("ready", flush=True)
     sys.stdin.read()
     for item in held:

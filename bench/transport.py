@@ -1,7 +1,8 @@
-"""Benchmark of Zenoh's transport options side by side (TCP, unix socket, lowlatency).
+"""Benchmark of Zenoh's transport options side by side (TCP, unix socket, lowlatency, rob6's).
 
 Zenoh's transport options side by side: a bare query between two processes over loopback
-TCP and a unix socket, each with the default transport and with ``lowlatency``."""
+TCP and a unix socket, with the default transport and with ``lowlatency``, and over TCP
+with the settings rob6's sessions have (``rob6.bus.session.TRANSPORT``)."""
 
 from __future__ import annotations
 
@@ -12,12 +13,14 @@ from collections.abc import Callable
 import zenoh
 
 from harness.ports import free_port
+from rob6.bus.session import TRANSPORT
 
 from .bare_zenoh import QUERY_KEY, open_peer
 from .latency import bare_queryable, peer_config, percentiles, wait_answered
 
 #: what ``lowlatency`` needs on both ends (QoS off)
 _LOWLATENCY = {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
+_SETTINGS = {"default": {}, "lowlatency": _LOWLATENCY, "rob6": TRANSPORT}
 
 
 def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -> None:
@@ -25,12 +28,13 @@ def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -
         # one queryable process per variant, each on its own port or socket
         variants = [("loopback TCP, default", f"tcp/127.0.0.1:{free_port()}", "default"),
                     ("loopback TCP, lowlatency", f"tcp/127.0.0.1:{free_port()}", "lowlatency"),
+                    ("loopback TCP, rob6's settings (batching off)", f"tcp/127.0.0.1:{free_port()}", "rob6"),
                     ("unix socket, default", f"unixsock-stream/{folder}/a.sock", "default"),
                     ("unix socket, lowlatency", f"unixsock-stream/{folder}/b.sock", "lowlatency")]
         servers, sessions = [], []
         try:
             for _, endpoint, transport in variants:
-                extra = _LOWLATENCY if transport == "lowlatency" else {}
+                extra = _SETTINGS[transport]
                 servers.append(bare_queryable(peer_config(**{"listen/endpoints": [endpoint]}, **extra)))
                 sessions.append(open_peer(peer_config(**{"connect/endpoints": [endpoint]}, **extra)))
             for session in sessions:
