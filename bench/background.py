@@ -19,15 +19,12 @@ import sys
 import time
 from collections.abc import Callable
 
-import zenoh
-
 from harness.ports import free_port
 from rob6.bus.session import TRANSPORT
 
-from .bare_zenoh import QUERY_KEY, open_peer
-from .latency import bare_queryable, peer_config, percentiles, wait_answered
+from .bare_zenoh import open_peer
+from .latency import ROOT, bare_queryable, peer_config, percentiles, timed_query, wait_answered
 
-_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: (share of one core, period in s) of each load, beside none
 LOADS = ((0.05, 0.005), (0.15, 0.005), (0.30, 0.005), (0.15, 0.001))
 
@@ -48,29 +45,21 @@ def background_table(count: int, table: Callable[..., None], block: int = 250, w
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     server = bare_queryable(peer_config(**{"listen/endpoints": [endpoint]}, **TRANSPORT))
     session = open_peer(peer_config(**{"connect/endpoints": [endpoint]}, **TRANSPORT))
-    loads = [subprocess.Popen([sys.executable, "-m", "bench.background", "spin", str(share), str(period)], cwd=_ROOT)
+    loads = [subprocess.Popen([sys.executable, "-m", "bench.background", "spin", str(share), str(period)], cwd=ROOT)
              for share, period in LOADS]
     samples: list[list[float]] = [[] for _ in range(len(LOADS) + 1)]
     try:
         for load in loads:
             os.kill(load.pid, signal.SIGSTOP)
         wait_answered(session)
-
-        def query() -> float:
-            start = time.perf_counter()
-            replies = list(session.get(QUERY_KEY, consolidation=zenoh.ConsolidationMode.NONE))
-            if len(replies) != 1 or replies[0].ok is None:
-                raise RuntimeError("the bare queryable did not answer once")
-            return time.perf_counter() - start
-
         for _ in range(warmup):
-            query()
+            timed_query(session)
         for _ in range(max(1, count // block)):
             for k in range(len(samples)):  # alone (0), then beside each load in turn
                 for n, load in enumerate(loads, start=1):
                     os.kill(load.pid, signal.SIGCONT if n == k else signal.SIGSTOP)
                 time.sleep(0.02)
-                samples[k] += [query() for _ in range(block)]
+                samples[k] += [timed_query(session) for _ in range(block)]
     finally:
         for load in loads:
             load.kill()

@@ -24,7 +24,7 @@ from rob6.bus.trace import TRACE_BATCH_S
 
 from .bare_zenoh import QUERY_KEY, RECORD, TUNED_KEY, Batcher, open_peer
 
-_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def percentiles(samples: list[float]) -> tuple[float, float]:
@@ -87,6 +87,17 @@ def echo_baseline(count: int) -> list[float]:
         listener.close()
 
 
+def timed_query(session: zenoh.Session, key: str = QUERY_KEY, payload: bytes = b"") -> float:
+    """One bare query received blocking: its round trip in seconds; RuntimeError unless
+    exactly one answer came."""
+    start = time.perf_counter()
+    replies = list(session.get(key, payload=payload, consolidation=zenoh.ConsolidationMode.NONE))
+    elapsed = time.perf_counter() - start
+    if len(replies) != 1 or replies[0].ok is None:
+        raise RuntimeError("the bare queryable did not answer once")
+    return elapsed
+
+
 def peer_config(**settings: object) -> dict[str, object]:
     """Zenoh settings (key -> value) of a bare peer: no scouting, and ``settings``."""
     return {"mode": "peer", "scouting/multicast/enabled": False, **settings}
@@ -96,7 +107,7 @@ def bare_process(role: str, settings: dict[str, object], *args: str) -> subproce
     """A ``bench.bare_zenoh`` program (``queryable``, ``recorder``), ready when returned;
     it ends when its standard input closes (``end``)."""
     process = subprocess.Popen([sys.executable, "-m", "bench.bare_zenoh", role, json.dumps(settings), *args],
-                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=_ROOT)
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)
     assert process.stdout is not None and process.stdout.readline().strip() == "ready"
     return process
 
@@ -163,17 +174,9 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
     tuned_session = open_peer(tuned)
     samples: dict[str, list[float]] = {"blocking": [], "asyncio": [], "recorded": [], "rob6 transport": []}
     try:
-        def blocking_once(payload: bytes = b"", asker: zenoh.Session = session, key: str = QUERY_KEY) -> float:
-            start = time.perf_counter()
-            replies = list(asker.get(key, payload=payload, consolidation=zenoh.ConsolidationMode.NONE))
-            elapsed = time.perf_counter() - start
-            if len(replies) != 1 or replies[0].ok is None:
-                raise RuntimeError("the bare queryable did not answer once")
-            return elapsed
-
         def recorded_once() -> float:
             t_in = time.time()
-            elapsed = blocking_once(RECORD)
+            elapsed = timed_query(session, payload=RECORD)
             batcher.add(b'{"t_in":%.6f,"t_out":%.6f,"line":"%s","reply":"pong"}' % (t_in, time.time(), RECORD))
             return elapsed
 
@@ -192,8 +195,8 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
 
         async def run() -> None:
             for i in range(warmup + count):
-                one, other = blocking_once(), await bridged_once()
-                tuned_one = blocking_once(asker=tuned_session, key=TUNED_KEY)
+                one, other = timed_query(session), await bridged_once()
+                tuned_one = timed_query(tuned_session, TUNED_KEY)
                 if i >= warmup:
                     samples["blocking"].append(one)
                     samples["asyncio"].append(other)

@@ -7,16 +7,13 @@ with the settings rob6's sessions have (``rob6.bus.session.TRANSPORT``)."""
 from __future__ import annotations
 
 import tempfile
-import time
 from collections.abc import Callable
-
-import zenoh
 
 from harness.ports import free_port
 from rob6.bus.session import TRANSPORT
 
-from .bare_zenoh import QUERY_KEY, open_peer
-from .latency import bare_queryable, peer_config, percentiles, wait_answered
+from .bare_zenoh import open_peer
+from .latency import bare_queryable, peer_config, percentiles, timed_query, wait_answered
 
 #: what ``lowlatency`` needs on both ends (QoS off)
 _LOWLATENCY = {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
@@ -42,11 +39,7 @@ def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -
             samples: list[list[float]] = [[] for _ in variants]
             for i in range(warmup + count):  # interleaved: every variant sees the same moments
                 for k, session in enumerate(sessions):
-                    start = time.perf_counter()
-                    replies = list(session.get(QUERY_KEY, consolidation=zenoh.ConsolidationMode.NONE))
-                    elapsed = time.perf_counter() - start
-                    if len(replies) != 1 or replies[0].ok is None:
-                        raise RuntimeError("the bare queryable did not answer once")
+                    elapsed = timed_query(session)
                     if i >= warmup:
                         samples[k].append(elapsed)
         finally:
