@@ -35,12 +35,22 @@ def _without_history(self: bus_trace._TraceSubscription) -> list[zenoh.ext.Advan
 
 @contextmanager
 def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] | None = None
-             ) -> Iterator[tuple[Bus, Callable[[], Bus], list[int], list[tuple[str, int]]]]:
-    """A publisher ("gateway"), a function that subscribes a recorder, the record numbers it
-    was given and the misses it was told of. ``drop(sn, times_seen)``: drop that arrival."""
+             ) -> Iterator[tuple[Bus, Callable[[], bus_trace._TraceSubscription], list[int], list[tuple[str, int]]]]:
+    """A publisher ("gateway"), a function that subscribes a recorder (its subscription, once
+    its first subscriber has gone and the second alone passes batches on), the record
+    numbers it was given and the misses it was told of. ``drop(sn, times_seen)``: drop that
+    arrival."""
     monkeypatch.setattr(bus_trace._TraceSubscription, "_declare", _without_history)
     monkeypatch.setattr(bus_trace, "TRACE_RESUBSCRIBE_S", 0.5)
     monkeypatch.setattr(bus_trace, "TRACE_REPAIR_S", 0.5)
+    retired = threading.Event()
+    retire = bus_trace._TraceSubscription._retire
+
+    def retiring(self: bus_trace._TraceSubscription, count: int) -> None:
+        retire(self, count)
+        retired.set()
+
+    monkeypatch.setattr(bus_trace._TraceSubscription, "_retire", retiring)
     if drop is not None:
         original = bus_trace._TraceSubscription._sample
         arrivals: dict[int, int] = {}
@@ -66,9 +76,11 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
                 received.extend(msgspec.json.decode(record)["n"] for suffix, record in trace_records(payload)
                                 if suffix == "trace/gateway/test")
 
-        def subscribe() -> Bus:
+        def subscribe() -> bus_trace._TraceSubscription:
+            retired.clear()
             subscriptions.append(recorder.subscribe_traces(on_batch, lambda source, count: misses.append((source, count))))
-            return recorder
+            assert retired.wait(10.0), "the first trace subscriber did not go"
+            return subscriptions[-1]
 
         try:
             yield publisher, subscribe, received, misses
@@ -107,7 +119,6 @@ def test_a_batch_lost_on_the_way_is_asked_for_again(monkeypatch: pytest.MonkeyPa
     with _session(monkeypatch, drop=lambda sn, seen: sn in lost and seen == 1) as (publisher, subscribe, received,
                                                                                    misses):
         subscribe()
-        time.sleep(0.5)
         _publish(publisher, range(RECORDS))
         _wait_for(lambda: len(received) >= RECORDS)
         time.sleep(1.0)
@@ -118,10 +129,38 @@ def test_a_batch_lost_on_the_way_is_asked_for_again(monkeypatch: pytest.MonkeyPa
 def test_a_batch_the_cache_no_longer_has_is_reported_missed(monkeypatch: pytest.MonkeyPatch) -> None:
     with _session(monkeypatch, drop=lambda sn, _seen: sn == 30) as (publisher, subscribe, received, misses):
         subscribe()
-        time.sleep(0.5)
         _publish(publisher, range(RECORDS))
         _wait_for(lambda: bool(misses))
         assert misses == [("rob6/repair/trace/gateway pub", 1)]
         time.sleep(2.0)  # reported once, not asked for again
         assert len(misses) == 1
         assert RECORDS - 3 <= len(received) < RECORDS  # one batch: one record, two on a busy machine
+
+
+
+def test_a_stopping_subscription_asks_for_what_is_still_missing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A hole and a tail that had not come when the subscription ended, before the repair came
+    round (a recorder stopped a moment after the hole): both are asked for as it ends."""
+    with _session(monkeypatch, drop=lambda sn, seen: (sn in {20, 21} or sn >= 70) and seen == 1) as (
+            publisher, subscribe, received, misses):
+        monkeypatch.setattr(bus_trace, "TRACE_REPAIR_S", 3600.0)  # one round only, before the batches
+        subscription = subscribe()
+        _publish(publisher, range(RECORDS))
+        time.sleep(0.5)  # the last batches arrived, and were dropped
+        missing = set(range(RECORDS)) - set(received)  # a batch's number is not its record's
+        assert min(missing) < 60 and RECORDS - 1 in missing, sorted(missing)  # a hole and the tail
+        subscription.undeclare()
+        assert sorted(received) == list(range(RECORDS)), sorted(set(range(RECORDS)) - set(received))
+        assert not misses
+
+
+def test_a_stopping_subscription_reports_what_no_cache_gave(monkeypatch: pytest.MonkeyPatch) -> None:
+    with _session(monkeypatch, drop=lambda sn, _seen: sn == 30) as (publisher, subscribe, received, misses):
+        monkeypatch.setattr(bus_trace, "TRACE_REPAIR_S", 3600.0)
+        subscription = subscribe()
+        _publish(publisher, range(RECORDS))
+        time.sleep(0.5)
+        assert not misses  # no repair round saw the hole twice
+        subscription.undeclare()
+        assert misses == [("rob6/repair/trace/gateway pub", 1)]
+        assert len(set(range(RECORDS)) - set(received)) == 1
