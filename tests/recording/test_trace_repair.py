@@ -35,11 +35,12 @@ def _without_history(self: bus_trace._TraceSubscription) -> list[zenoh.ext.Advan
 
 @contextmanager
 def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] | None = None
-             ) -> Iterator[tuple[Bus, Callable[[], bus_trace._TraceSubscription], list[int], list[tuple[str, int]]]]:
+             ) -> Iterator[tuple[Bus, Callable[[], bus_trace._TraceSubscription], list[int], list[tuple[str, int]],
+                                 set[int]]]:
     """A publisher ("gateway"), a function that subscribes a recorder (its subscription, once
     its first subscriber has gone and the second alone passes batches on), the record
-    numbers it was given and the misses it was told of. ``drop(sn, times_seen)``: drop that
-    arrival."""
+    numbers it was given, the misses it was told of, and the record numbers that arrived,
+    dropped or not. ``drop(sn, times_seen)``: drop that arrival."""
     monkeypatch.setattr(bus_trace._TraceSubscription, "_declare", _without_history)
     monkeypatch.setattr(bus_trace, "TRACE_RESUBSCRIBE_S", 0.5)
     monkeypatch.setattr(bus_trace, "TRACE_REPAIR_S", 0.5)
@@ -51,6 +52,7 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
         retired.set()
 
     monkeypatch.setattr(bus_trace._TraceSubscription, "_retire", retiring)
+    arrived: set[int] = set()
     if drop is not None:
         original = bus_trace._TraceSubscription._sample
         arrivals: dict[int, int] = {}
@@ -58,6 +60,7 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
         def dropping(self: bus_trace._TraceSubscription, sample: zenoh.Sample) -> None:
             sn = sample.source_info.source_sn if sample.source_info is not None else -1
             arrivals[sn] = arrivals.get(sn, 0) + 1
+            arrived.update(_numbers(sample.payload.to_bytes()))
             if str(sample.key_expr).endswith("/gateway") and drop(sn, arrivals[sn]):
                 return
             original(self, sample)
@@ -73,8 +76,7 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
 
         def on_batch(_key: str, payload: bytes) -> None:
             with lock:
-                received.extend(msgspec.json.decode(record)["n"] for suffix, record in trace_records(payload)
-                                if suffix == "trace/gateway/test")
+                received.extend(_numbers(payload))
 
         def subscribe() -> bus_trace._TraceSubscription:
             retired.clear()
@@ -83,12 +85,17 @@ def _session(monkeypatch: pytest.MonkeyPatch, drop: Callable[[int, int], bool] |
             return subscriptions[-1]
 
         try:
-            yield publisher, subscribe, received, misses
+            yield publisher, subscribe, received, misses, arrived
         finally:
             for subscription in subscriptions:
                 subscription.undeclare()
             recorder.close()
             publisher.close()
+
+
+def _numbers(payload: bytes) -> list[int]:
+    """The test's record numbers in one trace batch."""
+    return [msgspec.json.decode(record)["n"] for suffix, record in trace_records(payload) if suffix == "trace/gateway/test"]
 
 
 def _publish(publisher: Bus, numbers: range) -> None:
@@ -104,7 +111,7 @@ def _wait_for(condition: Callable[[], bool], timeout: float = 10.0) -> None:
 
 
 def test_batches_published_before_the_subscription_come_from_the_cache(monkeypatch: pytest.MonkeyPatch) -> None:
-    with _session(monkeypatch) as (publisher, subscribe, received, _misses):
+    with _session(monkeypatch) as (publisher, subscribe, received, _misses, _arrived):
         _publish(publisher, range(40))  # before any recorder: in the publisher's cache only
         subscribe()
         _publish(publisher, range(40, RECORDS))
@@ -117,7 +124,7 @@ def test_batches_published_before_the_subscription_come_from_the_cache(monkeypat
 def test_a_batch_lost_on_the_way_is_asked_for_again(monkeypatch: pytest.MonkeyPatch) -> None:
     lost = {20, 21, 35}
     with _session(monkeypatch, drop=lambda sn, seen: sn in lost and seen == 1) as (publisher, subscribe, received,
-                                                                                   misses):
+                                                                                   misses, _arrived):
         subscribe()
         _publish(publisher, range(RECORDS))
         _wait_for(lambda: len(received) >= RECORDS)
@@ -127,7 +134,8 @@ def test_a_batch_lost_on_the_way_is_asked_for_again(monkeypatch: pytest.MonkeyPa
 
 
 def test_a_batch_the_cache_no_longer_has_is_reported_missed(monkeypatch: pytest.MonkeyPatch) -> None:
-    with _session(monkeypatch, drop=lambda sn, _seen: sn == 30) as (publisher, subscribe, received, misses):
+    with _session(monkeypatch, drop=lambda sn, _seen: sn == 30) as (publisher, subscribe, received, misses,
+                                                                      _arrived):
         subscribe()
         _publish(publisher, range(RECORDS))
         _wait_for(lambda: bool(misses))
@@ -142,11 +150,11 @@ def test_a_stopping_subscription_asks_for_what_is_still_missing(monkeypatch: pyt
     """A hole and a tail that had not come when the subscription ended, before the repair came
     round (a recorder stopped a moment after the hole): both are asked for as it ends."""
     with _session(monkeypatch, drop=lambda sn, seen: (sn in {20, 21} or sn >= 70) and seen == 1) as (
-            publisher, subscribe, received, misses):
+            publisher, subscribe, received, misses, arrived):
         monkeypatch.setattr(bus_trace, "TRACE_REPAIR_S", 3600.0)  # one round only, before the batches
         subscription = subscribe()
         _publish(publisher, range(RECORDS))
-        time.sleep(0.5)  # the last batches arrived, and were dropped
+        _wait_for(lambda: RECORDS - 1 in arrived)  # the last batch arrived, and was dropped
         missing = set(range(RECORDS)) - set(received)  # a batch's number is not its record's
         assert min(missing) < 60 and RECORDS - 1 in missing, sorted(missing)  # a hole and the tail
         subscription.undeclare()
@@ -155,11 +163,12 @@ def test_a_stopping_subscription_asks_for_what_is_still_missing(monkeypatch: pyt
 
 
 def test_a_stopping_subscription_reports_what_no_cache_gave(monkeypatch: pytest.MonkeyPatch) -> None:
-    with _session(monkeypatch, drop=lambda sn, _seen: sn == 30) as (publisher, subscribe, received, misses):
+    with _session(monkeypatch, drop=lambda sn, _seen: sn == 30) as (publisher, subscribe, received, misses,
+                                                                      arrived):
         monkeypatch.setattr(bus_trace, "TRACE_REPAIR_S", 3600.0)
         subscription = subscribe()
         _publish(publisher, range(RECORDS))
-        time.sleep(0.5)
+        _wait_for(lambda: RECORDS - 1 in arrived)
         assert not misses  # no repair round saw the hole twice
         subscription.undeclare()
         assert misses == [("rob6/repair/trace/gateway pub", 1)]
