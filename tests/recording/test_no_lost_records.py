@@ -1,12 +1,14 @@
 """No lost records: a recorder SIGKILLed mid-session and restarted by the launcher still
-gets every client exchange of the session (the gateway's trace batches come from an
+gets every client exchange of the session and every joint state the driver published (the gateway's trace batches come from an
 advanced publisher that keeps 30 s of them; the restarted recorder's advanced subscriber
 asks for that history, and for what the history left out the cache is asked directly:
 rob6.bus.trace ``_TraceSubscription._repair``), and what it could not get it says on
 ``/recorder/status``.
 
 The gateway numbers the exchanges of a session (``seq`` 1, 2, ...): every number must be
-in the MCAP files (the killed recorder's unfinished files and the new recorder's)."""
+in the MCAP files (the killed recorder's unfinished files and the new recorder's). The
+driver publishes a state at least every ``REST_STATE_PERIOD_S`` (the next cycle after
+it): no longer gap between two recorded ones (they are traced too, ``Bus.publish_state``)."""
 
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ import time
 from pathlib import Path
 
 from harness.system import System, running
+from rob6.robots import get_robot
+from rob6_driver.service import REST_STATE_PERIOD_S
 from rob6_recorder.reader import Record, read_records
 
 PERIOD = 0.004  # s between client lines
@@ -83,5 +87,9 @@ def test_recorder_killed_and_restarted_mid_session_loses_no_client_record(tmp_pa
         print(f"{path.name}: seq {min(seqs, default=None)}..{max(seqs, default=None)} ({len(seqs)} records)")
     for kind, missing in lost.items():  # what the history left out, the repair asked for (rob6.bus)
         assert not missing, f"{kind[1:]} files: {len(missing)} of {exchanges} client records lost: {missing[:20]}"
+    cycles = sorted({r.data["cycle"] for r in _records(tmp_path, "/driver/joint_state", "_system")})
+    cycle_s = get_robot("kr16").cycle_s
+    longest = max(b - a for a, b in zip(cycles, cycles[1:], strict=False)) * cycle_s
+    assert len(cycles) > 100 and longest <= REST_STATE_PERIOD_S + cycle_s + 1e-9, f"no joint state for {longest:.3f} s"
     # what the recorder knew it missed is on its status channel: nothing here
     assert not [s for s in status if s.get("missed")], status

@@ -103,7 +103,7 @@ class DriverService:
         if content == self._published and 0.0 <= message.t - self._published_t < REST_STATE_PERIOD_S:
             return
         self._published, self._published_t = content, message.t
-        self.bus.publish("driver/state", message)
+        self.bus.publish_state("driver/state", message)
         if message.outputs != self._published_outputs:
             with self._outputs_published:
                 self._published_outputs = message.outputs

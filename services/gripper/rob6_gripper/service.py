@@ -87,7 +87,7 @@ class GripperService:
                 now = time.monotonic()
                 changed = state != last
                 if changed or now - last_sent >= STATE_HEARTBEAT_S:
-                    self.bus.publish("gripper/state", state)
+                    self.bus.publish_state("gripper/state", state)
                     last, last_sent = state, now
                 period = STATE_PERIOD_S if changed or self._commands else STATE_REST_PERIOD_S
             except Exception:

@@ -3,8 +3,9 @@
 It subscribes to ``rob6/<id>/**``. Services publish a copy of each request/reply they
 served (``trace/<service>/<op>``), the gateway a copy of each client line and reply
 (``trace/gateway/session``) and of each session's start and end, in batches
-(``trace/<service>``, see ``rob6.bus``); states and logs are
-published anyway. ``Recorder.submit`` never blocks, so the Zenoh callback stays short.
+(``trace/<service>``, see ``rob6.bus``), and so do the driver and the gripper with each
+state they publish (``Bus.publish_state``). ``Recorder.submit`` never blocks, so the
+Zenoh callback stays short.
 
 With ``live_port`` (not 0) the recorder's writer thread also feeds the live view
 (``live.LiveView``, a Foxglove WebSocket server): the same records, as they are written.
@@ -32,7 +33,9 @@ log = logging.getLogger("rob6.recorder")
 
 URDF_DIR = Path(rob6.__file__).parent / "urdf"
 
-# bus key (after rob6/<id>/) -> recording topic, for the streams recorded as they are
+# bus key (after rob6/<id>/) -> recording topic, for the streams recorded as they are; they
+# are recorded from the trace batches (``Bus.publish_state``, ``Bus.trace``), never from their
+# live copies, which are dropped under congestion and not kept for a recorder that was away
 TOPICS = {"driver/state": "/driver/joint_state", "driver/link": "/driver/link", "gripper/state": "/gripper/state"}
 
 
@@ -69,7 +72,7 @@ class RecorderService:
 
     def on_sample(self, key: str, payload: bytes) -> None:
         suffix = key[self._prefix:]
-        if suffix.startswith("trace/") and suffix.count("/") == 1:  # a batch: on_traces has it
+        if suffix in TOPICS or suffix.startswith("trace/") and suffix.count("/") == 1:  # on_traces has it
             return
         self._record(suffix, payload, time.time_ns())
 

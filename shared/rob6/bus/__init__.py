@@ -20,6 +20,7 @@ away or restarted gets what it missed and learns of what it could not get
     trace/gateway/session                  each client line in / reply out
     trace/gateway/event                    a client session opening or closing
     log/<service>                          a log record (rob6.logs.BusLogHandler)
+    driver/state, gripper/state            each published state (``Bus.publish_state``)
     driver/link                            an event of the driver's robot link
 
 Requests go to one *instance*: the bus watches the liveliness tokens and spreads the

@@ -9,6 +9,7 @@ import logging
 
 from ..config import BusSettings
 from .call import Calling
+from .codec import _encoder
 from .pubsub import PubSub
 from .serve import Serving
 
@@ -26,6 +27,14 @@ class Bus(Serving, Calling, PubSub):
         self._init_serving()
         self._init_traces()
         self._init_liveliness()  # last: the tokens' history comes at once
+
+    def publish_state(self, suffix: str, state: object) -> None:
+        """A state stream (``driver/state``, ``gripper/state``): published live for
+        controllers and views, where a sample is dropped under congestion (only the latest
+        matters to them), and the same bytes traced for the recorder, where none is."""
+        payload = _encoder.encode(state)
+        self.publish(suffix, payload)
+        self.trace(suffix, payload)
 
     def close(self) -> None:
         if self._closed.is_set():
