@@ -174,7 +174,7 @@ def multihost_table(table: Table) -> None:
     if outcome.error:
         print(f"multi-host bench skipped: rob6 images not built: {outcome.error}")
         return
-    topo = Topology(f"rob6mhbench{os.getpid()}", local_kinematics=True)
+    topo = Topology(f"rob6mhbench{os.getpid()}", local_kinematics=True, health_interval="60s")
     try:
         print(f"multi-host topology up in {topo.up():.0f} s")
         client = topo.client()

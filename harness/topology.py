@@ -103,6 +103,10 @@ class Topology:
     rsi: bool = False
     port: int = field(default_factory=free_port)
     subnet: str = field(default_factory=free_subnet)
+    #: the services' Docker health checks: often for the tests, which wait for them; rarely
+    #: for a benchmark, because each check is a Python process opening a Zenoh session
+    #: (~0.3 s of CPU): at 2 s the robot's nine services took over a core of two
+    health_interval: str = "2s"
 
     def __post_init__(self) -> None:
         cmd = compose_cmd()
@@ -112,7 +116,7 @@ class Topology:
         self.env_file = Path(os.environ.get("TMPDIR", "/tmp")) / f"{self.project}.env"
         self.env_file.write_text("")
         self.env = {**os.environ, "ROB6_TAG": TAG, "ROB6_PORT": str(self.port), "ROB6_LAB_SUBNET": self.subnet,
-                    "ROB6_HEALTH_INTERVAL": "2s"}
+                    "ROB6_HEALTH_INTERVAL": self.health_interval}
         self.control_port = free_port() if self.rsi else 0
         self._docker_rt_before: str | None = None
         if self.rsi:
