@@ -118,38 +118,33 @@ def gateway_tables() -> None:
     floor50, floor99 = echo50 + zenoh50, echo99 + zenoh99  # one bus crossing
     recorded50, recorded99 = percentiles(on["bare Zenoh query, recorded"])
     rfloor50, rfloor99 = echo50 + recorded50, echo99 + recorded99  # one recorded bus crossing
-    tuned50, tuned99 = percentiles(on["bare Zenoh query, rob6 transport"])
-    tfloor50, tfloor99 = echo50 + tuned50, echo99 + tuned99  # one bus crossing, rob6's Zenoh settings
-    blank = ("",) * 6
+    blank = ("",) * 5
     rows = [("bare TCP echo, blocking (floor)", *fmt_ms(echo), *blank),
             ("bare Zenoh query, blocking receive (floor)", *fmt_ms(on["bare Zenoh query, blocking"]), *blank),
             ("bare Zenoh query, awaited on asyncio", *fmt_ms(on["bare Zenoh query, asyncio"]), *blank),
             ("bare Zenoh query, both ends recording it (recorded floor)", f"{recorded50:.3f}", f"{recorded99:.3f}",
              *blank),
-            ("bare Zenoh query, rob6's Zenoh settings (batching off)", f"{tuned50:.3f}", f"{tuned99:.3f}", *blank),
             ("floor of a bus crossing: TCP echo + blocking Zenoh", f"{floor50:.3f}", f"{floor99:.3f}", *blank),
             ("floor of a recorded bus crossing: TCP echo + recorded Zenoh", f"{rfloor50:.3f}", f"{rfloor99:.3f}",
-             *blank),
-            ("floor of a bus crossing with rob6's Zenoh settings", f"{tfloor50:.3f}", f"{tfloor99:.3f}", *blank)]
+             *blank)]
     for command, _, kind in COMMANDS:
         name = command.split()[0]
         p50, p99 = percentiles(on[name])
-        recorded = tuned = ""
+        recorded = ""
         if kind in ("bus", "motion"):
             ratios = (f"{p50 / floor50:.2f}x", f"{p99 / floor99:.2f}x")
             recorded = f"{p50 / rfloor50:.2f}x / {p99 / rfloor99:.2f}x"
-            tuned = f"{p50 / tfloor50:.2f}x / {p99 / tfloor99:.2f}x"
             met = (p50 <= BUS_GOAL * floor50 and p99 <= BUS_GOAL * floor99) if kind == "bus" else (
                 p50 <= MOTION_GOAL * floor50 + PLANNING_MS)
         else:
             beside50, _ = percentiles(on[f"CM_PING beside {name}"]) if name != "CM_PING" else (ping50, 0.0)
             ratios = (f"{p50 / beside50:.2f}x CM_PING", "")
             met = p50 <= 1.5 * beside50 if kind == "mirror" else p50 <= ORIGINAL_PING_MS
-        rows.append((f"{name} ({kind})", f"{p50:.3f}", f"{p99:.3f}", *ratios, recorded, tuned, GOALS[kind],
+        rows.append((f"{name} ({kind})", f"{p50:.3f}", f"{p99:.3f}", *ratios, recorded, GOALS[kind],
                      "met" if met else "NOT MET"))
     table(f"Gateway round trips, ms ({COUNT} requests each, one client, kr16 dummy, recording on)",
           ("request", "p50", "p99", "p50 / floor", "p99 / floor", "p50 / p99 to the recorded floor",
-           "p50 / p99 to the floor with rob6's settings", "goal", ""), rows)
+           "goal", ""), rows)
     bare_off, bare_on = percentiles(on["bare Zenoh query, blocking"]), percentiles(on["bare Zenoh query, recorded"])
     overhead = [("bare Zenoh query (the floor of recording)", f"{bare_off[0]:.3f} / {bare_off[1]:.3f}",
                  f"{bare_on[0]:.3f} / {bare_on[1]:.3f}", f"{(bare_on[0] / bare_off[0] - 1) * 100:+.1f} %",

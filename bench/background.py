@@ -20,9 +20,8 @@ import time
 from collections.abc import Callable
 
 from harness.ports import free_port
-from rob6.bus.session import TRANSPORT
 
-from .bare_zenoh import open_peer
+from .bare_zenoh import BATCHING_OFF, open_peer
 from .latency import ROOT, bare_queryable, peer_config, percentiles, timed_query, wait_answered
 
 #: (share of one core, period in s) of each load, beside none
@@ -40,11 +39,11 @@ def spin(share: float, period: float) -> None:
 
 
 def background_table(count: int, table: Callable[..., None], block: int = 250, warmup: int = 200) -> None:
-    # two peers linked directly, as in the transport table, with rob6's Zenoh settings: with
-    # Zenoh's default batching its own 1 ms backoff hides what the background costs
+    # two peers linked directly, as in the transport table, with Zenoh's batching off: with
+    # its default batching its own 1 ms backoff hides what the background costs
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    server = bare_queryable(peer_config(**{"listen/endpoints": [endpoint]}, **TRANSPORT))
-    session = open_peer(peer_config(**{"connect/endpoints": [endpoint]}, **TRANSPORT))
+    server = bare_queryable(peer_config(**{"listen/endpoints": [endpoint]}, **BATCHING_OFF))
+    session = open_peer(peer_config(**{"connect/endpoints": [endpoint]}, **BATCHING_OFF))
     loads = [subprocess.Popen([sys.executable, "-m", "bench.background", "spin", str(share), str(period)], cwd=ROOT)
              for share, period in LOADS]
     samples: list[list[float]] = [[] for _ in range(len(LOADS) + 1)]

@@ -26,8 +26,8 @@ import zenoh
 from rob6.bus.trace import TRACE_BATCH_S
 
 QUERY_KEY = "bench/bare"
-#: the key of a second bare queryable beside the first (other Zenoh settings)
-TUNED_KEY = "bench/tuned"
+#: Zenoh's batching off on the sending side (rob6 keeps it on: docs/PERFORMANCE.md)
+BATCHING_OFF = {"transport/link/tx/queue/batching/enabled": False}
 RECORDS_KEY = "bench/records"
 #: the payload of a query whose exchange is recorded
 RECORD = b"record"

@@ -19,10 +19,9 @@ import time
 import zenoh
 
 from harness.client import Client
-from rob6.bus.session import TRANSPORT
 from rob6.bus.trace import TRACE_BATCH_S
 
-from .bare_zenoh import QUERY_KEY, RECORD, TUNED_KEY, Batcher, open_peer
+from .bare_zenoh import QUERY_KEY, RECORD, Batcher, open_peer
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -152,11 +151,9 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
     - ``recorded``: ``blocking``, with both ends batching a record of each exchange to a
       bare recording process (``bench.bare_zenoh``), the floor of a recorded request. Its
       batches outlive the exchange by ``TRACE_BATCH_S``, so it runs in blocks of ``block``
-      queries in turn with the other two, each block after the last batch has gone;
-    - ``rob6 transport``: ``blocking`` between a second pair of processes with the Zenoh
-      settings rob6's own sessions have (``rob6.bus.session.TRANSPORT``), interleaved.
+      queries in turn with the other two, each block after the last batch has gone.
 
-    The first three use Zenoh's default settings, the floor issue 25 names.
+    All three use Zenoh's default settings, as rob6 does: the floor issue 25 names.
     """
     block = min(block, count)
     # peers beside the router, with a direct link between them, as rob6's processes have
@@ -168,11 +165,7 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
     recording = bare_process("recorder", settings, records)
     session = open_peer(settings)
     batcher = Batcher(session, "asker")
-    # the pair with rob6's settings answers on a key of its own, beside the same router
-    tuned = {**settings, **TRANSPORT}
-    tuned_server = bare_process("queryable", tuned, TUNED_KEY)
-    tuned_session = open_peer(tuned)
-    samples: dict[str, list[float]] = {"blocking": [], "asyncio": [], "recorded": [], "rob6 transport": []}
+    samples: dict[str, list[float]] = {"blocking": [], "asyncio": [], "recorded": []}
     try:
         def recorded_once() -> float:
             t_in = time.time()
@@ -196,17 +189,14 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
         async def run() -> None:
             for i in range(warmup + count):
                 one, other = timed_query(session), await bridged_once()
-                tuned_one = timed_query(tuned_session, TUNED_KEY)
                 if i >= warmup:
                     samples["blocking"].append(one)
                     samples["asyncio"].append(other)
-                    samples["rob6 transport"].append(tuned_one)
                 if i >= warmup and (i - warmup) % block == block - 1:
                     samples["recorded"] += [recorded_once() for _ in range(block)]
                     time.sleep(3 * TRACE_BATCH_S)  # the last batch goes before the next block
 
         wait_answered(session)
-        wait_answered(tuned_session, TUNED_KEY)
         asyncio.run(run())
         expected, deadline = 2 * len(samples["recorded"]), time.monotonic() + REACH_S
         while (recorded := _count(records, b'"reply":"pong"')) < expected and time.monotonic() < deadline:
@@ -215,13 +205,11 @@ def zenoh_baselines(router_port: int, count: int, warmup: int = 200, block: int 
             raise RuntimeError(f"the bare recording has {recorded} records of {expected}")
         end(server)
         end(recording)
-        end(tuned_server)
         return samples
     finally:
         batcher.close()
         session.close()
-        tuned_session.close()
-        for process in (server, recording, tuned_server):
+        for process in (server, recording):
             process.kill()
             process.wait()
         folder.cleanup()

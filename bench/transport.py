@@ -1,8 +1,8 @@
-"""Benchmark of Zenoh's transport options side by side (TCP, unix socket, lowlatency, rob6's).
+"""Benchmark of Zenoh's transport options side by side (TCP, unix socket, lowlatency, batching off).
 
 Zenoh's transport options side by side: a bare query between two processes over loopback
 TCP and a unix socket, with the default transport and with ``lowlatency``, and over TCP
-with the settings rob6's sessions have (``rob6.bus.session.TRANSPORT``)."""
+with Zenoh's batching off (rob6 keeps Zenoh's defaults: docs/PERFORMANCE.md)."""
 
 from __future__ import annotations
 
@@ -10,14 +10,13 @@ import tempfile
 from collections.abc import Callable
 
 from harness.ports import free_port
-from rob6.bus.session import TRANSPORT
 
-from .bare_zenoh import open_peer
+from .bare_zenoh import BATCHING_OFF, open_peer
 from .latency import bare_queryable, peer_config, percentiles, timed_query, wait_answered
 
 #: what ``lowlatency`` needs on both ends (QoS off)
 _LOWLATENCY = {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
-_SETTINGS = {"default": {}, "lowlatency": _LOWLATENCY, "rob6": TRANSPORT}
+_SETTINGS = {"default": {}, "lowlatency": _LOWLATENCY, "batching off": BATCHING_OFF}
 
 
 def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -> None:
@@ -25,7 +24,7 @@ def transport_table(count: int, table: Callable[..., None], warmup: int = 200) -
         # one queryable process per variant, each on its own port or socket
         variants = [("loopback TCP, default", f"tcp/127.0.0.1:{free_port()}", "default"),
                     ("loopback TCP, lowlatency", f"tcp/127.0.0.1:{free_port()}", "lowlatency"),
-                    ("loopback TCP, rob6's settings (batching off)", f"tcp/127.0.0.1:{free_port()}", "rob6"),
+                    ("loopback TCP, batching off", f"tcp/127.0.0.1:{free_port()}", "batching off"),
                     ("unix socket, default", f"unixsock-stream/{folder}/a.sock", "default"),
                     ("unix socket, lowlatency", f"unixsock-stream/{folder}/b.sock", "lowlatency")]
         servers, sessions = [], []

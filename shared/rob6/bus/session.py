@@ -14,19 +14,15 @@ import zenoh
 from ..config import BusSettings
 from .codec import Decoders
 
-#: Zenoh settings of every rob6 session (a configuration file cannot turn them back).
-#: Batching off: a message goes to the link's sending task as soon as it is written. With
-#: Zenoh's default batching it may stay in the batch being filled until that task looks
-#: again, and the task backs off for 1 ms when it finds the batch being written: a bare
-#: query's p99 on this project's 2-core machine went from 1.41 to 0.25 ms with it off
-#: (docs/PERFORMANCE.md). A sender's own setting: every peer and router it talks to, a
-#: standard one or a remote host behind TLS, is unaffected.
-TRANSPORT = {"transport/link/tx/queue/batching/enabled": False}
-
 
 def zenoh_config(settings: BusSettings, *, mode: str | None = None,
                  listen: tuple[str, ...] | None = None) -> zenoh.Config:
     """Zenoh configuration from rob6 settings.
+
+    Zenoh's transport settings stay its defaults. Batching off removed a 1 ms tail between
+    two processes on one host, and it cost a multi-host deployment's remote calls two to
+    three times their p99, also when only the services on the robot PC had it
+    (docs/PERFORMANCE.md, "Zenoh's batching").
 
     A JSON5 file in the settings (TLS, access control) is the base; mode, connect and
     listen come from the settings unless the file sets them itself.
@@ -52,8 +48,6 @@ def zenoh_config(settings: BusSettings, *, mode: str | None = None,
         set_unless_in_file("connect/endpoints", list(settings.connect))
     if listen:
         set_unless_in_file("listen/endpoints", list(listen))
-    for key, value in TRANSPORT.items():
-        config.insert_json5(key, msgspec.json.encode(value).decode())
     # no multicast scouting: rob6 finds its router by configuration, never by
     # broadcasting on the lab network
     config.insert_json5("scouting/multicast/enabled", "false")
