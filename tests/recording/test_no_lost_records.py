@@ -1,6 +1,7 @@
 """No lost records: a recorder SIGKILLed mid-session and restarted by the launcher still
-gets every client exchange of the session and every joint state the driver published (the gateway's trace batches come from an
-advanced publisher that keeps 30 s of them; the restarted recorder's advanced subscriber
+gets every client exchange of the session and every joint state the driver published (the
+gateway's and the driver's trace batches come from an advanced publisher that keeps 30 s of
+them; the restarted recorder's advanced subscriber
 asks for that history, and for what the history left out the cache is asked directly:
 rob6.bus.trace ``_TraceSubscription._repair``), and what it could not get it says on
 ``/recorder/status``.

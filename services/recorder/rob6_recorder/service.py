@@ -72,7 +72,7 @@ class RecorderService:
 
     def on_sample(self, key: str, payload: bytes) -> None:
         suffix = key[self._prefix:]
-        if suffix in TOPICS or suffix.startswith("trace/") and suffix.count("/") == 1:  # on_traces has it
+        if suffix in TOPICS or (suffix.startswith("trace/") and suffix.count("/") == 1):  # on_traces has it
             return
         self._record(suffix, payload, time.time_ns())
 
