@@ -225,8 +225,8 @@ class LimitMonitor:
         widened turn bounds close at rest only.
         """
         mon = self.enforced
-        if self._settle == 0 and np.array_equal(mon.turn_min, current.turn_min) \
-                and np.array_equal(mon.turn_max, current.turn_max):
+        if self._settle == 0 and (mon.turn_min == current.turn_min).all() \
+                and (mon.turn_max == current.turn_max).all():
             return
         if not moving:
             self.reset(current)

@@ -217,13 +217,13 @@ class MotionCore:
         with self._lock:
             return self._state()
 
-    def _state(self) -> CoreState:
+    def _state(self, moving: bool | None = None) -> CoreState:
         return CoreState(self.t, self._cycle, self._q.copy(), self._qd.copy(), self._qdd.copy(),
-                        self._mode, self._moving())
+                        self._mode, self._moving() if moving is None else moving)
 
     def _moving(self) -> bool:
         return self._mode in ("trajectory", "stopping") or self._gen is not None or self._ebrake or \
-            bool(np.any(np.abs(self._v_fd) > REST_EPS))
+            bool((np.abs(self._v_fd) > REST_EPS).any())
 
     @property
     def mode(self) -> str:
@@ -685,8 +685,9 @@ class MotionCore:
                 self._step_trajectory()
             else:
                 self._step_generator()
-            self._update_monitor()
-            state = self._state()
+            moving = self._moving()  # once: the monitor's update changes none of its inputs
+            self._update_monitor(moving)
+            state = self._state(moving)
         self._run_deferred()
         return state
 
@@ -699,7 +700,8 @@ class MotionCore:
         self._qdd = a if qdd is None else np.asarray(qdd, float).copy()
 
     def _hold(self) -> None:
-        self._apply(self._q.copy(), np.zeros(N_JOINTS), np.zeros(N_JOINTS))
+        if self._v_fd.any() or self._qd.any() or self._qdd.any():  # else held already: nothing changes
+            self._apply(self._q.copy(), np.zeros(N_JOINTS), np.zeros(N_JOINTS))
 
     def _command(self, qn: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None) -> Breach | None:
         """The one way a trajectory or generated sample becomes the setpoint: applied only if
@@ -812,13 +814,13 @@ class MotionCore:
         if motion is not None:
             self._deferred += motion._finish(False, reason, self._state())
 
-    def _update_monitor(self) -> None:
+    def _update_monitor(self, moving: bool) -> None:
         """Let the monitor close transitional limits (``LimitMonitor.update``): in Alter
         motion the state counts once it follows a plan made with the current limits;
         trajectories and stops keep the wider limits until rest."""
         on_current_plan = (self._mode == "alter" and self._gen is not None and self._gen_kind == "alter"
                            and self._gen_version == self._lim_version and not self._target_pending)
-        self._monitor.update(self._lim, self._moving(), on_current_plan, self._v_fd, self._qd, self._qdd)
+        self._monitor.update(self._lim, moving, on_current_plan, self._v_fd, self._qd, self._qdd)
 
     # ------------------------------------------------------------------ fast-forward helpers
     def run(self, cycles: int) -> list[CoreState]:
