@@ -112,7 +112,7 @@ class PingReply(Struct):
 
 class JointState(Struct):
     """Published by the driver on ``rob6/<id>/driver/state`` every controller cycle; at rest
-    (nothing but ``t`` and ``cycle`` changed) every ``REST_STATE_PERIOD_S`` (40 ms)."""
+    (nothing but ``t`` and ``cycle`` changed) every ``REST_STATE_PERIOD_S`` (100 ms)."""
 
     t: float  # driver clock, seconds
     cycle: int

@@ -1,6 +1,6 @@
 """The latest joint state of the robot, kept from the driver's publications.
 
-The driver publishes its state every controller cycle (at rest every 40 ms); the gateway,
+The driver publishes its state every controller cycle (at rest every 100 ms); the gateway,
 which answers position and status reads, keeps the newest one instead of asking.
 """
 

@@ -91,6 +91,7 @@ def test_recorder_killed_and_restarted_mid_session_loses_no_client_record(tmp_pa
     cycles = sorted({r.data["cycle"] for r in _records(tmp_path, "/driver/joint_state", "_system")})
     cycle_s = get_robot("kr16").cycle_s
     longest = max(b - a for a, b in zip(cycles, cycles[1:], strict=False)) * cycle_s
-    assert len(cycles) > 100 and longest <= REST_STATE_PERIOD_S + cycle_s + 1e-9, f"no joint state for {longest:.3f} s"
+    assert (cycles[-1] - cycles[0]) * cycle_s > 5.0, "the joint states do not cover the session"
+    assert longest <= REST_STATE_PERIOD_S + cycle_s + 1e-9, f"no joint state for {longest:.3f} s"
     # what the recorder knew it missed is on its status channel: nothing here
     assert not [s for s in status if s.get("missed")], status

@@ -96,7 +96,7 @@ def _joint_states(messages: queue.Queue[Any], until: Any) -> Any:
 def test_joint_states_follow_an_old_client(system: System) -> None:
     subscriber, messages = _subscribe("/joint_states", "sensor_msgs/msg/JointState")
     try:
-        first = messages.get(timeout=WAIT_S)  # the driver's state at rest comes every 40 ms
+        first = messages.get(timeout=WAIT_S)  # the driver's state at rest comes every 100 ms
         assert list(first.name) == [f"joint_{i}" for i in range(1, 7)]
         target = [10.0, -60.0, 80.0, 20.0, 40.0, 30.0]
         client = Client(system.port)

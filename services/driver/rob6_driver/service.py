@@ -55,10 +55,12 @@ log = logging.getLogger("rob6.driver")
 STOPPING = "waiting for the arm to stop"
 #: a state that differs from the last one published only in its time and cycle (the robot
 #: at rest) is published this often, not every cycle: each subscriber of a 250 Hz stream
-#: (gateway, recorder, live view) pays 2-4 % of a core for it (issue 13). Nothing is lost:
-#: until the next state, the robot is where the last one says. Below the gateway's
-#: rob6.state.STATE_STALE_S, so a silent driver is still told from a resting robot.
-REST_STATE_PERIOD_S = 0.04
+#: (gateway, recorder, live view) pays 2-4 % of a core for it (issue 13), and each state at
+#: rest costs the recorder its trace batch (docs/PERFORMANCE.md, "The idle system"). 10 Hz,
+#: the rate of ROS's joint_state_publisher. Nothing is lost: until the next state, the robot
+#: is where the last one says. Well below the gateway's rob6.state.STATE_STALE_S (two states
+#: may go missing), so a silent driver is still told from a resting robot.
+REST_STATE_PERIOD_S = 0.1
 #: at most this long a switched output waits for the next cycle's state to carry it
 SIGNAL_PUBLISH_WAIT_S = 0.5
 

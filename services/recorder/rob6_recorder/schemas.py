@@ -193,7 +193,7 @@ def struct_schema(struct: type[msgspec.Struct], title: str) -> dict[str, Any]:
     return out
 
 
-#: Driver state every cycle, at rest every 40 ms (``/driver/joint_state``); degrees and degrees/s. Plot q[0]..q[5].
+#: Driver state every cycle, at rest every 100 ms (``/driver/joint_state``); degrees and degrees/s. Plot q[0]..q[5].
 #: Fields at their default are left out (link connected, late 0...).
 JOINT_STATE = struct_schema(JointState, "rob6.JointState")
 #: An event of the driver's link to the robot (``/driver/link``).

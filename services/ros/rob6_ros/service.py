@@ -6,7 +6,7 @@ session, in rmw_zenoh's format (``rmw``):
 * ``joint_states`` (sensor_msgs/JointState): the URDF's joint names, positions in radians
   (rob6's URDF joint value is the robot's joint angle, ``rob6_kinematics.urdf``) and
   velocities in rad/s, from the driver's state; at most ``max_rate_hz`` (100 Hz) while the
-  arm moves, and every state the driver publishes at rest (25 Hz);
+  arm moves, and every state the driver publishes at rest (10 Hz);
 * ``robot_description`` (std_msgs/String, transient local, depth 1): the URDF rob6 already
   has, kept by the publisher for late joiners as rmw_zenoh does.
 

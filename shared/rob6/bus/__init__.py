@@ -4,7 +4,7 @@ Key expressions (``<id>`` is the robot id, so several robots share one network):
 
     rob6/<id>/<service>/<instance>/<op>    queryable of one service instance (requests)
     rob6/<id>/alive/<service>/<instance>   liveliness token: the instance is up
-    rob6/<id>/driver/state                 joint state, every driver cycle (at rest 25 Hz)
+    rob6/<id>/driver/state                 joint state, every driver cycle (at rest 10 Hz)
     rob6/<id>/gripper/state                gripper state
     rob6/<id>/control/<name>               verbosity, shutdown (gateway -> all)
     rob6/<id>/trace/<service>              the records below, in batches (recorder)
