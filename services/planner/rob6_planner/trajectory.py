@@ -132,37 +132,29 @@ def sample_profiles(traj: ruckig.Trajectory, times: np.ndarray) -> tuple[np.ndar
     """Vectorised sampling of a Ruckig trajectory (no brake phase) at sorted ``times``.
 
     Uses the 7-phase constant-jerk profiles of each DoF; after a profile's end the DoF
-    keeps its final state (rest, for our position targets).
-    -> q, qd, qdd arrays (len(times), dofs). Agrees with ``Trajectory.at_time`` to ~1e-13.
+    keeps its final state (rest, for our position targets). Every DoF at once: a move's
+    planning is on the request path, and a numpy call costs more than its arithmetic here.
+    -> q, qd, qdd arrays (len(times), dofs). Agrees with ``Trajectory.at_time`` to ~1e-12.
     """
     profiles = traj.profiles[0]
+    if any(prof.brake.duration > 0.0 for prof in profiles):
+        raise ValueError("brake phase present: use Trajectory.at_time")
     dofs = len(profiles)
     times = np.asarray(times, float)
     n = len(times)
-    tab = np.empty((dofs, 7, 6))  # per phase: start time, duration, p, v, a, j
-    idx = np.empty((n, dofs), dtype=np.intp)
-    phases = np.arange(7)
-    for d, prof in enumerate(profiles):
-        if prof.brake.duration > 0.0:
-            raise ValueError("brake phase present: use Trajectory.at_time")
-        t = prof.t
-        tab[d, :, 1] = t
-        tab[d, :, 2] = prof.p[:7]
-        tab[d, :, 3] = prof.v[:7]
-        tab[d, :, 4] = prof.a[:7]
-        tab[d, :, 5] = prof.j
-        cum = np.cumsum(tab[d, :, 1])
-        tab[d, 0, 0] = 0.0
-        tab[d, 1:, 0] = cum[:6]
-        # sample k is in phase i when start_i <= t_k < start_{i+1} (the last phase is open)
-        bounds = np.searchsorted(times, cum[:6], side="left")
-        counts = np.diff(np.concatenate(([0], bounds, [n])))
-        idx[:, d] = np.repeat(phases, counts) + 7 * d
-    flat = tab.reshape(dofs * 7, 6)
-    start, dur, P, V, A, J = (np.ascontiguousarray(flat[:, k]).take(idx) for k in range(6))
-    # in-place Horner evaluation (large temporaries are what costs here)
-    tau = start
-    np.subtract(times[:, None], start, out=tau)
+    tab = np.empty((dofs, 7, 6))  # per DoF and phase: start time, duration, p, v, a, j
+    tab[:, :, 1:] = np.array([(prof.t, prof.p[:7], prof.v[:7], prof.a[:7], prof.j)
+                              for prof in profiles]).transpose(0, 2, 1)
+    ends = np.cumsum(tab[:, :, 1], axis=1)
+    tab[:, 0, 0] = 0.0
+    tab[:, 1:, 0] = ends[:, :6]
+    # sample k is in phase i when start_i <= t_k < start_{i+1} (the last phase is open):
+    # per DoF, its samples run through the 7 phases in turn, counts[d, i] of them in phase i
+    counts = np.diff(np.searchsorted(times, ends[:, :6], side="left"), prepend=0, append=n, axis=1)
+    idx = np.repeat(np.arange(dofs * 7), counts.ravel()).reshape(dofs, n).T
+    start, dur, P, V, A, J = np.moveaxis(tab.reshape(dofs * 7, 6)[idx], 2, 0)
+    # in-place Horner evaluation (large temporaries are what costs on long moves)
+    tau = times[:, None] - start
     np.minimum(tau, dur, out=tau)
     qdd = tau * J
     qdd += A
@@ -173,8 +165,7 @@ def sample_profiles(traj: ruckig.Trajectory, times: np.ndarray) -> tuple[np.ndar
     qd += V
     q = tau * J
     q *= 1.0 / 6.0
-    A *= 0.5
-    q += A
+    q += 0.5 * A
     q *= tau
     q += V
     q *= tau
@@ -248,27 +239,22 @@ def check_target(q0: ArrayLike, q1: ArrayLike, config: Limits, pattern: Sequence
     (MovePTPJointsStatus) for the target's status computed from its joints, as the
     original (REFERENCE.md 6.4, 6.6).
     """
-    q0 = np.asarray(q0, float)
-    q1 = np.asarray(q1, float)
-    if q1.shape != (N_JOINTS,) or not np.all(np.isfinite(q1)):
+    goal = np.asarray(q1, float)
+    if goal.shape != (N_JOINTS,) or not np.isfinite(goal).all():
         return "target is not 6 finite joint values"
-    lo = np.asarray(config.turn_min, float)
-    hi = np.asarray(config.turn_max, float)
-    bad = ~((q1 > lo) & (q1 < hi))
-    if bad.any():
-        j = int(np.argmax(bad))
-        return f"joint {j + 1} target {q1[j]:.6f} outside turn limits ({lo[j]:g}, {hi[j]:g})"
-    change = np.abs(q1 - q0)
-    mc = np.asarray(config.max_change, float)
-    bad = change > mc + MAX_CHANGE_EPS
-    if bad.any():
-        j = int(np.argmax(bad))
-        return f"joint {j + 1} change {change[j]:.6f} exceeds max change {mc[j]:g}"
+    # six numbers: plain Python, cheaper than numpy's calls on the request path
+    end, start = goal.tolist(), np.asarray(q0, float).tolist()
+    for j, (q, lo, hi) in enumerate(zip(end, config.turn_min, config.turn_max, strict=True)):
+        if not lo < q < hi:
+            return f"joint {j + 1} target {q:.6f} outside turn limits ({lo:g}, {hi:g})"
+    for j, (a, b, most) in enumerate(zip(start, end, config.max_change, strict=True)):
+        if abs(b - a) > most + MAX_CHANGE_EPS:
+            return f"joint {j + 1} change {abs(b - a):.6f} exceeds max change {most:g}"
     robot = getattr(config, "robot", None)
     allowed = getattr(config, "allowed", None)
     if robot is not None and (allowed is not None or pattern is not None):
-        target = robot.status(tuple(q1))
-        current = robot.status(tuple(q0))
+        target = robot.status(end)
+        current = robot.status(start)
         for name, pat in (("allowed status", allowed), ("status", pattern)):
             if pat is not None and not status_matches(pat, target, current):
                 return f"target status {' '.join(target)} does not match the {name} {' '.join(pat)}"
@@ -318,31 +304,29 @@ class TrajectoryPlanner:
             reason = check_target(q0, q1, config, pattern)
             if reason:
                 return PlanResult(False, reason)
-        delta = q1 - q0
-        moving = np.abs(delta) > SAME_EPS
-        if not moving.any():
+        # six joints: plain Python, cheaper than numpy's calls on the request path
+        start, end = q0.tolist(), q1.tolist()
+        moving = [abs(b - a) > SAME_EPS for a, b in zip(start, end, strict=True)]
+        if not any(moving):
             traj = SampledTrajectory.still(q1, self.dt)
             return PlanResult(True, trajectory=traj, info={"duration": 0.0})
-        lim = self.limits(config)
-        stuck = moving & ~((lim.vmax > MIN_LIMIT) & (lim.amax > MIN_LIMIT))
-        if stuck.any():
-            j = int(np.argmax(stuck))
-            return PlanResult(False, f"joint {j + 1} cannot move: max speed or acceleration is 0")
+        speed, accel = speed_si(config.speed), accel_si(config.accel)
+        jerk = jerk_si(accel, self.jerk_ramp_s)
+        for j, (m, v, a) in enumerate(zip(moving, speed, accel, strict=True)):
+            if m and not (v > MIN_LIMIT and a > MIN_LIMIT):
+                return PlanResult(False, f"joint {j + 1} cannot move: max speed or acceleration is 0")
         inp = self._inp
-        # joints that do not move get harmless nonzero limits (Ruckig needs > 0)
-        vmax = np.where(moving, lim.vmax, 1.0)
-        amax = np.where(moving, lim.amax, 1.0)
-        jmax = np.where(moving, lim.jmax, 1.0)
-        target = np.where(moving, q1, q0)
-        inp.current_position = q0.tolist()
+        # joints that do not move stay where they are, with harmless nonzero limits (Ruckig needs > 0)
+        target = [b if m else a for m, a, b in zip(moving, start, end, strict=True)]
+        inp.current_position = start
         inp.current_velocity = [0.0] * N_JOINTS
         inp.current_acceleration = [0.0] * N_JOINTS
-        inp.target_position = target.tolist()
+        inp.target_position = target
         inp.target_velocity = [0.0] * N_JOINTS
         inp.target_acceleration = [0.0] * N_JOINTS
-        inp.max_velocity = vmax.tolist()
-        inp.max_acceleration = amax.tolist()
-        inp.max_jerk = jmax.tolist()
+        inp.max_velocity = [v if m else 1.0 for m, v in zip(moving, speed, strict=True)]
+        inp.max_acceleration = [a if m else 1.0 for m, a in zip(moving, accel, strict=True)]
+        inp.max_jerk = [x if m else 1.0 for m, x in zip(moving, jerk, strict=True)]
         try:
             result = self._otg.calculate(inp, self._traj)
         except Exception as exc:  # ruckig raises on invalid input
@@ -354,10 +338,8 @@ class TrajectoryPlanner:
             return PlanResult(False, f"move would take {duration:.6g} s (limit {self.max_duration_s:g} s)")
         # rest-to-rest profiles are monotone; make sure nothing leaves the limits anyway
         ext = self._traj.position_extrema
-        lo_ext = np.array([b.min for b in ext])
-        hi_ext = np.array([b.max for b in ext])
-        bad = turn_limit_violation(np.vstack([lo_ext, hi_ext]), config.turn_min, config.turn_max,
-                                   start=q0) if check else None
+        bad = turn_limit_violation([[b.min for b in ext], [b.max for b in ext]], config.turn_min,
+                                   config.turn_max, start=q0) if check else None
         if bad is not None:
             return PlanResult(False, f"joint {bad[1] + 1} would leave its turn limits on the way")
         info = {"duration": duration}
