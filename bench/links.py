@@ -22,6 +22,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+import zenoh
 
 from harness.ports import free_port
 from harness.system import running
@@ -32,6 +33,9 @@ from .tables import Row, Table
 from .viewer import Viewer
 
 START = "0 -80 100 0 30 0"
+#: more joint_states than a stream's subscriber receives (at most 100 Hz while the arm moves):
+#: a full channel would hold up Zenoh's thread
+JOINT_STATES_KEPT = 100_000
 
 
 class ControllerSim:
@@ -75,10 +79,11 @@ def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> d
         ros_subscriber = None
         try:
             bus.wait_for(["driver"], 10)
-            if ros:  # a ROS 2 subscriber of joint_states (its own cost is its process's, not rob6's)
-                def count(_sample: object) -> None:
-                    joint_states[0] += 1
-                ros_subscriber = bus.session.declare_subscriber("0/joint_states/**", count)
+            if ros:  # a ROS 2 subscriber of joint_states: its messages wait in Zenoh's channel,
+                # counted at the end, so no Python of this process (the client's) runs for them
+                # while the client measures
+                ros_subscriber = bus.session.declare_subscriber(
+                    "0/joint_states/**", zenoh.handlers.FifoChannel(JOINT_STATES_KEPT))
             if link == "rsi":
                 kuka = ControllerSim("kuka_rsi_sim", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{udp}",
                                      "--start-pose", START.replace(" ", ","))
@@ -111,6 +116,8 @@ def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> d
                 client.ask("DisableAlter", timeout=10)
         finally:
             if ros_subscriber is not None:
+                while ros_subscriber.try_recv() is not None:
+                    joint_states[0] += 1
                 ros_subscriber.undeclare()
             bus.close()
             if kuka:
