@@ -310,8 +310,8 @@ class TrajectoryPlanner:
         if not any(moving):
             traj = SampledTrajectory.still(q1, self.dt)
             return PlanResult(True, trajectory=traj, info={"duration": 0.0})
-        speed, accel = speed_si(config.speed), accel_si(config.accel)
-        jerk = jerk_si(accel, self.jerk_ramp_s)
+        lim = self.limits(config)
+        speed, accel, jerk = lim.vmax.tolist(), lim.amax.tolist(), lim.jmax.tolist()
         for j, (m, v, a) in enumerate(zip(moving, speed, accel, strict=True)):
             if m and not (v > MIN_LIMIT and a > MIN_LIMIT):
                 return PlanResult(False, f"joint {j + 1} cannot move: max speed or acceleration is 0")
