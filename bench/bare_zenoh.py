@@ -1,13 +1,16 @@
-"""Bare Zenoh programs for the floors: a queryable, a recording process, and record batching.
+"""Bare Zenoh programs for the floors: a queryable, a relay, a recording process, record batching.
 
 The floor of a bus crossing is a bare query between two processes (``queryable`` answers
-``pong``). The floor of a *recorded* one adds what recording costs at its barest: both ends
+``pong``). The floor of a client command that crosses the bus once, as an Alter target
+does, is ``relay``: a TCP server that answers each line with a bare query to the queryable,
+received on the thread that read the line. The floor of a *recorded* one adds what recording costs at its barest: both ends
 queue a record of the exchange, a thread of each sends what gathered every
 ``TRACE_BATCH_S`` as one message (``Batcher``, as rob6's services batch their records), and a
 third process appends every batch to a file (``recorder``). Plain Zenoh and the standard
 library only: none of rob6's layers.
 
     python -m bench.bare_zenoh queryable SETTINGS_JSON [KEY]
+    python -m bench.bare_zenoh relay SETTINGS_JSON PORT
     python -m bench.bare_zenoh recorder SETTINGS_JSON FILE
 
 Each prints ``ready`` once declared and runs until its standard input closes.
@@ -16,6 +19,7 @@ Each prints ``ready`` once declared and runs until its standard input closes.
 from __future__ import annotations
 
 import json
+import socket
 import sys
 import threading
 import time
@@ -95,6 +99,33 @@ def queryable(session: zenoh.Session, key: str = QUERY_KEY) -> list[object]:
     return [batcher, session.declare_queryable(key, on_query)]
 
 
+def relay(session: zenoh.Session, port: int) -> socket.socket:
+    """A TCP server on loopback ``port``: each line a client sends is answered with
+    ``pong`` once ``QUERY_KEY`` has answered a query for it (one client at a time, blocking
+    reads and a blocking receive on one thread, as the gateway serves a session)."""
+    listener = socket.create_server(("127.0.0.1", port))
+
+    def serve() -> None:
+        while True:
+            try:
+                sock, _ = listener.accept()
+            except OSError:  # closed: the program ends
+                return
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            with sock:
+                sock.sendall(b"welcome\n")
+                pending = b""
+                while data := sock.recv(65536):
+                    pending += data
+                    while b"\n" in pending:
+                        _, pending = pending.split(b"\n", 1)
+                        replies = list(session.get(QUERY_KEY, consolidation=zenoh.ConsolidationMode.NONE))
+                        sock.sendall(b"pong\n" if len(replies) == 1 and replies[0].ok is not None else b"ERROR\n")
+
+    threading.Thread(target=serve, name="relay", daemon=True).start()
+    return listener
+
+
 def recorder(session: zenoh.Session, path: str) -> list[object]:
     """Every batch on ``RECORDS_KEY/*`` appended to the file ``path`` as it came."""
     out = open(path, "ab", buffering=0)  # noqa: SIM115  (open while the process runs; each batch written as it comes)
@@ -104,6 +135,13 @@ def recorder(session: zenoh.Session, path: str) -> list[object]:
 def main(argv: list[str]) -> None:
     role, settings = argv[0], json.loads(argv[1])
     session = open_peer(settings)
+    if role == "relay":
+        listener = relay(session, int(argv[2]))
+        print("ready", flush=True)
+        sys.stdin.read()
+        listener.close()
+        session.close()
+        return
     held = queryable(session, *argv[2:]) if role == "queryable" else recorder(session, argv[2])
     print("ready", flush=True)
     sys.stdin.read()

@@ -103,7 +103,7 @@ def peer_config(**settings: object) -> dict[str, object]:
 
 
 def bare_process(role: str, settings: dict[str, object], *args: str) -> subprocess.Popen[str]:
-    """A ``bench.bare_zenoh`` program (``queryable``, ``recorder``), ready when returned;
+    """A ``bench.bare_zenoh`` program (``queryable``, ``relay``, ``recorder``), ready when returned;
     it ends when its standard input closes (``end``)."""
     process = subprocess.Popen([sys.executable, "-m", "bench.bare_zenoh", role, json.dumps(settings), *args],
                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)

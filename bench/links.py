@@ -24,15 +24,18 @@ from typing import Any
 import numpy as np
 import zenoh
 
+from harness.client import Client
 from harness.ports import free_port
 from harness.system import running
 from rob6.messages import Empty, LinkQuery, LinkStatus
 
-from .latency import percentiles
+from .latency import bare_process, bare_queryable, end, peer_config, percentiles
 from .tables import Row, Table
 from .viewer import Viewer
 
 START = "0 -80 100 0 30 0"
+#: the stream's period: kr16rt's 4 ms cycle, 250 Hz
+ALTER_PERIOD_S = 0.004
 #: more joint_states than a stream's subscriber receives (at most 100 Hz while the arm moves):
 #: a full channel would hold up Zenoh's thread
 JOINT_STATES_KEPT = 100_000
@@ -60,6 +63,42 @@ class ControllerSim:
         self.control.close()
         self.proc.terminate()
         self.proc.wait(10)
+
+
+def paced(client: Client, lines: Sequence[str]) -> tuple[list[float], float]:
+    """Send ``lines`` one every ``ALTER_PERIOD_S``, each after the reply to the last, as a
+    send-and-wait Alter client streams: the round trips (s) and the time it all took."""
+    rtts = []
+    start = time.perf_counter()
+    for k, line in enumerate(lines):
+        sent = time.perf_counter()
+        client.send(line)
+        client.read_lines(1)
+        rtts.append(time.perf_counter() - sent)
+        delay = start + (k + 1) * ALTER_PERIOD_S - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+    return rtts, time.perf_counter() - start
+
+
+def paced_floor(seconds: float) -> tuple[float, float]:
+    """The floor of an Alter target, p50 / p99 ms: a line over TCP answered after one bare
+    Zenoh query between two processes (``bench.bare_zenoh relay`` and ``queryable``, linked
+    directly as the gateway and the driver are), sent as the stream sends (``paced``)."""
+    port, relay_port = free_port(), free_port()
+    server = bare_queryable(peer_config(**{"listen/endpoints": [f"tcp/127.0.0.1:{port}"]}))
+    relay = bare_process("relay", peer_config(**{"connect/endpoints": [f"tcp/127.0.0.1:{port}"]}), str(relay_port))
+    try:
+        with Client(relay_port, handshake=False) as client:
+            paced(client, ["warm-up\n"] * 250)
+            rtts, _ = paced(client, ["MoveRTJoints\n"] * int(seconds / ALTER_PERIOD_S))
+        end(relay)
+        end(server)
+        return percentiles(rtts)
+    finally:
+        for process in (relay, server):
+            process.kill()
+            process.wait()
 
 
 def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> dict[str, Any]:
@@ -98,18 +137,10 @@ def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> d
                 before = bus.request("driver", "state", Empty())
                 controller_before = kuka.status() if kuka else None
                 bus.request("driver", "link", LinkQuery(reset=True))
-                rtts, period, n = [], 0.004, int(seconds * 250)
-                start = time.perf_counter()
-                for k in range(n):
-                    line = "MoveRTJoints %f -80 100 0 30 0\n" % (5.0 * np.sin(2 * np.pi * 0.2 * k * period))
-                    sent = time.perf_counter()
-                    client.send(line)
-                    client.read_lines(1)
-                    rtts.append(time.perf_counter() - sent)
-                    delay = start + (k + 1) * period - time.perf_counter()
-                    if delay > 0:
-                        time.sleep(delay)
-                elapsed = time.perf_counter() - start
+                n = int(seconds / ALTER_PERIOD_S)
+                rtts, elapsed = paced(client, [
+                    "MoveRTJoints %f -80 100 0 30 0\n" % (5.0 * np.sin(2 * np.pi * 0.2 * k * ALTER_PERIOD_S))
+                    for k in range(n)])
                 after = bus.request("driver", "state", Empty())
                 status = bus.request("driver", "link", LinkQuery())
                 controller = kuka.status() if kuka else None
@@ -238,7 +269,12 @@ def adept_table(seconds: float, table: Table) -> None:
           ])
 
 
+#: how long the Alter floor is measured (3,750 lines)
+FLOOR_S = 15.0
+
+
 def links_table(seconds: float, table: Table) -> None:
+    floor = paced_floor(FLOOR_S)
     sim, rsi = stream("sim", seconds), stream("rsi", seconds)
     p50s, p99s = sim["rtt"]
     p50r, p99r = rsi["rtt"]
@@ -257,7 +293,11 @@ def links_table(seconds: float, table: Table) -> None:
               ("packet out -> answer in (controller) p50 / p99 / max, ms", "-",
                f"{crtt['p50']} / {crtt['p99']} / {crtt['max']}", ""),
               ("command -> target in the driver p50 / p99, ms", f"{p50s:.3f} / {p99s:.3f}",
-               f"{p50r:.3f} / {p99r:.3f}", "p99 <= 4 (one cycle)"),
+               f"{p50r:.3f} / {p99r:.3f}", "p99 <= 4 (one cycle); issue 25: p99 <= 1"),
+              (f"floor: a line over TCP + one bare Zenoh query, sent the same way ({FLOOR_S:.0f} s) p50 / p99, ms",
+               "%.3f / %.3f" % floor, "%.3f / %.3f" % floor, ""),
+              ("command -> target / floor, p50 / p99", f"{p50s / floor[0]:.2f}x / {p99s / floor[1]:.2f}x",
+               f"{p50r / floor[0]:.2f}x / {p99r / floor[1]:.2f}x", ""),
           ])
 
 
