@@ -29,7 +29,7 @@ from harness.ports import free_port
 from harness.system import running
 from rob6.messages import Empty, LinkQuery, LinkStatus
 
-from .latency import bare_process, bare_queryable, end, peer_config, percentiles
+from .latency import REACH_S, bare_process, bare_queryable, end, peer_config, percentiles
 from .tables import Row, Table
 from .viewer import Viewer
 
@@ -65,16 +65,19 @@ class ControllerSim:
         self.proc.wait(10)
 
 
-def paced(client: Client, lines: Sequence[str]) -> tuple[list[float], float]:
+def paced(client: Client, lines: Sequence[str], expect: str | None = None) -> tuple[list[float], float]:
     """Send ``lines`` one every ``ALTER_PERIOD_S``, each after the reply to the last, as a
-    send-and-wait Alter client streams: the round trips (s) and the time it all took."""
+    send-and-wait Alter client streams: the round trips (s) and the time it all took.
+    ``expect``: the one reply each line must get (RuntimeError otherwise)."""
     rtts = []
     start = time.perf_counter()
     for k, line in enumerate(lines):
         sent = time.perf_counter()
         client.send(line)
-        client.read_lines(1)
+        reply = client.read_lines(1)
         rtts.append(time.perf_counter() - sent)
+        if expect is not None and reply != expect:
+            raise RuntimeError(f"{line.strip()!r} answered {reply!r}, not {expect!r}")
         delay = start + (k + 1) * ALTER_PERIOD_S - time.perf_counter()
         if delay > 0:
             time.sleep(delay)
@@ -90,8 +93,13 @@ def paced_floor(seconds: float) -> tuple[float, float]:
     relay = bare_process("relay", peer_config(**{"connect/endpoints": [f"tcp/127.0.0.1:{port}"]}), str(relay_port))
     try:
         with Client(relay_port, handshake=False) as client:
-            paced(client, ["warm-up\n"] * 250)
-            rtts, _ = paced(client, ["MoveRTJoints\n"] * int(seconds / ALTER_PERIOD_S))
+            deadline = time.monotonic() + REACH_S
+            while client.ask("reached?") != "pong\n":  # the two peers link a moment after they open
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"the bare queryable did not answer the relay within {REACH_S:.0f} s")
+                time.sleep(0.05)
+            paced(client, ["warm-up\n"] * 250, "pong\n")
+            rtts, _ = paced(client, ["MoveRTJoints\n"] * int(seconds / ALTER_PERIOD_S), "pong\n")
         end(relay)
         end(server)
         return percentiles(rtts)
