@@ -1,13 +1,13 @@
 """Bare Zenoh programs for the floors: a queryable, a relay, a recording process, record batching.
 
 The floor of a bus crossing is a bare query between two processes (``queryable`` answers
-``pong``). The floor of a client command that crosses the bus once, as an Alter target
-does, is ``relay``: a TCP server that answers each line with a bare query to the queryable,
-received on the thread that read the line. The floor of a *recorded* one adds what recording costs at its barest: both ends
+``pong``). The floor of a *recorded* one adds what recording costs at its barest: both ends
 queue a record of the exchange, a thread of each sends what gathered every
 ``TRACE_BATCH_S`` as one message (``Batcher``, as rob6's services batch their records), and a
-third process appends every batch to a file (``recorder``). Plain Zenoh and the standard
-library only: none of rob6's layers.
+third process appends every batch to a file (``recorder``). The floor of a client's command
+that crosses the bus once, as an Alter target does, is ``relay``: a TCP server that answers
+each line after a bare query to the queryable, received on the thread that read the line.
+Plain Zenoh and the standard library only: none of rob6's layers.
 
     python -m bench.bare_zenoh queryable SETTINGS_JSON [KEY]
     python -m bench.bare_zenoh relay SETTINGS_JSON PORT
@@ -135,18 +135,16 @@ def recorder(session: zenoh.Session, path: str) -> list[object]:
 def main(argv: list[str]) -> None:
     role, settings = argv[0], json.loads(argv[1])
     session = open_peer(settings)
-    if role == "relay":
-        listener = relay(session, int(argv[2]))
-        print("ready", flush=True)
-        sys.stdin.read()
-        listener.close()
-        session.close()
-        return
-    held = queryable(session, *argv[2:]) if role == "queryable" else recorder(session, argv[2])
+    if role == "queryable":
+        held = queryable(session, *argv[2:])
+    elif role == "relay":
+        held = [relay(session, int(argv[2]))]
+    else:
+        held = recorder(session, argv[2])
     print("ready", flush=True)
     sys.stdin.read()
     for item in held:
-        if isinstance(item, Batcher):
+        if isinstance(item, (Batcher, socket.socket)):
             item.close()
     session.close()
 
