@@ -148,7 +148,7 @@ def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> d
                 n = int(seconds / ALTER_PERIOD_S)
                 rtts, elapsed = paced(client, [
                     "MoveRTJoints %f -80 100 0 30 0\n" % (5.0 * np.sin(2 * np.pi * 0.2 * k * ALTER_PERIOD_S))
-                    for k in range(n)])
+                    for k in range(n)], "true\n")
                 after = bus.request("driver", "state", Empty())
                 status = bus.request("driver", "link", LinkQuery())
                 controller = kuka.status() if kuka else None
