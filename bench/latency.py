@@ -15,10 +15,13 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import zenoh
 
 from harness.client import Client
+from harness.ports import free_port
 from rob6.bus.trace import TRACE_BATCH_S
 
 from .bare_zenoh import QUERY_KEY, RECORD, Batcher, open_peer
@@ -114,6 +117,23 @@ def bare_process(role: str, settings: dict[str, object], *args: str) -> subproce
 def bare_queryable(settings: dict[str, object]) -> subprocess.Popen[str]:
     """A process with one queryable, ``bench/bare``, answering ``pong`` (``bench.bare_zenoh``)."""
     return bare_process("queryable", settings)
+
+
+@contextmanager
+def bare_relay() -> Iterator[tuple[int, subprocess.Popen[str]]]:
+    """A ``bench.bare_zenoh`` relay linked directly to a bare queryable: yields the relay's
+    TCP port and the queryable's process; both must end cleanly afterwards (``end``)."""
+    port, relay_port = free_port(), free_port()
+    server = bare_queryable(peer_config(**{"listen/endpoints": [f"tcp/127.0.0.1:{port}"]}))
+    relay = bare_process("relay", peer_config(**{"connect/endpoints": [f"tcp/127.0.0.1:{port}"]}), str(relay_port))
+    try:
+        yield relay_port, server
+        end(relay)
+        end(server)
+    finally:
+        for process in (relay, server):
+            process.kill()
+            process.wait()
 
 
 def end(process: subprocess.Popen[str]) -> None:

@@ -29,7 +29,7 @@ from harness.ports import free_port
 from harness.system import running
 from rob6.messages import Empty, LinkQuery, LinkStatus
 
-from .latency import REACH_S, bare_process, bare_queryable, end, peer_config, percentiles
+from .latency import REACH_S, bare_relay, percentiles
 from .tables import Row, Table
 from .viewer import Viewer
 
@@ -88,25 +88,15 @@ def paced_floor(seconds: float) -> tuple[float, float]:
     """The floor of an Alter target, p50 / p99 ms: a line over TCP answered after one bare
     Zenoh query between two processes (``bench.bare_zenoh relay`` and ``queryable``, linked
     directly as the gateway and the driver are), sent as the stream sends (``paced``)."""
-    port, relay_port = free_port(), free_port()
-    server = bare_queryable(peer_config(**{"listen/endpoints": [f"tcp/127.0.0.1:{port}"]}))
-    relay = bare_process("relay", peer_config(**{"connect/endpoints": [f"tcp/127.0.0.1:{port}"]}), str(relay_port))
-    try:
-        with Client(relay_port, handshake=False) as client:
-            deadline = time.monotonic() + REACH_S
-            while client.ask("reached?") != "pong\n":  # the two peers link a moment after they open
-                if time.monotonic() > deadline:
-                    raise RuntimeError(f"the bare queryable did not answer the relay within {REACH_S:.0f} s")
-                time.sleep(0.05)
-            paced(client, ["warm-up\n"] * 250, "pong\n")
-            rtts, _ = paced(client, ["MoveRTJoints\n"] * int(seconds / ALTER_PERIOD_S), "pong\n")
-        end(relay)
-        end(server)
-        return percentiles(rtts)
-    finally:
-        for process in (relay, server):
-            process.kill()
-            process.wait()
+    with bare_relay() as (relay_port, _), Client(relay_port, handshake=False) as client:
+        deadline = time.monotonic() + REACH_S
+        while client.ask("reached?") != "pong\n":  # the two peers link a moment after they open
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the bare queryable did not answer the relay within {REACH_S:.0f} s")
+            time.sleep(0.05)
+        paced(client, ["warm-up\n"] * 250, "pong\n")
+        rtts, _ = paced(client, ["MoveRTJoints\n"] * int(seconds / ALTER_PERIOD_S), "pong\n")
+    return percentiles(rtts)
 
 
 def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> dict[str, Any]:
