@@ -28,14 +28,15 @@ from harness.client import Client
 from harness.ports import free_port
 from harness.system import running
 from rob6.messages import Empty, LinkQuery, LinkStatus
+from rob6.robots import get_robot
 
 from .latency import REACH_S, bare_relay, percentiles
 from .tables import Row, Table
 from .viewer import Viewer
 
 START = "0 -80 100 0 30 0"
-#: the stream's period: kr16rt's 4 ms cycle, 250 Hz
-ALTER_PERIOD_S = 0.004
+#: the stream's period: one target per cycle of kr16rt (4 ms, 250 Hz)
+ALTER_PERIOD_S = get_robot("kr16rt").cycle_s
 #: more joint_states than a stream's subscriber receives (at most 100 Hz while the arm moves):
 #: a full channel would hold up Zenoh's thread
 JOINT_STATES_KEPT = 100_000
