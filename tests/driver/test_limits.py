@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rob6.robots import get_robot
-from rob6_driver.limits import Breach, LimitMonitor, Limits, within
+from rob6_driver.limits import OUTSIDE_TOL, Breach, LimitMonitor, Limits, turn_bad, within
 from rob6_driver.motion import MotionCore
 
 DT = 0.01
@@ -165,6 +165,31 @@ def test_turn_limits_crossed_by_a_stop_are_widened_just_enough_then_close_at_res
     current = Limits(lo, hi, mon.enforced.vmax, mon.enforced.amax, mon.enforced.jmax, mon.enforced.max_change)
     mon.update(current, moving=False, on_current_plan=False, v_prev=ZERO, qd=ZERO, qdd=ZERO)
     assert mon.enforced.turn_max[2] == 3.0
+
+
+def joint_respects_turn(low: float, high: float, lo: float, hi: float, start: float) -> bool:
+    """The turn rule read joint by joint from the module's docstring: strict limits, but a
+    joint starting on or outside one may only move back inwards."""
+    low_ok = low >= start - OUTSIDE_TOL if start <= lo else low > lo
+    high_ok = high <= start + OUTSIDE_TOL if start >= hi else high < hi
+    return low_ok and high_ok
+
+
+def test_the_turn_checks_follow_the_rule_inside_on_and_outside_the_limits() -> None:
+    """``turn_bad`` and ``within`` take a shortcut for samples strictly inside (every cycle's
+    case); with starts and samples inside, on and outside the limits they still say what
+    the rule says."""
+    rng = np.random.default_rng(25)
+    lo, hi = np.full(6, -10.0), np.full(6, 10.0)
+    values = np.array([-10.5, -10.0, -10.0 + 1e-12, -9.0, 0.0, 9.0, 10.0 - 1e-12, 10.0, 10.5])
+    for _ in range(3000):
+        start, a, b = (rng.choice(values, 6) for _ in range(3))
+        low, high = np.minimum(a, b), np.maximum(a, b)
+        rule = [joint_respects_turn(low[j], high[j], lo[j], hi[j], start[j]) for j in range(6)]
+        assert within(low, high, lo, hi, start) == all(rule)
+        single = [joint_respects_turn(a[j], a[j], lo[j], hi[j], start[j]) for j in range(6)]
+        first_bad = next((j for j, ok in enumerate(single) if not ok), None)
+        assert turn_bad(a[None], lo, hi, start) == (None if first_bad is None else (0, first_bad))
 
 
 # ---------------------------------------------------------------- the core cannot go around it

@@ -254,6 +254,8 @@ class LimitMonitor:
 # ====================================================================== turn-limit geometry
 def turn_bad(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, start: np.ndarray) -> tuple[int, int] | None:
     """First (row, joint) of q breaking the strict turn limits (start rule), or None."""
+    if ((q > lo) & (q < hi)).all():  # strictly inside passes whatever the start (the common case, cheap)
+        return None
     lo_ok = np.where(start <= lo, q >= start - OUTSIDE_TOL, q > lo)
     hi_ok = np.where(start >= hi, q <= start + OUTSIDE_TOL, q < hi)
     ok = lo_ok & hi_ok
@@ -277,4 +279,7 @@ def within_hi(qmax: np.ndarray, hi: np.ndarray, start: np.ndarray) -> np.ndarray
 
 def within(qmin: npt.ArrayLike, qmax: npt.ArrayLike, lo: np.ndarray, hi: np.ndarray, start: np.ndarray) -> bool:
     """Does a motion from ``start`` spanning ``qmin``..``qmax`` stay inside the turn limits?"""
-    return bool(np.all(within_lo(np.asarray(qmin), lo, start) & within_hi(np.asarray(qmax), hi, start)))
+    low, high = np.asarray(qmin), np.asarray(qmax)
+    if (low > lo).all() and (high < hi).all():  # strictly inside, whatever the start (cheap)
+        return True
+    return bool(np.all(within_lo(low, lo, start) & within_hi(high, hi, start)))

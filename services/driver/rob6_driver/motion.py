@@ -599,7 +599,7 @@ class MotionCore:
         """Ruckig input from the exact current state; axes that may not move are held."""
         inp = self._inp
         q, v, a = self._q, self._qd, self._qdd
-        vmax, amax = lim.vmax.copy(), lim.amax.copy()
+        vmax, amax = lim.vmax, lim.amax  # replaced, never changed in place
         # while the monitor still allows the old limits (transition), keep the old (higher)
         # jerk: a state from the old limits may need it to get within the new ones
         mon = self._monitor.enforced
@@ -853,8 +853,8 @@ def _consistent_state(v: np.ndarray, a: np.ndarray, vmax: np.ndarray, amax: np.n
     carry the velocity beyond vmax (otherwise Ruckig would start with a brake phase
     that overshoots the limits). A no-op (to rounding) for states of a valid trajectory.
     """
-    v = np.clip(v, -vmax, vmax)
-    a = np.clip(a, -amax, amax)
+    v = np.minimum(np.maximum(v, -vmax), vmax)  # np.clip's, without its wrappers' cost every cycle
+    a = np.minimum(np.maximum(a, -amax), amax)
     room = np.maximum(vmax - v * np.sign(a), 0.0)
     a_lim = np.sqrt(2.0 * jmax * room)
     a = np.sign(a) * np.minimum(np.abs(a), a_lim)
