@@ -64,6 +64,11 @@ def test_session_recorded_replayed_and_compared(tmp_path: Path) -> None:
         # log records travel with the traces (kept for a recorder that starts later)
         logs = [r.data for p in tmp_path.glob("*_system_*.mcap") for r in read_records(p, ["/log"])]
         assert any(r["service"] == "gateway" and r["message"].startswith("gateway listening on") for r in logs)
+        # what is published live (rob6.bus.LIVE_TOPICS), not traced: the planner's settings
+        # after SetJointsMaxSpeed, the gateway's verbosity sent to each service coming up
+        assert [r.data["speed"] for r in read_records(path, ["/planner/config"])] == [[0.1] * 6]
+        system_files = sorted(tmp_path.glob("*_system_*.mcap"))
+        assert any(r.data == {"level": 2} for p in system_files for r in read_records(p, ["/control/verbosity"]))
         same = _replay(path, system.port)
         assert same.returncode == 0, same.stdout + same.stderr
     with running("ad850", log_dir=str(tmp_path / "other")) as other:

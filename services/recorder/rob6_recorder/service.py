@@ -1,6 +1,7 @@
 """The recorder service: everything on the robot's bus into MCAP files.
 
-It subscribes to ``rob6/<id>/**``. Services publish a copy of each request/reply they
+It subscribes to what is published live (``rob6.bus.LIVE_TOPICS``: control messages, the
+planner's settings) and to the trace batches. Services publish a copy of each request/reply they
 served (``trace/<service>/<op>``), the gateway a copy of each client line and reply
 (``trace/gateway/session``) and of each session's start and end, in batches
 (``trace/<service>``, see ``rob6.bus``), and so do the driver and the gripper with each
@@ -21,7 +22,7 @@ from typing import Any
 import msgspec
 
 import rob6
-from rob6.bus import Bus, trace_records
+from rob6.bus import LIVE_TOPICS, Bus, trace_records
 from rob6.messages import ClientExchange, SessionEvent
 from rob6.robots import RobotModel
 
@@ -56,7 +57,8 @@ class RecorderService:
 
     def start(self) -> None:
         self.recorder.start()
-        self._subscriber = self.bus.subscribe("**", self.on_sample)
+        self._subscribers = [self.bus.subscribe(suffix, self.on_sample)
+                             for suffix in sorted(LIVE_TOPICS - TOPICS.keys())]
         self.bus.announce()
         # trace batches with what their publishers kept for a recorder that was away
         # (partitioned, restarted): a separate, advanced subscriber; "**" gets the rest
@@ -65,16 +67,15 @@ class RecorderService:
     def stop(self) -> None:
         # stop listening first, then write out what is queued: nothing arrives after the close
         self._traces.undeclare()
-        self._subscriber.undeclare()
+        for subscriber in self._subscribers:
+            subscriber.undeclare()
         self.recorder.close()
         if self.live is not None:
             self.live.close()
 
     def on_sample(self, key: str, payload: bytes) -> None:
-        suffix = key[self._prefix:]
-        if suffix in TOPICS or (suffix.startswith("trace/") and suffix.count("/") == 1):  # on_traces has it
-            return
-        self._record(suffix, payload, time.time_ns())
+        """A live publication (a control message, the planner's settings)."""
+        self._record(key[self._prefix:], payload, time.time_ns())
 
     def on_traces(self, key: str, payload: bytes) -> None:
         """One ``trace/<service>`` batch of records."""
@@ -115,7 +116,7 @@ class RecorderService:
                 submit(topic, log_time, data, publish_time)
         elif suffix.startswith("log/"):
             submit("/log", now, payload)
-        else:  # control messages, planner configuration, anything new: kept as it is
+        else:  # control messages, the planner's settings: kept as they are
             submit("/" + suffix, now, payload)
 
     def _client_exchange(self, exchange: ClientExchange) -> None:

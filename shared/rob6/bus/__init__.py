@@ -7,6 +7,7 @@ Key expressions (``<id>`` is the robot id, so several robots share one network):
     rob6/<id>/driver/state                 joint state, every driver cycle (at rest 10 Hz)
     rob6/<id>/gripper/state                gripper state
     rob6/<id>/control/<name>               verbosity, shutdown (gateway -> all)
+    rob6/<id>/planner/config               the planner's settings (tool, base, speeds...)
     rob6/<id>/trace/<service>              the records below, in batches (recorder)
 
 Records for the recorder (``Bus.trace``) leave in batches, one message per few
@@ -76,13 +77,14 @@ from .call import HEDGE_DELAY_S
 from .codec import new_cid
 from .core import Bus
 from .errors import BusError, BusTimeout, CallAbandoned
-from .pubsub import decode
+from .pubsub import LIVE_TOPICS, decode
 from .serve import Context, Handler
 from .session import open_session, zenoh_config
 from .trace import trace_records
 
 __all__ = [
     "HEDGE_DELAY_S",
+    "LIVE_TOPICS",
     "Bus",
     "BusError",
     "BusTimeout",

@@ -22,6 +22,12 @@ from .liveliness import Liveliness
 
 log = logging.getLogger("rob6.bus")
 
+#: every suffix published live on ``rob6/<id>/<suffix>`` (``publish``), and nothing else may
+#: be: a subscriber that wants them all (the recorder) subscribes to these, not to ``**``,
+#: which would also bring it each state at 250 Hz and each trace batch a second time
+LIVE_TOPICS = frozenset({"driver/state", "gripper/state", "control/verbosity", "control/shutdown",
+                         "planner/config"})
+
 T = TypeVar("T")
 
 
@@ -42,6 +48,8 @@ class PubSub(Liveliness):
             return
         publisher = self._publishers.get(suffix)
         if publisher is None:
+            if suffix not in LIVE_TOPICS:
+                raise ValueError(f"{suffix!r} is not in rob6.bus.LIVE_TOPICS (add it there, so it is recorded)")
             congestion = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
             publisher = self._publishers[suffix] = self.session.declare_publisher(
                 self.key(suffix), congestion_control=congestion)
