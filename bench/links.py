@@ -67,10 +67,19 @@ class ControllerSim:
 
 
 def paced(client: Client, lines: Sequence[str], expect: str | None = None) -> tuple[list[float], float]:
-    """Send ``lines`` one every ``ALTER_PERIOD_S``, each after the reply to the last, as a
-    send-and-wait Alter client streams: the round trips (s) and the time it all took.
-    ``expect``: the one reply each line must get (RuntimeError otherwise)."""
+    """Send ``lines`` one a period, each after the reply to the last, as a send-and-wait Alter
+    client streams: the round trips (s) and the time it all took. ``expect``: the one reply
+    each line must get (RuntimeError otherwise).
+
+    The period is ``ALTER_PERIOD_S`` stretched by one part in ``len(lines)``: as if the
+    client's clock ran that much slower than the robot's, so the lines meet every phase of
+    the robot's cycle once. With the client and the driver on one clock at exactly one
+    cycle a line, a run would meet one phase throughout, and a target's time depends on
+    it: measured, p50 1.18-1.34 ms when the target reaches the driver between its cycles,
+    1.96-2.00 when it arrives as the next cycle runs (p99 4.3-5.4 and 8.8; docs/PERFORMANCE.md).
+    """
     rtts = []
+    period = ALTER_PERIOD_S * (1 + 1 / max(len(lines), 1))
     start = time.perf_counter()
     for k, line in enumerate(lines):
         sent = time.perf_counter()
@@ -79,7 +88,7 @@ def paced(client: Client, lines: Sequence[str], expect: str | None = None) -> tu
         rtts.append(time.perf_counter() - sent)
         if expect is not None and reply != expect:
             raise RuntimeError(f"{line.strip()!r} answered {reply!r}, not {expect!r}")
-        delay = start + (k + 1) * ALTER_PERIOD_S - time.perf_counter()
+        delay = start + (k + 1) * period - time.perf_counter()
         if delay > 0:
             time.sleep(delay)
     return rtts, time.perf_counter() - start
