@@ -61,7 +61,7 @@ class RecorderService:
                              for suffix in sorted(LIVE_TOPICS - TOPICS.keys())]
         self.bus.announce()
         # trace batches with what their publishers kept for a recorder that was away
-        # (partitioned, restarted): a separate, advanced subscriber; "**" gets the rest
+        # (partitioned, restarted): a separate, advanced subscriber; the live topics' get the rest
         self._traces = self.bus.subscribe_traces(self.on_traces, self.recorder.report_missed)
 
     def stop(self) -> None:
