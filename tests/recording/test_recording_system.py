@@ -18,7 +18,7 @@ from rob6_recorder.reader import read_records
 
 SCRIPT = ["GetRobot", "ForwardCalc 10 -60 80 20 40 30", "MovePTPJoints 10 -60 80 20 40 30",
           "GetPositionJoints", "GetStatus", "BackwardCalc 1 0 0 1000 0 1 0 0 0 0 1 500 noflip up lefty",
-          "SetJointsMaxSpeed 0.1 0.1 0.1 0.1 0.1 0.1", "GetJointsMaxSpeed", "Foo"]
+          "SetJointsMaxSpeed 0.1 0.1 0.1 0.1 0.1 0.1", "GetJointsMaxSpeed", "SetVerbosity 3", "Foo"]
 REPLY_LINES = {"ForwardCalc": 2}
 
 
@@ -65,10 +65,9 @@ def test_session_recorded_replayed_and_compared(tmp_path: Path) -> None:
         logs = [r.data for p in tmp_path.glob("*_system_*.mcap") for r in read_records(p, ["/log"])]
         assert any(r["service"] == "gateway" and r["message"].startswith("gateway listening on") for r in logs)
         # what is published live (rob6.bus.LIVE_TOPICS), not traced: the planner's settings
-        # after SetJointsMaxSpeed, the gateway's verbosity sent to each service coming up
-        assert [r.data["speed"] for r in read_records(path, ["/planner/config"])] == [[0.1] * 6]
-        system_files = sorted(tmp_path.glob("*_system_*.mcap"))
-        assert any(r.data == {"level": 2} for p in system_files for r in read_records(p, ["/control/verbosity"]))
+        # after SetJointsMaxSpeed, the gateway's verbosity after SetVerbosity
+        assert [r.data["speed"] for r in read_records(path, ["/planner/config"])][-1:] == [[0.1] * 6]
+        assert {"level": 3} in [r.data for r in read_records(path, ["/control/verbosity"])]
         same = _replay(path, system.port)
         assert same.returncode == 0, same.stdout + same.stderr
     with running("ad850", log_dir=str(tmp_path / "other")) as other:
