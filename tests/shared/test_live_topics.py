@@ -5,9 +5,10 @@ would never be recorded)."""
 from __future__ import annotations
 
 import queue
-import time
+import threading
 
 import pytest
+import zenoh
 
 from harness.system import zenoh_router
 from rob6.bus import LIVE_TOPICS, Bus
@@ -23,17 +24,26 @@ def test_a_topic_outside_the_live_topics_is_refused_and_one_inside_is_published(
 
         gateway, recorder = bus("gateway"), bus("recorder")
         try:
+            # a subscription reaches the publishing session a moment after it is made: Zenoh's
+            # matching listener, declared before it, says when it has
+            matched = threading.Event()
+
+            def on_matching(status: zenoh.MatchingStatus) -> None:
+                if status.matching:
+                    matched.set()
+
+            probe = gateway.session.declare_publisher(gateway.key("control/verbosity"))
+            listener = probe.declare_matching_listener(on_matching)
             received: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
             for suffix in LIVE_TOPICS:
                 recorder.subscribe(suffix, lambda key, payload: received.put((key, payload)))
             with pytest.raises(ValueError, match="LIVE_TOPICS"):
                 gateway.publish("control/new_thing", Verbosity(level=1))
-            deadline = time.monotonic() + 10
-            while received.empty():  # the subscription reaches the publisher a moment after it is made
-                assert time.monotonic() < deadline, "control/verbosity never arrived"
-                gateway.publish("control/verbosity", Verbosity(level=3))
-                time.sleep(0.05)
-            key, payload = received.get()
+            assert matched.wait(10), "the recorder's subscription never reached the gateway"
+            listener.undeclare()
+            probe.undeclare()
+            gateway.publish("control/verbosity", Verbosity(level=3))
+            key, payload = received.get(timeout=10)
             assert key.endswith("/control/verbosity") and payload == b'{"level":3}'
         finally:
             gateway.close()
