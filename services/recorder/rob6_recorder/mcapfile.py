@@ -28,6 +28,11 @@ from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 from .schemas import schema_for
 
 ROBOT_DESCRIPTION_TOPIC = "/robot_description"
+#: a chunk is compressed when it holds this much (or at the writer's next flush): 32 KiB
+#: keeps each compression to a fraction of a millisecond, where 1 MiB took milliseconds
+#: of one CPU that a request beside it could not have (docs/PERFORMANCE.md, "Recording");
+#: the files grow by about a tenth for it (more chunk headers and indexes)
+CHUNK_SIZE = 32 << 10
 
 _encoder = msgspec.json.Encoder()
 _decoder = msgspec.json.Decoder()
@@ -64,7 +69,7 @@ class McapFile:
 
     def __init__(self, path: str | os.PathLike[str], *, start_ns: int | None = None,
                  urdf: str | None = None, metadata: dict[str, dict[str, str]] | None = None,
-                 chunk_size: int = 1 << 20, compression: str = "zstd"):
+                 chunk_size: int = CHUNK_SIZE, compression: str = "zstd"):
         self.path = Path(path)
         self.start_ns = time.time_ns() if start_ns is None else start_ns
         self.opened = time.monotonic()

@@ -44,7 +44,7 @@ import msgspec
 
 from .derived_channels import JointStateDerivation
 from .files import RecordingFiles
-from .mcapfile import as_dict, encode
+from .mcapfile import CHUNK_SIZE, as_dict, encode
 from .schemas import to_foxglove_log
 from .transforms import Fk
 
@@ -53,6 +53,14 @@ log = logging.getLogger("rob6.recorder")
 JOINT_STATE_TOPIC = "/driver/joint_state"
 LOG_TOPIC = "/log"
 STATUS_TOPIC = "/recorder/status"
+
+#: while the writer keeps up it writes this many records, then pauses, so its work comes in
+#: slices of some 50 us with the CPU free between them: on this two-CPU machine a request
+#: beside the writer waited for the whole of each burst (docs/PERFORMANCE.md, "Recording")
+WRITE_SLICE = 8
+WRITE_PAUSE_S = 0.0002
+#: with more than this queued (a burst, a slow disk) it writes without pausing
+WRITE_PAUSE_BACKLOG = 2_000
 
 _encoder = msgspec.json.Encoder()
 
@@ -112,7 +120,7 @@ class Recorder:
                  joint_map: Sequence[tuple[float, float]] | None = None,
                  system: bool = True, sessions: bool = True,
                  rotate_bytes: int = 256 << 20, rotate_seconds: float = 3600.0,
-                 chunk_interval: float = 0.5, chunk_size: int = 1 << 20,
+                 chunk_interval: float = 0.5, chunk_size: int = CHUNK_SIZE,
                  compression: str = "zstd", fsync: bool = True,
                  max_backlog: int = 100_000, warn_backlog: int = 10_000,
                  session_linger: float = 0.5, tf_max_rate: float = 50.0,
@@ -289,7 +297,9 @@ class Recorder:
             n = len(queue)
             self._max_seen = max(self._max_seen, n)
             if n:
-                for _ in range(min(n, 20_000)):
+                for k in range(min(n, 20_000)):
+                    if k and k % WRITE_SLICE == 0 and len(queue) < WRITE_PAUSE_BACKLOG and not self._stop:
+                        time.sleep(WRITE_PAUSE_S)
                     item = queue.popleft()
                     if type(item) is tuple:
                         try:
