@@ -10,7 +10,8 @@
     rec.close()
 
 ``submit`` never blocks and never raises for a full queue: it appends to an
-unbounded-by-type but *count-bounded* deque that a writer thread drains. Above
+unbounded-by-type but *count-bounded* deque that a writer thread drains (in slices
+while it keeps up, ``WRITE_SLICE``). Above
 ``warn_backlog`` queued records it logs a warning (at most once a second); at
 ``max_backlog`` it drops the record, counts it per topic, logs it, and the writer
 thread writes the accounting into the recordings (``/recorder/status``) as soon as
