@@ -30,8 +30,8 @@ from .schemas import schema_for
 ROBOT_DESCRIPTION_TOPIC = "/robot_description"
 #: a chunk is compressed when it holds this much (or at the writer's next flush): 32 KiB
 #: keeps each compression to a fraction of a millisecond, where 1 MiB took milliseconds
-#: of one CPU that a request beside it could not have (docs/PERFORMANCE.md, "Recording");
-#: the files grow by about a tenth for it (more chunk headers and indexes)
+#: of one CPU that a request beside it could not have (docs/PERFORMANCE.md, "The
+#: recorder's writing"); the files grow by about a tenth for it (more chunk indexes)
 CHUNK_SIZE = 32 << 10
 
 _encoder = msgspec.json.Encoder()

@@ -57,7 +57,8 @@ STATUS_TOPIC = "/recorder/status"
 
 #: while the writer keeps up it writes this many records, then pauses, so its work comes in
 #: slices of some 50 us with the CPU free between them: on this two-CPU machine a request
-#: beside the writer waited for the whole of each burst (docs/PERFORMANCE.md, "Recording")
+#: beside the writer waited for the whole of each burst (docs/PERFORMANCE.md, "The
+#: recorder's writing")
 WRITE_SLICE = 8
 WRITE_PAUSE_S = 0.0002
 #: with more than this queued (a burst, a slow disk) it writes without pausing
