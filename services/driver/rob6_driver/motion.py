@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 import threading
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -517,21 +518,10 @@ class MotionCore:
             if not self._alter:
                 return False, "alter mode is not enabled"
             self._last_heard = self.t
-            try:
-                target = _six(q) + (self._q if relative else 0.0)
-            except ValueError as exc:
-                return False, str(exc)
-            lo, hi = self._lim.turn_min, self._lim.turn_max
-            bad = ~((target > lo) & (target < hi))
-            if bad.any():
-                j = int(np.argmax(bad))
-                return False, f"joint {j + 1} target {target[j]:.6f} outside turn limits ({lo[j]:g}, {hi[j]:g})"
-            step = np.abs(target - self._q)
-            far = step > self._lim.max_change
-            if far.any():
-                j = int(np.argmax(far))
-                return False, (f"joint {j + 1} target {target[j]:.6f} is {step[j]:.6f} deg away, "
-                               f"beyond the max change {self._lim.max_change[j]:g}")
+            checked, reason = _check_target(q, self._q.tolist(), relative, self._lim)
+            if checked is None:
+                return False, reason
+            target = np.array(checked)
             if synchronized is not None:
                 self._sync = bool(synchronized)
             self._watchdog_fired = False
@@ -843,6 +833,34 @@ def _six(values: npt.ArrayLike) -> np.ndarray:
     if arr.shape != (N_JOINTS,) or not np.all(np.isfinite(arr)):
         raise ValueError("expected 6 finite values")
     return arr
+
+
+def _check_target(q: npt.ArrayLike, current: list[float], relative: bool,
+                  lim: Limits) -> tuple[list[float] | None, str]:
+    """An Alter target ``q`` (``relative``: an offset from ``current``) checked against the
+    strict turn limits and the max change from ``current``: ``(target, "")``, or ``(None,
+    why)`` when it is refused.
+
+    Plain floats, not numpy: it runs for every target on the real-time path, where each
+    numpy call on six values costs microseconds (docs/PERFORMANCE.md, "Python run cold")."""
+    try:  # the bus's list of six numbers without numpy; anything else as numpy reads it
+        values = [float(v) for v in q] if isinstance(q, list) and len(q) == N_JOINTS else _six(q).tolist()
+    except (TypeError, ValueError):
+        values = []
+    if len(values) != N_JOINTS or not all(map(math.isfinite, values)):
+        return None, "expected 6 finite values"
+    target = [v + c for v, c in zip(values, current, strict=True)] if relative else values
+    lo, hi = lim.turn_min.tolist(), lim.turn_max.tolist()
+    for j, t in enumerate(target):
+        if not lo[j] < t < hi[j]:  # NaN and inf too
+            return None, f"joint {j + 1} target {t:.6f} outside turn limits ({lo[j]:g}, {hi[j]:g})"
+    max_change = lim.max_change.tolist()
+    for j, t in enumerate(target):
+        step = abs(t - current[j])
+        if step > max_change[j]:
+            return None, (f"joint {j + 1} target {t:.6f} is {step:.6f} deg away, "
+                          f"beyond the max change {max_change[j]:g}")
+    return target, ""
 
 
 def _consistent_state(v: np.ndarray, a: np.ndarray, vmax: np.ndarray, amax: np.ndarray,

@@ -16,12 +16,12 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from queue import SimpleQueue
-from typing import Any
+from typing import Any, NamedTuple
 
 import msgspec
 import zenoh
 
-from ..messages import OPS, SCHEMA_VERSION, ErrorBody, ReplyEnvelope, RequestEnvelope, Waiting
+from ..messages import OPS, SCHEMA_VERSION, ErrorBody, Op, ReplyEnvelope, RequestEnvelope, Waiting
 from .codec import WAITING, _encoder, _parametrize
 from .errors import BusError
 from .trace import Tracing
@@ -51,6 +51,14 @@ class Context:
 Handler = Callable[[Any, Context], Any]
 
 
+class _Served(NamedTuple):
+    """An operation this service answers: its handler, its spec, its requests' decoder
+    (each looked up once, at ``serve``, not with every request)."""
+
+    handler: Handler
+    spec: Op
+    decoder: msgspec.json.Decoder[Any]
+
 
 class Serving(Tracing):
     """A service's side of the bus (a mixin of ``Bus``): every request it serves is traced."""
@@ -71,13 +79,17 @@ class Serving(Tracing):
         if unknown:
             raise ValueError(f"operations not in rob6.messages.OPS: {unknown}")
         quick = frozenset(inline)
-        queue: SimpleQueue[zenoh.Query | None] = SimpleQueue()
+        served = {op: _Served(handler, OPS[(self.service, op)],
+                              self._decoder(_parametrize(RequestEnvelope, OPS[(self.service, op)].request)))
+                  for op, handler in handlers.items()}
+        queue: SimpleQueue[tuple[zenoh.Query, str] | None] = SimpleQueue()
 
         def on_query(query: zenoh.Query) -> None:
-            if str(query.key_expr).rsplit("/", 1)[-1] in quick:
-                self._answer(query, handlers)
+            op = str(query.key_expr).rsplit("/", 1)[-1]
+            if op in quick:
+                self._answer(query, op, served)
             else:
-                queue.put(query)
+                queue.put((query, op))
 
         def on_close() -> None:  # the session is going away: the workers end
             for _ in range(workers):
@@ -90,7 +102,7 @@ class Serving(Tracing):
         self._declared.append(self.session.declare_queryable(
             self.key(self.service, self.instance, "*"), zenoh.handlers.Callback(on_query, on_close), complete=True))
         for n in range(workers):
-            thread = threading.Thread(target=self._serve_loop, args=(queue, handlers),
+            thread = threading.Thread(target=self._serve_loop, args=(queue, served),
                                       name=f"{self.service}-worker-{n}", daemon=True)
             thread.start()
             self._workers.append(thread)
@@ -101,28 +113,28 @@ class Serving(Tracing):
         self._declared.append(self.session.liveliness().declare_token(
             self.key("alive", self.service, self.instance)))
 
-    def _serve_loop(self, queue: SimpleQueue[zenoh.Query | None], handlers: Mapping[str, Handler]) -> None:
-        while (query := queue.get()) is not None:
-            self._answer(query, handlers)
+    def _serve_loop(self, queue: SimpleQueue[tuple[zenoh.Query, str] | None],
+                    served: Mapping[str, _Served]) -> None:
+        while (item := queue.get()) is not None:
+            self._answer(*item, served)
 
-    def _answer(self, query: zenoh.Query, handlers: Mapping[str, Handler]) -> None:
+    def _answer(self, query: zenoh.Query, op: str, served: Mapping[str, _Served]) -> None:
         started = time.time()
-        op = str(query.key_expr).rsplit("/", 1)[-1]
         cid = ""
         raw = query.payload.to_bytes() if query.payload is not None else b""
         try:
-            spec = OPS.get((self.service, op))
-            if spec is None or op not in handlers:
+            if op not in served:
                 raise BusError("unknown_op", f"{self.service} has no operation {op!r}")
+            handler, spec, decoder = served[op]
             try:
-                envelope = self._decoder(_parametrize(RequestEnvelope, spec.request)).decode(raw)
+                envelope = decoder.decode(raw)
             except msgspec.DecodeError as exc:
                 raise BusError("schema", f"malformed {self.service}.{op} request: {exc}") from None
             cid = envelope.cid
             if envelope.v != SCHEMA_VERSION:
                 raise BusError("schema", f"schema version {envelope.v}, expected {SCHEMA_VERSION}")
             waiting = functools.partial(self._announce, query) if spec.waits else _no_announcement
-            body = handlers[op](envelope.body, Context(cid=cid, op=op, waiting=waiting))
+            body = handler(envelope.body, Context(cid=cid, op=op, waiting=waiting))
             reply: ReplyEnvelope[Any] = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=True, instance=self.instance, body=body)
         except BusError as exc:
             reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance,
