@@ -108,23 +108,32 @@ class LimitMonitor:
 
     # ------------------------------------------------------------------ one sample
     def check(self, qn: np.ndarray, q: np.ndarray, v_prev: np.ndarray) -> Breach | None:
-        """None if ``qn`` may follow ``q`` (reached with velocity ``v_prev``), else why not."""
+        """None if ``qn`` may follow ``q`` (reached with velocity ``v_prev``), else why not.
+
+        In plain floats, the same arithmetic as numpy's element by element: it runs every
+        cycle, where numpy's calls on six values cost more than the check itself
+        (docs/PERFORMANCE.md, "Python run cold")."""
         mon = self.enforced
-        bad = turn_bad(qn[None], mon.turn_min, mon.turn_max, q)
-        if bad is not None:
-            j = bad[1]
-            lim = mon.turn_max[j] if qn[j] >= mon.turn_max[j] else mon.turn_min[j]
-            return Breach("turn", j, qn[j], lim)
-        v = (qn - q) / self.dt
-        over = np.abs(v) - (mon.vmax * (1 + RTOL) + ATOL_V)
-        if (over > 0).any():
+        qn_, q_ = qn.tolist(), q.tolist()
+        if not all(lo < x < hi for lo, x, hi in zip(mon.turn_min.tolist(), qn_, mon.turn_max.tolist(), strict=True)):
+            bad = turn_bad(qn[None], mon.turn_min, mon.turn_max, q)  # the start rule, in numpy
+            if bad is not None:
+                j = bad[1]
+                lim = mon.turn_max[j] if qn[j] >= mon.turn_max[j] else mon.turn_min[j]
+                return Breach("turn", j, qn[j], lim)
+        dt = self.dt
+        v = [(x - x0) / dt for x, x0 in zip(qn_, q_, strict=True)]
+        vmax = mon.vmax.tolist()
+        over = [abs(x) - (m * (1 + RTOL) + ATOL_V) for x, m in zip(v, vmax, strict=True)]
+        if any(o > 0 for o in over):
             j = int(np.argmax(over))
-            return Breach("speed", j, v[j], mon.vmax[j])
-        a = (v - v_prev) / self.dt
-        over = np.abs(a) - (mon.amax * (1 + RTOL) + ATOL_A)
-        if (over > 0).any():
+            return Breach("speed", j, v[j], vmax[j])
+        a = [(x - x0) / dt for x, x0 in zip(v, v_prev.tolist(), strict=True)]
+        amax = mon.amax.tolist()
+        over = [abs(x) - (m * (1 + RTOL) + ATOL_A) for x, m in zip(a, amax, strict=True)]
+        if any(o > 0 for o in over):
             j = int(np.argmax(over))
-            return Breach("acceleration", j, a[j], mon.amax[j])
+            return Breach("acceleration", j, a[j], amax[j])
         return None
 
     def outside_turn(self, qn: np.ndarray, q: np.ndarray) -> int | None:
@@ -225,8 +234,8 @@ class LimitMonitor:
         widened turn bounds close at rest only.
         """
         mon = self.enforced
-        if self._settle == 0 and (mon.turn_min == current.turn_min).all() \
-                and (mon.turn_max == current.turn_max).all():
+        if self._settle == 0 and mon.turn_min.tolist() == current.turn_min.tolist() \
+                and mon.turn_max.tolist() == current.turn_max.tolist():  # lists: cheaper every cycle
             return
         if not moving:
             self.reset(current)
