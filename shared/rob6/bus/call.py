@@ -39,7 +39,7 @@ from ..messages import (
     RequestEnvelope,
     Waiting,
 )
-from .codec import WAITING, _encoder, _parametrize, _waiting, new_cid
+from .codec import WAITING, _encoder, _waiting, new_cid
 from .errors import BusError, BusTimeout, CallAbandoned, _InstanceLost
 from .liveliness import Liveliness
 
@@ -207,7 +207,7 @@ class _Request:
 
     def decode(self, raw: bytes, target: str) -> Any:
         try:
-            envelope = self.bus._decoder(_parametrize(ReplyEnvelope, self.spec.reply)).decode(raw)
+            envelope = self.bus._decoder(ReplyEnvelope, self.spec.reply).decode(raw)
         except msgspec.DecodeError as exc:
             raise BusError("schema", f"malformed {self.service}.{self.op} reply: {exc}") from None
         if envelope.instance != target:  # never a second owner's answer, whatever the network did

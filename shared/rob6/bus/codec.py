@@ -32,20 +32,23 @@ def new_cid() -> str:
 
 
 class Decoders:
-    """A bus's decoders, one per message type, each built once: ``decoders(typ)``."""
+    """A bus's envelope decoders, one per envelope and message type, each built once:
+    ``decoders(ReplyEnvelope, Ack)``. Keyed by the two classes, not by ``ReplyEnvelope[Ack]``:
+    building and hashing that generic alias cost more than the decoding (every request)."""
 
     def __init__(self) -> None:
-        self._decoders: dict[Any, msgspec.json.Decoder[Any]] = {}
+        self._decoders: dict[tuple[Any, type], msgspec.json.Decoder[Any]] = {}
 
-    def __call__(self, typ: Any) -> msgspec.json.Decoder[Any]:
-        decoder = self._decoders.get(typ)
+    def __call__(self, envelope: Any, typ: type) -> msgspec.json.Decoder[Any]:
+        key = (envelope, typ)
+        decoder = self._decoders.get(key)
         if decoder is None:
             # built under a lock: two threads building a decoder for the same generic type at
             # once crashed the interpreter (SIGSEGV in msgspec's annotation walk, seen in CI)
             with _DECODER_LOCK:
-                decoder = self._decoders.get(typ)
+                decoder = self._decoders.get(key)
                 if decoder is None:
-                    decoder = self._decoders[typ] = msgspec.json.Decoder(typ)
+                    decoder = self._decoders[key] = msgspec.json.Decoder(_parametrize(envelope, typ))
         return decoder
 
 

@@ -22,7 +22,7 @@ import msgspec
 import zenoh
 
 from ..messages import OPS, SCHEMA_VERSION, ErrorBody, Op, ReplyEnvelope, RequestEnvelope, Waiting
-from .codec import WAITING, _encoder, _parametrize
+from .codec import WAITING, _encoder
 from .errors import BusError
 from .trace import Tracing
 
@@ -80,7 +80,7 @@ class Serving(Tracing):
             raise ValueError(f"operations not in rob6.messages.OPS: {unknown}")
         quick = frozenset(inline)
         served = {op: _Served(handler, OPS[(self.service, op)],
-                              self._decoder(_parametrize(RequestEnvelope, OPS[(self.service, op)].request)))
+                              self._decoder(RequestEnvelope, OPS[(self.service, op)].request))
                   for op, handler in handlers.items()}
         queue: SimpleQueue[tuple[zenoh.Query, str] | None] = SimpleQueue()
 
