@@ -114,15 +114,15 @@ class LimitMonitor:
         cycle, where numpy's calls on six values cost more than the check itself
         (docs/PERFORMANCE.md, "Python run cold")."""
         mon = self.enforced
-        qn_, q_ = qn.tolist(), q.tolist()
-        if not all(lo < x < hi for lo, x, hi in zip(mon.turn_min.tolist(), qn_, mon.turn_max.tolist(), strict=True)):
+        new, last = qn.tolist(), q.tolist()
+        if not all(lo < x < hi for lo, x, hi in zip(mon.turn_min.tolist(), new, mon.turn_max.tolist(), strict=True)):
             bad = turn_bad(qn[None], mon.turn_min, mon.turn_max, q)  # the start rule, in numpy
             if bad is not None:
                 j = bad[1]
                 lim = mon.turn_max[j] if qn[j] >= mon.turn_max[j] else mon.turn_min[j]
                 return Breach("turn", j, qn[j], lim)
         dt = self.dt
-        v = [(x - x0) / dt for x, x0 in zip(qn_, q_, strict=True)]
+        v = [(x - x0) / dt for x, x0 in zip(new, last, strict=True)]
         vmax = mon.vmax.tolist()
         over = [abs(x) - (m * (1 + RTOL) + ATOL_V) for x, m in zip(v, vmax, strict=True)]
         if any(o > 0 for o in over):

@@ -646,8 +646,7 @@ class MotionCore:
         if all(x - r > lo and x + r < hi for lim in lims
                for x, r, lo, hi in zip(q, reach, lim.turn_min.tolist(), lim.turn_max.tolist(), strict=True)):
             return True
-        reach_ = np.array(reach)
-        lo, hi = self._q - reach_, self._q + reach_
+        lo, hi = self._q - np.array(reach), self._q + np.array(reach)
         if all(within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims):
             return True
         lo, hi = trajectory_extrema(traj, 0.0)
