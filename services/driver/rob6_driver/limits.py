@@ -288,7 +288,9 @@ def within_hi(qmax: np.ndarray, hi: np.ndarray, start: np.ndarray) -> np.ndarray
 
 def within(qmin: npt.ArrayLike, qmax: npt.ArrayLike, lo: np.ndarray, hi: np.ndarray, start: np.ndarray) -> bool:
     """Does a motion from ``start`` spanning ``qmin``..``qmax`` stay inside the turn limits?"""
-    low, high = np.asarray(qmin), np.asarray(qmax)
-    if (low > lo).all() and (high < hi).all():  # strictly inside, whatever the start (cheap)
+    low, high = np.asarray(qmin, float), np.asarray(qmax, float)
+    # strictly inside passes whatever the start; in plain floats, as it is asked every cycle
+    # of an Alter stream (docs/PERFORMANCE.md, "Python run cold")
+    if all(a > b and c < d for a, b, c, d in zip(low.tolist(), lo.tolist(), high.tolist(), hi.tolist(), strict=True)):
         return True
     return bool(np.all(within_lo(low, lo, start) & within_hi(high, hi, start)))

@@ -637,17 +637,14 @@ class MotionCore:
 
     def _safe(self, traj: ruckig.Trajectory, *lims: Limits) -> bool:
         """Does the whole future of ``traj`` stay inside the turn limits of ``lims``?"""
-        # cheap bound first: no joint can get further than (max speed x duration); strictly
-        # inside every limit passes (in plain floats: it runs every cycle of an Alter stream)
+        # cheap bound first: no joint can get further than (max speed x duration); in plain
+        # floats, as it runs every cycle of an Alter stream
         d = traj.duration
         reach = [1.01 * (m if m >= s or m != m else s) * d + 1e-9  # np.maximum's, NaN included
                  for m, s in zip(self._monitor.enforced.vmax.tolist(), map(abs, self._qd.tolist()), strict=True)]
         q = self._q.tolist()
-        if all(x - r > lo and x + r < hi for lim in lims
-               for x, r, lo, hi in zip(q, reach, lim.turn_min.tolist(), lim.turn_max.tolist(), strict=True)):
-            return True
-        lo, hi = self._q - np.array(reach), self._q + np.array(reach)
-        if all(within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims):
+        low, high = [x - r for x, r in zip(q, reach, strict=True)], [x + r for x, r in zip(q, reach, strict=True)]
+        if all(within(low, high, lim.turn_min, lim.turn_max, self._q) for lim in lims):
             return True
         lo, hi = trajectory_extrema(traj, 0.0)
         return all(within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims)
