@@ -35,7 +35,8 @@ ROBOT_DESCRIPTION_TOPIC = "/robot_description"
 CHUNK_SIZE = 32 << 10
 #: zstd's fastest level, not its default 3: the chunks are JSON records much alike, which level
 #: 1 packs within a few per cent of level 3 (a recording of 6,000 requests: 2.43 against 2.36
-#: MB) for a fifth less CPU per record written (docs/PERFORMANCE.md, "The recorder's writing")
+#: MB) for a fifth less CPU per record written (docs/PERFORMANCE.md, "What a record costs the
+#: recorder, and zstd's fastest level")
 ZSTD_LEVEL = 1
 
 _encoder = msgspec.json.Encoder()
