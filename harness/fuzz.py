@@ -27,6 +27,7 @@ import math
 import os
 import random
 import socket
+import threading
 import time
 from dataclasses import dataclass, field
 from itertools import pairwise
@@ -201,6 +202,13 @@ def check_args(text: str) -> None:
 
 
 # ============================================================== in-process: command dispatch
+class _Nothing:
+    """A subscription that never receives anything."""
+
+    def take(self) -> list[bytes]:
+        return []
+
+
 class _DeadBus:
     """Every request fails like a missing service; subscriptions are ignored."""
 
@@ -210,9 +218,14 @@ class _DeadBus:
     def __init__(self) -> None:
         from rob6.bus import BusError
         self._error = BusError
+        self.closed = threading.Event()
+        self.closed.set()  # closed from the start: no thread of the gateway waits on it
 
     def subscribe(self, *a: object, **k: object) -> None:
         pass
+
+    def subscribe_latest(self, *a: object, **k: object) -> _Nothing:
+        return _Nothing()
 
     def on_liveliness(self, *a: object, **k: object) -> None:
         pass

@@ -1,7 +1,12 @@
 """The latest joint state of the robot, kept from the driver's publications.
 
 The driver publishes its state every controller cycle (at rest every 100 ms); the gateway,
-which answers position and status reads, keeps the newest one instead of asking.
+which answers position and status reads, keeps the newest one instead of asking. Zenoh holds
+the states that arrive (``Bus.subscribe_latest``) and the mirror takes them when it is read and
+every ``STATE_TAKE_S``, so no Python runs for each of the 250 states a second while the arm
+moves: in the gateway, a state's callback took the interpreter just as the driver's replies
+came, which cost a 250 Hz Alter stream a fifth of its p99 (docs/PERFORMANCE.md, "The gateway's
+mirror of the joint state").
 """
 
 from __future__ import annotations
@@ -15,6 +20,10 @@ from .bus import Bus
 from .messages import JointState
 
 STATE_STALE_S = 0.25  # a joint state older than this means the driver is not running
+#: how often the mirror takes the states that arrived when nobody reads: a state counts as
+#: arrived when the take before the one that found it was made, so a state is judged at most
+#: this much older than it is, and a silent driver is told within STATE_STALE_S
+STATE_TAKE_S = 0.05
 
 
 def replaces(state: JointState, kept: JointState | None) -> bool:
@@ -27,19 +36,29 @@ def replaces(state: JointState, kept: JointState | None) -> bool:
 
 
 class JointStateMirror:
+    """The driver's newest joint state, and how fresh it is (see the module's text)."""
+
     def __init__(self, bus: Bus):
         self.bus = bus
         self._lock = threading.Lock()
         self._state: JointState | None = None
-        self._seen = 0.0
+        self._seen = 0.0  # when the kept state had arrived at the latest
+        self._taken = time.monotonic()  # the last take
         self._decoder = msgspec.json.Decoder(JointState)
-        bus.subscribe("driver/state", self._on_state, owner="driver")  # one robot, one driver
+        self._states = bus.subscribe_latest("driver/state", owner="driver")  # one robot, one driver
+        threading.Thread(target=self._take_often, name="joint-state-mirror", daemon=True).start()
 
-    def _on_state(self, _key: str, payload: bytes) -> None:
-        state = self._decoder.decode(payload)
+    def _take_often(self) -> None:
+        while not self.bus.closed.wait(STATE_TAKE_S):
+            self._take()
+
+    def _take(self) -> None:
         with self._lock:
-            if replaces(state, self._state):
-                self._state, self._seen = state, time.monotonic()
+            arrived_after, self._taken = self._taken, time.monotonic()
+            for payload in self._states.take():
+                state = self._decoder.decode(payload)
+                if replaces(state, self._state):
+                    self._state, self._seen = state, arrived_after
 
     def update(self, state: JointState) -> None:
         """A state from a reply (a move just ended): newer than anything published before it."""
@@ -50,6 +69,7 @@ class JointStateMirror:
         """The current joint state, or None when the driver is gone or silent."""
         if not self.bus.instances("driver"):
             return None
+        self._take()
         with self._lock:
             if self._state is None or time.monotonic() - self._seen > STATE_STALE_S:
                 return None

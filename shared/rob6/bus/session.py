@@ -77,5 +77,10 @@ class BusSession:
         self._decoder = Decoders()
         self._attachment = self.instance.encode()
 
+    @property
+    def closed(self) -> threading.Event:
+        """Set when the bus closes: a thread of the bus's user waits on it to end with it."""
+        return self._closed
+
     def key(self, *parts: str) -> str:
         return "/".join((self.prefix, *parts))
