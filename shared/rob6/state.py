@@ -11,6 +11,7 @@ mirror of the joint state").
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 
@@ -18,6 +19,8 @@ import msgspec
 
 from .bus import Bus
 from .messages import JointState
+
+log = logging.getLogger("rob6.state")
 
 STATE_STALE_S = 0.25  # a joint state older than this means the driver is not running
 #: how often the mirror takes the states that arrived when nobody reads: a state counts as
@@ -50,13 +53,21 @@ class JointStateMirror:
 
     def _take_often(self) -> None:
         while not self.bus.closed.wait(STATE_TAKE_S):
-            self._take()
+            try:
+                self._take()
+            except Exception:  # the next take tries again; a closing bus ends the loop
+                if not self.bus.closed.is_set():
+                    log.exception("taking the driver's states failed")
 
     def _take(self) -> None:
         with self._lock:
             arrived_after, self._taken = self._taken, time.monotonic()
             for payload in self._states.take():
-                state = self._decoder.decode(payload)
+                try:
+                    state = self._decoder.decode(payload)
+                except msgspec.DecodeError:  # one bad state must not cost the others
+                    log.exception("a driver state that is not one: %r", payload[:200])
+                    continue
                 if replaces(state, self._state):
                     self._state, self._seen = state, arrived_after
 
