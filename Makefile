@@ -1,6 +1,6 @@
 # rob6 — the two commands: `make run` and `make test` (see README.md).
 # Everything installs into ./.venv from uv.lock; a fresh machine needs only
-# Python 3.11-3.13, pip, gcc and make (and Docker for the e2e tests).
+# Python 3.11-3.13, pip, gcc, cargo and make (and Docker for the e2e tests).
 
 PYTHON ?= python3
 UV_VERSION := 0.13.9
@@ -13,7 +13,7 @@ SHARED_TRUTH ?= ../shared
 # `make test PYTEST_ARGS="-m 'not docker'"` skips the slow Docker end-to-end tests
 PYTEST_ARGS ?=
 
-.PHONY: help install run test test-fast check bench images lock clean transcripts python-version
+.PHONY: help install run test test-fast check bench images lock clean transcripts python-version rust
 
 help:
 	@echo "make run    start router, services and gateway (simulated KR16 on port 5005)"
@@ -29,12 +29,18 @@ python-version:
 		"choose one with make PYTHON=python3.12 ...", file=sys.stderr); sys.exit(not ok)' \
 		|| { command -v $(PYTHON) >/dev/null || echo "rob6: no $(PYTHON) here; choose one with make PYTHON=..." >&2; exit 1; }
 
+# the recorder's writer (services/recorder/native) is Rust, built by uv sync through maturin
+rust:
+	@command -v cargo >/dev/null || { echo "rob6: no cargo here: the recorder's writer is Rust" \
+		"(services/recorder/native); install a Rust toolchain, e.g. with rustup" >&2; exit 1; }
+
 $(UV): | python-version
 	$(PYTHON) -m venv $(TOOLS)
 	$(TOOLS)/bin/pip install --quiet uv==$(UV_VERSION)
 
-$(VENV)/.installed: $(UV) | python-version
+$(VENV)/.installed: $(UV) | python-version rust
 $(VENV)/.installed: uv.lock pyproject.toml $(wildcard shared/pyproject.toml services/*/pyproject.toml controllers/*/pyproject.toml clients/*/pyproject.toml)
+$(VENV)/.installed: $(wildcard services/recorder/native/Cargo.* services/recorder/native/src/*.rs)
 	$(UV) sync --frozen --all-packages --python $(PYTHON)
 	@touch $@
 

@@ -3,9 +3,9 @@
 Library API (the service in ``service.py`` feeds ``Recorder``):
 
 * ``rob6_recorder.writer``: ``Recorder`` (non-blocking ``submit``, per-session files,
-  rolling system file); ``files`` routes records to files and rotates them, ``mcapfile``
-  is one file (``McapFile``), ``derived_channels`` the /tf and /flange derived from joint
-  states (computed by ``transforms``).
+  rolling system file); the files are written by ``rob6_recorder_native.Writer`` (Rust,
+  services/recorder/native), ``payloads`` makes a record's JSON, ``derived_channels`` the
+  /tf and /flange derived from joint states (computed by ``transforms``).
 * ``rob6_recorder.reader``: ``read_records`` / ``scan`` (also unfinished files).
 * ``rob6_recorder.recover``: ``recover(path, out_path)``.
 * ``rob6_recorder.inspect``: ``summarize``, ``export_csv``.

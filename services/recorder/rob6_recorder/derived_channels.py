@@ -4,9 +4,10 @@ The Foxglove channels derived from each joint state, and when: per-link ``/tf`` 
 URDF and, with a forward-kinematics callable, ``/flange`` and an ``fk_flange`` frame on
 ``/tf`` (the computation itself: ``transforms.py``).
 
-Runs on the recorder's writer thread, so it keeps itself cheap: at most ``tf_max_rate``
-derivations a second; an FK callable that raises is not called again (one warning), one
-that takes over 20 ms is paused for 5 s (a remote call must not hold up the recording).
+Runs in the recorder's ``submit`` of a joint state, so it keeps itself cheap: at most
+``tf_max_rate`` derivations a second; an FK callable that raises is not called again (one
+warning), one that takes over 20 ms is paused for 5 s (a remote call must not hold up the
+recording).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from typing import Any
 
 import msgspec
 
-from .mcapfile import as_dict
+from .payloads import as_dict
 from .transforms import Fk, TfDeriver, flange_message
 
 log = logging.getLogger("rob6.recorder")
@@ -73,7 +74,7 @@ class JointStateDerivation:
                 self._fk_failed = True  # one warning, then no more FK calls
                 log.warning("fk callable failed (%r): no /flange from now on", exc)
             took = time.monotonic() - began
-            if took > 0.02:  # the writer thread must not wait on a slow FK (a remote call?)
+            if took > 0.02:  # the recording must not wait on a slow FK (a remote call?)
                 self._fk_pause = time.monotonic() + 5.0
                 log.warning("fk callable took %.0f ms: /flange paused for 5 s", took * 1000)
             if flange is not None:

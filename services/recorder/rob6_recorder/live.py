@@ -9,7 +9,7 @@ every field, defaults included),
 channels, and ``/commands``: every client line and its reply as a ``foxglove.Log``
 (``name`` = ``session <n>``, ``message`` = ``> line`` / ``< reply``) for the Log panel.
 
-The recorder calls ``publish`` from its writer thread, after the record went to the files:
+The recorder calls ``publish`` for each record it queues for its files (``Recorder.submit``):
 the live view is one more subscriber of the bus and costs the real-time path nothing. A
 message goes to the clients subscribed to its channel only; one without subscribers is
 dropped in the SDK. The WebSocket protocol has no latched topics, so the last message of
@@ -47,7 +47,7 @@ from rob6.config import DEFAULT_LIVE_PORT, BusSettings
 from rob6.errors import RefusedError
 from rob6.messages import JointState
 
-from .mcapfile import ROBOT_DESCRIPTION_TOPIC, as_dict, encode
+from .payloads import ROBOT_DESCRIPTION_TOPIC, as_dict, encode
 from .schemas import schema_for, stamp
 
 log = logging.getLogger("rob6.recorder.live")

@@ -34,7 +34,7 @@ from rob6.config import DEFAULT_LIVE_PORT
 
 from .derived_channels import TF_TOPIC, JointStateDerivation
 from .live import COMMANDS_TOPIC, LATCHED, LiveView
-from .mcapfile import ROBOT_DESCRIPTION_TOPIC
+from .payloads import ROBOT_DESCRIPTION_TOPIC
 from .reader import RecordingReader
 from .writer import JOINT_STATE_TOPIC
 

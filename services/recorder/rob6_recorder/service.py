@@ -8,8 +8,8 @@ served (``trace/<service>/<op>``), the gateway a copy of each client line and re
 state they publish (``Bus.publish_state``). ``Recorder.submit`` never blocks, so the
 Zenoh callback stays short.
 
-With ``live_port`` (not 0) the recorder's writer thread also feeds the live view
-(``live.LiveView``, a Foxglove WebSocket server): the same records, as they are written.
+With ``live_port`` (not 0) the recorder also feeds the live view (``live.LiveView``, a
+Foxglove WebSocket server): the same records, as they are queued for the files.
 """
 
 from __future__ import annotations
