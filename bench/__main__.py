@@ -261,7 +261,7 @@ def recording_table() -> None:
           ("case", "msgs/s (target >= 50,000)", "dropped", "max backlog"),
           [(r["case"], f"{r['msgs_per_s']:,.0f}", r["dropped"], r["max_backlog"]) for r in rows]
           + [(replay["case"], f"{replay['lines_per_s']:,.0f} lines/s", "-", "-")])
-    table("MCAP writers alone (joint-state records, zstd), msgs/s: foxglove-sdk is the recorder's",
+    table("MCAP writers alone (joint-state records, zstd), msgs/s: rob6_recorder_native is the recorder's",
           ("writer", "files open", "msgs/s", "bytes/msg"),
           [(w["writer"], w["files"], f"{w['msgs_per_s']:,.0f}", f"{w['bytes_per_msg']:.1f}")
            for w in bench_writers()])

@@ -11,9 +11,9 @@ peak backlog. Both with a client session open (every record goes to the session
 file *and* the system file) or not. ``bench_replay``: replays a recorded session of
 ``lines`` commands as fast as possible against a local fake server (lines/s).
 
-``bench_writers``: the maintained MCAP writers on their own (foxglove-sdk's, which the
-recorder uses, and the ``mcap`` package's), one file and two (a session open), with
-joint-state payloads already encoded. ``live_table(table)`` (for ``bench/__main__.py``):
+``bench_writers``: MCAP writers on their own, one file and two (a session open), with
+joint-state payloads already encoded: the recorder's (``rob6_recorder_native.Writer``, through
+its queue and thread), foxglove-sdk's and the ``mcap`` package's. ``live_table(table)`` (for ``bench/__main__.py``):
 gateway round trips with the live view off and on (a Foxglove viewer in a process of its
 own, ``bench/viewer.py``, subscribed to every channel), same run.
 """
@@ -34,7 +34,7 @@ import msgspec
 from bench.tables import Table
 from harness.fake_server import FakeServer  # the replay target: a fake rob6 server
 from rob6_recorder.session_replay import load_script, replay
-from rob6_recorder.writer import Recorder
+from rob6_recorder.writer import CHUNK_SIZE, ZSTD_LEVEL, Recorder
 
 
 def _state(i: int) -> dict[str, Any]:
@@ -135,7 +135,8 @@ def bench_replay(lines: int = 2000) -> dict[str, Any]:
 
 
 def bench_writers(n: int = 300_000) -> list[dict[str, Any]]:
-    """Messages/s of foxglove-sdk's and the ``mcap`` package's writers, 1 and 2 files."""
+    """Messages/s of the recorder's native writer, foxglove-sdk's and the ``mcap`` package's,
+    1 and 2 files."""
     import foxglove
     from foxglove.mcap import MCAPWriteOptions
     from mcap.writer import CompressionType, Writer
@@ -187,9 +188,36 @@ def bench_writers(n: int = 300_000) -> list[dict[str, Any]]:
             rows.append({"writer": "foxglove-sdk (Rust)", "files": files,
                          "msgs_per_s": n / (time.perf_counter() - start),
                          "bytes_per_msg": (d / f"fox{files}_0.mcap").stat().st_size / n})
+            rows.append(_native_writer(d / f"native{files}", payloads, files))
     finally:
         shutil.rmtree(d, ignore_errors=True)
     return rows
+
+
+def _native_writer(directory: Path, payloads: list[bytes], files: int) -> dict[str, Any]:
+    """The recorder's writer: every payload submitted, then closed (all on disk); two files
+    are a session's and the system file."""
+    from rob6_recorder_native import Writer as NativeWriter
+
+    directory.mkdir()
+    n = len(payloads)
+    writer = NativeWriter(
+        str(directory), "kr16", "bench", urdf=None, urdf_record=None, metadata={}, system=True,
+        sessions=files == 2, rotate_bytes=0, rotate_seconds=0, chunk_interval=0.5, chunk_size=CHUNK_SIZE,
+        compression="zstd", zstd_level=ZSTD_LEVEL, fsync=False, max_backlog=n + 1, warn_backlog=n + 1,
+        session_linger=0.5)
+    writer.start()
+    if files == 2:
+        writer.control("open_session", "1", 10.0)
+    t = time.time_ns()
+    start = time.perf_counter()
+    for i, p in enumerate(payloads):
+        writer.submit("/driver/joint_state", t + i, t + i, p)
+    writer.close(60.0)
+    elapsed = time.perf_counter() - start
+    system_file = next(directory.glob("*_system_*.mcap"))
+    return {"writer": "rob6_recorder_native (Rust)", "files": files, "msgs_per_s": n / elapsed,
+            "bytes_per_msg": system_file.stat().st_size / n}
 
 
 def bench_live(count: int = 2000) -> dict[str, dict[str, list[float]]]:
