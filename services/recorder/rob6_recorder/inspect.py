@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rob6_recorder_native import STATUS_TOPIC
+
 from .reader import Record, RecordingReader
 
 _SESSION_TOPIC = re.compile(r"^/session/([^/]+)/(client_in|client_out|event)$")
@@ -131,7 +133,7 @@ def summarize(path: str | os.PathLike[str], max_failures: int = 20) -> Summary:
             summary.start_ns = summary.end_ns = rec.log_time
         summary.start_ns = min(summary.start_ns, rec.log_time)
         summary.end_ns = max(summary.end_ns, rec.log_time)
-        if rec.topic == "/recorder/status" and isinstance(rec.data, dict):
+        if rec.topic == STATUS_TOPIC and isinstance(rec.data, dict):
             summary.dropped = max(summary.dropped, int(rec.data.get("dropped", 0) or 0))
         m = _SESSION_TOPIC.match(rec.topic)
         if not m or not isinstance(rec.data, dict):

@@ -46,8 +46,9 @@ from foxglove.websocket import (
 from rob6.config import DEFAULT_LIVE_PORT, BusSettings
 from rob6.errors import RefusedError
 from rob6.messages import JointState
+from rob6_recorder_native import ROBOT_DESCRIPTION_TOPIC, STATUS_TOPIC
 
-from .payloads import ROBOT_DESCRIPTION_TOPIC, as_dict, encode
+from .payloads import as_dict, encode
 from .schemas import schema_for, stamp
 
 log = logging.getLogger("rob6.recorder.live")
@@ -58,7 +59,7 @@ URDF_ASSET = "package://rob6/robot.urdf"
 #: advertised from the start (a panel can subscribe before the first message)
 STANDARD_TOPICS = ("/tf", "/driver/joint_state", "/driver/link", "/gripper/state", "/log", COMMANDS_TOPIC)
 LATCHED = frozenset({ROBOT_DESCRIPTION_TOPIC, "/tf", "/flange", "/driver/joint_state", "/driver/link",
-                     "/gripper/state", "/recorder/status"})
+                     "/gripper/state", STATUS_TOPIC})
 
 _encoder = msgspec.json.Encoder()
 _joint_state = msgspec.json.Decoder(JointState)

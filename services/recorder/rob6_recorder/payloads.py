@@ -11,7 +11,6 @@ from typing import Any
 
 import msgspec
 
-ROBOT_DESCRIPTION_TOPIC = "/robot_description"
 _encoder = msgspec.json.Encoder()
 _decoder = msgspec.json.Decoder()
 

@@ -31,10 +31,10 @@ from typing import Any
 from foxglove.websocket import PlaybackCommand, PlaybackControlRequest, PlaybackState, PlaybackStatus
 
 from rob6.config import DEFAULT_LIVE_PORT
+from rob6_recorder_native import ROBOT_DESCRIPTION_TOPIC
 
 from .derived_channels import TF_TOPIC, JointStateDerivation
 from .live import COMMANDS_TOPIC, LATCHED, LiveView
-from .payloads import ROBOT_DESCRIPTION_TOPIC
 from .reader import RecordingReader
 from .writer import JOINT_STATE_TOPIC
 

@@ -38,11 +38,11 @@ from typing import Any
 
 import msgspec
 
-from rob6_recorder_native import Writer
+from rob6_recorder_native import ROBOT_DESCRIPTION_TOPIC, STATUS_TOPIC, Writer
 
 from . import __version__
 from .derived_channels import JointStateDerivation
-from .payloads import ROBOT_DESCRIPTION_TOPIC, as_dict, encode
+from .payloads import as_dict, encode
 from .schemas import schema_for, to_foxglove_log
 from .transforms import Fk
 
@@ -50,7 +50,6 @@ log = logging.getLogger("rob6.recorder")
 
 JOINT_STATE_TOPIC = "/driver/joint_state"
 LOG_TOPIC = "/log"
-STATUS_TOPIC = "/recorder/status"
 
 #: a chunk is compressed when it holds this much (or at the writer's next flush): 32 KiB
 #: keeps each compression to a fraction of a millisecond, where 1 MiB took milliseconds

@@ -793,6 +793,14 @@ struct Writer {
     drop_log: Mutex<RateLimited>,
 }
 
+impl Drop for Writer {
+    /// Dropped without `close` (a recorder forgotten): the writer finishes its files and ends.
+    fn drop(&mut self) {
+        self.shared.queue.lock().unwrap().stopping = true;
+        self.shared.wake.notify_one();
+    }
+}
+
 fn compression(name: &str) -> PyResult<Option<Compression>> {
     match name {
         "zstd" => Ok(Some(Compression::Zstd)),
