@@ -1,7 +1,8 @@
-"""Recorder/McapFile: content, order, schemas, rotation, drop accounting."""
+"""Recorder and its native writer: content, order, schemas, rotation, drop accounting, errors."""
 
 from __future__ import annotations
 
+import gc
 import json
 import logging
 import math
@@ -20,6 +21,7 @@ from rob6_recorder.reader import RecordingReader, is_complete, read_records
 from rob6_recorder.schemas import schema_for, to_foxglove_log
 from rob6_recorder.transforms import TfDeriver, pose_from_fk
 from rob6_recorder.writer import Recorder
+from tests.motion.link_session import wait_until
 from tests.recording.rec_helpers import record_session
 
 if TYPE_CHECKING:
@@ -374,3 +376,31 @@ def test_schemas_of_bus_messages_are_generated_from_their_structs() -> None:
         assert spec.schema["type"] == "object" and "$ref" not in spec.schema
         msgspec.json.decode(spec.data)  # stored as JSON
     assert "missed" in schema_for("/driver/joint_state").schema["properties"]
+
+
+def test_a_recorder_dropped_without_close_finishes_its_files(tmp_path: Path) -> None:
+    """A forgotten recorder must not leave a file without its summary: the native writer's
+    thread is told to finish when the recorder goes."""
+    rec = Recorder(tmp_path, "kr16", "robot1").start()
+    rec.submit("/driver/joint_state", time.time_ns(), {"cycle": 1})
+    del rec
+    gc.collect()
+    # polled: the writer's thread finishes on its own after the recorder is gone, nothing to join
+    system = wait_until(lambda: next(iter(_files(tmp_path, "system")), None), 10.0, "the system file")
+    wait_until(lambda: is_complete(system), 10.0, "the file finished")
+    assert [r.data for r in read_records(system, ["/driver/joint_state"])] == [{"cycle": 1}]
+
+
+def test_a_file_that_cannot_be_opened_is_counted_logged_and_the_recording_goes_on(
+        tmp_path: Path, caplog: LogCaptureFixture) -> None:
+    directory = tmp_path / "rec"
+    with caplog.at_level(logging.ERROR, logger="rob6.recorder"), Recorder(directory, "kr16", "robot1") as rec:
+        directory.rmdir()  # before the first record: its system file cannot be created
+        assert rec.submit("/driver/joint_state", time.time_ns(), {"cycle": 1})
+        assert rec.flush()
+        assert rec.stats().errors >= 1
+        directory.mkdir()
+        assert rec.submit("/driver/joint_state", time.time_ns(), {"cycle": 2})
+    assert any("opening" in r.message and "failed" in r.message for r in caplog.records)
+    (system,) = _files(directory, "system")
+    assert [r.data for r in read_records(system, ["/driver/joint_state"])] == [{"cycle": 2}]
