@@ -1,9 +1,11 @@
 //! The recorder's writing, without Python per record: a queue, a writer thread, the routing of
 //! records to files, and the MCAP files themselves.
 //!
-//! `Writer` is what `rob6_recorder.writer.Recorder` drives. `submit` copies one record into the
-//! queue and returns; the writer thread takes records from it in order, without the GIL, and
-//! writes each where it belongs:
+//! `Writer` is what `rob6_recorder.writer.Recorder` drives. `submit` writes one record at once,
+//! on the caller's thread, when nothing is queued and the writer thread is not writing (its
+//! flush every `chunk_interval`, a backlog); otherwise it queues the record and returns, and the
+//! writer thread takes the queued records in order, without the GIL. Either way each record is
+//! written where it belongs:
 //!
 //! - one file per client session (`/session/<n>/...` records, plus everything else that happens
 //!   while it is open) and a rolling system file (everything), rotated when it is
@@ -29,15 +31,18 @@
 //! writer catches up. Rare events (a warning, an error, a file opened) go to Python's logging
 //! (`rob6.recorder`), never with the queue's lock held.
 //!
-//! Why native: in the running system the recorder's Python per record (routing, encoding, the
-//! writer thread's wake-ups) cost the other processes' requests their tail
-//! (docs/PERFORMANCE.md, "The recorder's writing, native").
+//! Why native, and why on the caller's thread: in the running system the recorder's Python per
+//! record (routing, encoding, the writer thread's wake-ups) cost the other processes' requests
+//! their tail, and a writer thread woken for each trace batch still cost some 30 us of CPU per
+//! request, against 5-8 us written where the batch is received (docs/PERFORMANCE.md, "The
+//! recorder's writing, native").
 
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::fs::{File, OpenOptions};
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -383,6 +388,7 @@ struct Files {
     part: u32,
     /// what to log once the record is written: (level, message); errors are counted
     notes: Vec<(u8, String)>,
+    error_log: RateLimited,
 }
 
 fn session_of(topic: &str) -> Option<&str> {
@@ -643,14 +649,13 @@ impl Files {
 // ------------------------------------------------------------------------------------ the writer thread
 struct WriterThread {
     shared: Arc<Shared>,
-    files: Files,
-    error_log: RateLimited,
+    files: Arc<Mutex<Files>>,
 }
 
 impl WriterThread {
-    fn run(mut self) {
+    fn run(self) {
         let mut last_flush = Instant::now();
-        let chunk_interval = self.files.settings.chunk_interval;
+        let chunk_interval = self.files.lock().unwrap().settings.chunk_interval;
         loop {
             let mut written = 0usize;
             // take records one by one (the lock only around the queue), pacing the slices
@@ -669,33 +674,37 @@ impl WriterThread {
                 if written > 0 && written.is_multiple_of(WRITE_SLICE) && queued < WRITE_PAUSE_BACKLOG && !stopping {
                     std::thread::sleep(WRITE_PAUSE);
                 }
+                let mut files = self.files.lock().unwrap();
                 match item {
                     Item::Record(record) => {
-                        self.files.write(record);
+                        files.write(record);
                         self.shared.queue.lock().unwrap().account.written += 1;
                     }
                     Item::Control(control, done) => {
                         match control {
-                            Control::Flush => self.files.flush(),
-                            Control::OpenSession(s) => self.files.open_session_now(s),
-                            Control::CloseSession(s) => self.files.close_session(s),
+                            Control::Flush => files.flush(),
+                            Control::OpenSession(s) => files.open_session_now(s),
+                            Control::CloseSession(s) => files.close_session(s),
                         }
                         done.set();
                     }
                 }
+                files.report();
                 written += 1;
-                self.report();
                 if last_flush.elapsed() >= chunk_interval {
                     break;
                 }
             }
-            self.write_drop_status();
-            if last_flush.elapsed() >= chunk_interval {
-                self.files.flush();
-                let dropped = self.shared.queue.lock().unwrap().account.dropped;
-                self.files.housekeeping(dropped);
-                self.report();
-                last_flush = Instant::now();
+            {
+                let mut files = self.files.lock().unwrap();
+                files.write_drop_status();
+                if last_flush.elapsed() >= chunk_interval {
+                    files.flush();
+                    let dropped = self.shared.queue.lock().unwrap().account.dropped;
+                    files.housekeeping(dropped);
+                    files.report();
+                    last_flush = Instant::now();
+                }
             }
             let mut q = self.shared.queue.lock().unwrap();
             if q.items.is_empty() {
@@ -717,18 +726,21 @@ impl WriterThread {
                 }
             }
         }
-        self.write_drop_status();
+        let mut files = self.files.lock().unwrap();
+        files.write_drop_status();
         let dropped = self.shared.queue.lock().unwrap().account.dropped;
-        self.files.finish(dropped);
-        self.report();
+        files.finish(dropped);
+        files.report();
     }
+}
 
+impl Files {
     /// What the files had to say: errors (counted, logged at most once a second), files opened.
     fn report(&mut self) {
-        if self.files.notes.is_empty() {
+        if self.notes.is_empty() {
             return;
         }
-        let notes: Vec<(u8, String)> = self.files.notes.drain(..).collect();
+        let notes: Vec<(u8, String)> = self.notes.drain(..).collect();
         let mut errors = 0;
         for (level, message) in notes {
             if level < ERROR {
@@ -769,7 +781,7 @@ impl WriterThread {
             ),
         );
         let now = now_ns();
-        self.files.write(Record {
+        self.write(Record {
             topic: STATUS_TOPIC.into(),
             log_time: now,
             publish_time: now,
@@ -786,7 +798,9 @@ impl WriterThread {
 struct Writer {
     shared: Arc<Shared>,
     thread: Mutex<Option<JoinHandle<()>>>,
-    pending_files: Mutex<Option<Files>>,
+    /// the writer thread's, and the submitting thread's while the writer has nothing queued
+    files: Arc<Mutex<Files>>,
+    started: AtomicBool,
     max_backlog: usize,
     warn_backlog: usize,
     backlog_log: Mutex<RateLimited>,
@@ -889,11 +903,13 @@ impl Writer {
             recent: VecDeque::new(),
             part: 0,
             notes: Vec::new(),
+            error_log: RateLimited { last: None },
         };
         Ok(Writer {
             shared,
             thread: Mutex::new(None),
-            pending_files: Mutex::new(Some(files)),
+            files: Arc::new(Mutex::new(files)),
+            started: AtomicBool::new(false),
             max_backlog,
             warn_backlog,
             backlog_log: Mutex::new(RateLimited { last: None }),
@@ -908,13 +924,12 @@ impl Writer {
 
     /// Start the writer thread (once).
     fn start(&self) {
-        let Some(files) = self.pending_files.lock().unwrap().take() else {
+        if self.started.swap(true, Ordering::SeqCst) {
             return;
-        };
+        }
         let thread = WriterThread {
             shared: Arc::clone(&self.shared),
-            files,
-            error_log: RateLimited { last: None },
+            files: Arc::clone(&self.files),
         };
         let shared = Arc::clone(&self.shared);
         let handle = std::thread::Builder::new()
@@ -933,7 +948,8 @@ impl Writer {
         *self.thread.lock().unwrap() = Some(handle);
     }
 
-    /// Queue one record; never blocks. False if it had to be dropped (counted, logged).
+    /// Write one record now if nothing is queued and the writer thread is not writing, else
+    /// queue it; never waits for the writer. False if it had to be dropped (counted, logged).
     #[pyo3(signature = (topic, log_time, publish_time, payload, closing=false))]
     fn submit(
         &self,
@@ -960,13 +976,23 @@ impl Writer {
                 let dropped = a.dropped;
                 (false, n, q.stopping, dropped, true)
             } else {
-                q.items.push_back(Item::Record(Record {
+                let record = Record {
                     topic: topic.to_string(),
                     log_time,
                     publish_time,
                     payload,
                     closing,
-                }));
+                };
+                if q.items.is_empty() && self.started.load(Ordering::Relaxed) {
+                    if let Ok(mut files) = self.files.try_lock() {
+                        files.write(record);
+                        q.account.written += 1;
+                        drop(q);
+                        files.report();
+                        return true;
+                    }
+                }
+                q.items.push_back(Item::Record(record));
                 q.records += 1;
                 (true, n, false, 0, q.idle)
             }
