@@ -644,6 +644,62 @@ impl Files {
             self.close_file(f, dropped_total);
         }
     }
+
+    /// What the files had to say: errors (counted, logged at most once a second), files opened.
+    fn report(&mut self) {
+        if self.notes.is_empty() {
+            return;
+        }
+        let notes: Vec<(u8, String)> = self.notes.drain(..).collect();
+        let mut errors = 0;
+        for (level, message) in notes {
+            if level < ERROR {
+                pylog(level, &message);
+            } else {
+                errors += 1;
+                if self.error_log.due() {
+                    pylog(level, &message);
+                }
+            }
+        }
+        self.shared.queue.lock().unwrap().account.errors += errors;
+    }
+
+    /// The drop accounting on `/recorder/status`, once the writer has caught up after drops.
+    fn write_drop_status(&mut self) {
+        let (status, pending, total) = {
+            let mut q = self.shared.queue.lock().unwrap();
+            if q.account.drops_pending.is_empty() {
+                return;
+            }
+            let pending = std::mem::take(&mut q.account.drops_pending);
+            let a = &q.account;
+            let status = serde_json::json!({
+                "submitted": a.written + q.records as u64, "written": a.written, "dropped": a.dropped,
+                "dropped_since_last": pending, "backlog": q.items.len(), "max_backlog_seen": a.max_seen,
+                "first_drop_ns": a.first_drop_ns, "last_drop_ns": a.last_drop_ns,
+            });
+            (status, pending, a.dropped)
+        };
+        let count: u64 = pending.values().sum();
+        let listed: Vec<String> = pending.iter().map(|(t, c)| format!("{t}: {c}")).collect();
+        pylog(
+            WARNING,
+            &format!(
+                "recorder dropped {count} records ({}); {total} in total",
+                listed.join(", ")
+            ),
+        );
+        let now = now_ns();
+        self.write(Record {
+            topic: STATUS_TOPIC.into(),
+            log_time: now,
+            publish_time: now,
+            payload: serde_json::to_vec(&status).unwrap_or_default(),
+            closing: false,
+        });
+        self.report();
+    }
 }
 
 // ------------------------------------------------------------------------------------ the writer thread
@@ -731,64 +787,6 @@ impl WriterThread {
         let dropped = self.shared.queue.lock().unwrap().account.dropped;
         files.finish(dropped);
         files.report();
-    }
-}
-
-impl Files {
-    /// What the files had to say: errors (counted, logged at most once a second), files opened.
-    fn report(&mut self) {
-        if self.notes.is_empty() {
-            return;
-        }
-        let notes: Vec<(u8, String)> = self.notes.drain(..).collect();
-        let mut errors = 0;
-        for (level, message) in notes {
-            if level < ERROR {
-                pylog(level, &message);
-            } else {
-                errors += 1;
-                if self.error_log.due() {
-                    pylog(level, &message);
-                }
-            }
-        }
-        self.shared.queue.lock().unwrap().account.errors += errors;
-    }
-
-    /// The drop accounting on `/recorder/status`, once the writer has caught up after drops.
-    fn write_drop_status(&mut self) {
-        let (status, pending, total) = {
-            let mut q = self.shared.queue.lock().unwrap();
-            if q.account.drops_pending.is_empty() {
-                return;
-            }
-            let pending = std::mem::take(&mut q.account.drops_pending);
-            let a = &q.account;
-            let status = serde_json::json!({
-                "submitted": a.written + q.records as u64, "written": a.written, "dropped": a.dropped,
-                "dropped_since_last": pending, "backlog": q.items.len(), "max_backlog_seen": a.max_seen,
-                "first_drop_ns": a.first_drop_ns, "last_drop_ns": a.last_drop_ns,
-            });
-            (status, pending, a.dropped)
-        };
-        let count: u64 = pending.values().sum();
-        let listed: Vec<String> = pending.iter().map(|(t, c)| format!("{t}: {c}")).collect();
-        pylog(
-            WARNING,
-            &format!(
-                "recorder dropped {count} records ({}); {total} in total",
-                listed.join(", ")
-            ),
-        );
-        let now = now_ns();
-        self.write(Record {
-            topic: STATUS_TOPIC.into(),
-            log_time: now,
-            publish_time: now,
-            payload: serde_json::to_vec(&status).unwrap_or_default(),
-            closing: false,
-        });
-        self.report();
     }
 }
 
