@@ -185,10 +185,10 @@ def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path: Path, cap
     assert rec.stats().written == 100
 
 
-def test_records_keep_their_order_whether_written_at_once_or_queued(tmp_path: Path) -> None:
-    """A record is written on the submitting thread while nothing is queued, and queued behind
-    whatever is (here a session opened without waiting, done by the writer's thread): the files
-    hold them in the order submitted."""
+def test_records_keep_their_order_around_the_writers_controls(tmp_path: Path) -> None:
+    """Sessions opened without waiting are done by the writer's thread in order with the
+    records around them: each session's file holds what was submitted after it opened, and the
+    system file everything, in the order submitted."""
     with Recorder(tmp_path, "kr16", "robot1") as rec:
         t = time.time_ns()
         for i in range(400):
@@ -198,7 +198,7 @@ def test_records_keep_their_order_whether_written_at_once_or_queued(tmp_path: Pa
     assert rec.stats().written == 400 and rec.stats().dropped == 0
     (system,) = _files(tmp_path, "system")
     assert [r.data["cycle"] for r in read_records(system) if r.topic == "/driver/joint_state"] == list(range(400))
-    for n in (50, 150, 250, 350):  # each session's file: what came after it opened
+    for n in (50, 150, 250, 350):
         (session,) = [p for p in _files(tmp_path, "session") if p.stem.endswith(f"session{n}")]
         cycles = [r.data["cycle"] for r in read_records(session) if r.topic == "/driver/joint_state"]
         assert cycles == list(range(n + 1, 400)), n

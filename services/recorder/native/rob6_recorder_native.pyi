@@ -1,5 +1,5 @@
-"""The recorder's writing without Python per record (src/lib.rs): the routing of records to
-files, the MCAP files, and a queue and a writer thread for when a record cannot be written at once."""
+"""The recorder's writing without Python per record (src/lib.rs): a queue, a writer thread, the
+routing of records to files, and the MCAP files."""
 
 from typing import Any
 

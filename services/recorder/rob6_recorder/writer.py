@@ -9,12 +9,11 @@
     ...
     rec.close()
 
-``submit`` never waits for the writer and never raises for a full queue. It makes the record's
-JSON payload, derives what a joint state gives (``/tf``, ``/flange``: ``derived_channels``),
-hands the live view its copy, and gives the record to the native writer
-(``rob6_recorder_native.Writer``, services/recorder/native), which routes it to its files (the
-session's, the system file), rotates them, and writes them as MCAP without Python: at once
-while nothing is queued, else on its own thread. The routing, the file
+``submit`` never blocks and never raises for a full queue. It makes the record's JSON payload,
+derives what a joint state gives (``/tf``, ``/flange``: ``derived_channels``), hands the live
+view its copy, and queues the record for the native writer (``rob6_recorder_native.Writer``,
+services/recorder/native): a thread without Python that routes each record to its files (the
+session's, the system file), rotates them, and writes them as MCAP. The routing, the file
 names, crash safety and the drop accounting are described there. Above ``warn_backlog`` queued
 records it logs a warning (at most once a second); at ``max_backlog`` it drops the record,
 counts it per topic, logs it, and the writer writes the accounting into the recordings
@@ -69,7 +68,7 @@ _encoder = msgspec.json.Encoder()
 @dataclass
 class RecorderStats:
     submitted: int = 0
-    written: int = 0  # records written (one per submit)
+    written: int = 0  # records processed by the writer thread (one per submit)
     dropped: int = 0
     missed: int = 0  # trace batches lost on the way to the recorder (report_missed)
     dropped_by_topic: dict[str, int] = field(default_factory=dict)
@@ -156,7 +155,7 @@ class Recorder:
     # ----------------------------------------------------------------- hot path
     def submit(self, topic: str, log_time: int, data: Any,
                publish_time: int | None = None) -> bool:
-        """Write or queue one record; never waits. False if it had to be dropped (counted, logged).
+        """Queue one record; never blocks. False if it had to be dropped (counted, logged).
 
         ``data``: a JSON-serialisable dict/list, a msgspec Struct, or JSON bytes.
         """

@@ -1,11 +1,9 @@
 //! The recorder's writing, without Python per record: a queue, a writer thread, the routing of
 //! records to files, and the MCAP files themselves.
 //!
-//! `Writer` is what `rob6_recorder.writer.Recorder` drives. `submit` writes one record at once,
-//! on the caller's thread, when nothing is queued and the writer thread is not writing (its
-//! flush every `chunk_interval`, a backlog); otherwise it queues the record and returns, and the
-//! writer thread takes the queued records in order, without the GIL. Either way each record is
-//! written where it belongs:
+//! `Writer` is what `rob6_recorder.writer.Recorder` drives. `submit` copies one record into the
+//! queue and returns; the writer thread takes records from it in order, without the GIL, and
+//! writes each where it belongs:
 //!
 //! - one file per client session (`/session/<n>/...` records, plus everything else that happens
 //!   while it is open) and a rolling system file (everything), rotated when it is
@@ -31,18 +29,15 @@
 //! writer catches up. Rare events (a warning, an error, a file opened) go to Python's logging
 //! (`rob6.recorder`), never with the queue's lock held.
 //!
-//! Why native, and why on the caller's thread: in the running system the recorder's Python per
-//! record (routing, encoding, the writer thread's wake-ups) cost the other processes' requests
-//! their tail, and a writer thread woken for each trace batch still cost some 30 us of CPU per
-//! request, against 5-8 us written where the batch is received (docs/PERFORMANCE.md, "The
-//! recorder's writing, native").
+//! Why native: in the running system the recorder's Python per record (routing, encoding, the
+//! writer thread's wake-ups) cost the other processes' requests their tail
+//! (docs/PERFORMANCE.md, "The recorder's writing, native").
 
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::fs::{File, OpenOptions};
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -388,7 +383,6 @@ struct Files {
     part: u32,
     /// what to log once the record is written: (level, message); errors are counted
     notes: Vec<(u8, String)>,
-    error_log: RateLimited,
 }
 
 fn session_of(topic: &str) -> Option<&str> {
@@ -644,13 +638,97 @@ impl Files {
             self.close_file(f, dropped_total);
         }
     }
+}
+
+// ------------------------------------------------------------------------------------ the writer thread
+struct WriterThread {
+    shared: Arc<Shared>,
+    files: Files,
+    error_log: RateLimited,
+}
+
+impl WriterThread {
+    fn run(mut self) {
+        let mut last_flush = Instant::now();
+        let chunk_interval = self.files.settings.chunk_interval;
+        loop {
+            let mut written = 0usize;
+            // take records one by one (the lock only around the queue), pacing the slices
+            while written < DRAIN_MAX {
+                let (item, queued, stopping) = {
+                    let mut q = self.shared.queue.lock().unwrap();
+                    let n = q.items.len();
+                    q.account.max_seen = q.account.max_seen.max(n);
+                    let item = q.items.pop_front();
+                    if let Some(Item::Record(_)) = item {
+                        q.records -= 1;
+                    }
+                    (item, n, q.stopping)
+                };
+                let Some(item) = item else { break };
+                if written > 0 && written.is_multiple_of(WRITE_SLICE) && queued < WRITE_PAUSE_BACKLOG && !stopping {
+                    std::thread::sleep(WRITE_PAUSE);
+                }
+                match item {
+                    Item::Record(record) => {
+                        self.files.write(record);
+                        self.shared.queue.lock().unwrap().account.written += 1;
+                    }
+                    Item::Control(control, done) => {
+                        match control {
+                            Control::Flush => self.files.flush(),
+                            Control::OpenSession(s) => self.files.open_session_now(s),
+                            Control::CloseSession(s) => self.files.close_session(s),
+                        }
+                        done.set();
+                    }
+                }
+                written += 1;
+                self.report();
+                if last_flush.elapsed() >= chunk_interval {
+                    break;
+                }
+            }
+            self.write_drop_status();
+            if last_flush.elapsed() >= chunk_interval {
+                self.files.flush();
+                let dropped = self.shared.queue.lock().unwrap().account.dropped;
+                self.files.housekeeping(dropped);
+                self.report();
+                last_flush = Instant::now();
+            }
+            let mut q = self.shared.queue.lock().unwrap();
+            if q.items.is_empty() {
+                if q.stopping {
+                    break;
+                }
+                q.idle = true;
+                let wait = chunk_interval.min(Duration::from_millis(250));
+                let (mut q, _) = self
+                    .shared
+                    .wake
+                    .wait_timeout_while(q, wait, |q| q.items.is_empty() && !q.stopping)
+                    .unwrap();
+                q.idle = false;
+                let gather = !q.items.is_empty() && !q.stopping;
+                drop(q);
+                if gather {
+                    std::thread::sleep(GATHER);
+                }
+            }
+        }
+        self.write_drop_status();
+        let dropped = self.shared.queue.lock().unwrap().account.dropped;
+        self.files.finish(dropped);
+        self.report();
+    }
 
     /// What the files had to say: errors (counted, logged at most once a second), files opened.
     fn report(&mut self) {
-        if self.notes.is_empty() {
+        if self.files.notes.is_empty() {
             return;
         }
-        let notes: Vec<(u8, String)> = self.notes.drain(..).collect();
+        let notes: Vec<(u8, String)> = self.files.notes.drain(..).collect();
         let mut errors = 0;
         for (level, message) in notes {
             if level < ERROR {
@@ -691,7 +769,7 @@ impl Files {
             ),
         );
         let now = now_ns();
-        self.write(Record {
+        self.files.write(Record {
             topic: STATUS_TOPIC.into(),
             log_time: now,
             publish_time: now,
@@ -702,103 +780,13 @@ impl Files {
     }
 }
 
-// ------------------------------------------------------------------------------------ the writer thread
-struct WriterThread {
-    shared: Arc<Shared>,
-    files: Arc<Mutex<Files>>,
-}
-
-impl WriterThread {
-    fn run(self) {
-        let mut last_flush = Instant::now();
-        let chunk_interval = self.files.lock().unwrap().settings.chunk_interval;
-        loop {
-            let mut written = 0usize;
-            // take records one by one (the lock only around the queue), pacing the slices
-            while written < DRAIN_MAX {
-                let (item, queued, stopping) = {
-                    let mut q = self.shared.queue.lock().unwrap();
-                    let n = q.items.len();
-                    q.account.max_seen = q.account.max_seen.max(n);
-                    let item = q.items.pop_front();
-                    if let Some(Item::Record(_)) = item {
-                        q.records -= 1;
-                    }
-                    (item, n, q.stopping)
-                };
-                let Some(item) = item else { break };
-                if written > 0 && written.is_multiple_of(WRITE_SLICE) && queued < WRITE_PAUSE_BACKLOG && !stopping {
-                    std::thread::sleep(WRITE_PAUSE);
-                }
-                let mut files = self.files.lock().unwrap();
-                match item {
-                    Item::Record(record) => {
-                        files.write(record);
-                        self.shared.queue.lock().unwrap().account.written += 1;
-                    }
-                    Item::Control(control, done) => {
-                        match control {
-                            Control::Flush => files.flush(),
-                            Control::OpenSession(s) => files.open_session_now(s),
-                            Control::CloseSession(s) => files.close_session(s),
-                        }
-                        done.set();
-                    }
-                }
-                files.report();
-                written += 1;
-                if last_flush.elapsed() >= chunk_interval {
-                    break;
-                }
-            }
-            {
-                let mut files = self.files.lock().unwrap();
-                files.write_drop_status();
-                if last_flush.elapsed() >= chunk_interval {
-                    files.flush();
-                    let dropped = self.shared.queue.lock().unwrap().account.dropped;
-                    files.housekeeping(dropped);
-                    files.report();
-                    last_flush = Instant::now();
-                }
-            }
-            let mut q = self.shared.queue.lock().unwrap();
-            if q.items.is_empty() {
-                if q.stopping {
-                    break;
-                }
-                q.idle = true;
-                let wait = chunk_interval.min(Duration::from_millis(250));
-                let (mut q, _) = self
-                    .shared
-                    .wake
-                    .wait_timeout_while(q, wait, |q| q.items.is_empty() && !q.stopping)
-                    .unwrap();
-                q.idle = false;
-                let gather = !q.items.is_empty() && !q.stopping;
-                drop(q);
-                if gather {
-                    std::thread::sleep(GATHER);
-                }
-            }
-        }
-        let mut files = self.files.lock().unwrap();
-        files.write_drop_status();
-        let dropped = self.shared.queue.lock().unwrap().account.dropped;
-        files.finish(dropped);
-        files.report();
-    }
-}
-
 // ------------------------------------------------------------------------------------ Python's side
 /// The recorder's queue and writer thread (see the module's text).
 #[pyclass(module = "rob6_recorder_native")]
 struct Writer {
     shared: Arc<Shared>,
     thread: Mutex<Option<JoinHandle<()>>>,
-    /// the writer thread's, and the submitting thread's while the writer has nothing queued
-    files: Arc<Mutex<Files>>,
-    started: AtomicBool,
+    pending_files: Mutex<Option<Files>>,
     max_backlog: usize,
     warn_backlog: usize,
     backlog_log: Mutex<RateLimited>,
@@ -901,13 +889,11 @@ impl Writer {
             recent: VecDeque::new(),
             part: 0,
             notes: Vec::new(),
-            error_log: RateLimited { last: None },
         };
         Ok(Writer {
             shared,
             thread: Mutex::new(None),
-            files: Arc::new(Mutex::new(files)),
-            started: AtomicBool::new(false),
+            pending_files: Mutex::new(Some(files)),
             max_backlog,
             warn_backlog,
             backlog_log: Mutex::new(RateLimited { last: None }),
@@ -922,12 +908,13 @@ impl Writer {
 
     /// Start the writer thread (once).
     fn start(&self) {
-        if self.started.swap(true, Ordering::SeqCst) {
+        let Some(files) = self.pending_files.lock().unwrap().take() else {
             return;
-        }
+        };
         let thread = WriterThread {
             shared: Arc::clone(&self.shared),
-            files: Arc::clone(&self.files),
+            files,
+            error_log: RateLimited { last: None },
         };
         let shared = Arc::clone(&self.shared);
         let handle = std::thread::Builder::new()
@@ -946,8 +933,7 @@ impl Writer {
         *self.thread.lock().unwrap() = Some(handle);
     }
 
-    /// Write one record now if nothing is queued and the writer thread is not writing, else
-    /// queue it; never waits for the writer. False if it had to be dropped (counted, logged).
+    /// Queue one record; never blocks. False if it had to be dropped (counted, logged).
     #[pyo3(signature = (topic, log_time, publish_time, payload, closing=false))]
     fn submit(
         &self,
@@ -974,23 +960,13 @@ impl Writer {
                 let dropped = a.dropped;
                 (false, n, q.stopping, dropped, true)
             } else {
-                let record = Record {
+                q.items.push_back(Item::Record(Record {
                     topic: topic.to_string(),
                     log_time,
                     publish_time,
                     payload,
                     closing,
-                };
-                if q.items.is_empty() && self.started.load(Ordering::Relaxed) {
-                    if let Ok(mut files) = self.files.try_lock() {
-                        files.write(record);
-                        q.account.written += 1;
-                        drop(q);
-                        files.report();
-                        return true;
-                    }
-                }
-                q.items.push_back(Item::Record(record));
+                }));
                 q.records += 1;
                 (true, n, false, 0, q.idle)
             }
