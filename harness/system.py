@@ -30,6 +30,10 @@ __all__ = ["System", "ask_driver", "driver_state", "link_status", "running", "ze
 
 R = TypeVar("R")
 
+#: the systems started since the current test began (tests/conftest.py clears it and, when the
+#: test fails, shows their output: the services' warnings say what a failure's error cannot)
+STARTED: list[System] = []
+
 
 class System:
     """A running ``rob6 run`` (router, services, gateway) on free ports."""
@@ -50,6 +54,7 @@ class System:
         if log_dir:
             env["ROB6_LOG_DIR"] = log_dir
         self.output: list[str] = []
+        STARTED.append(self)
         self._ready = threading.Event()
         self.process: subprocess.Popen[str] = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                         stderr=subprocess.STDOUT, text=True, start_new_session=True)

@@ -1,11 +1,14 @@
 """Shared pytest configuration: the Docker tests' images, built once before the first test;
-ROB6_SKIP_DOCKER=1 skips the Docker tests."""
+ROB6_SKIP_DOCKER=1 skips the Docker tests; a failed test shows the output of the rob6 systems
+it ran (its fixtures' and its own)."""
 
 import os
+from collections.abc import Generator
 
 import pytest
 
 from harness import images
+from harness.system import STARTED, System
 
 #: the one image build of this test run, made before the first test (absent: no Docker test was selected)
 IMAGES_BUILT = pytest.StashKey[images.Outcome]()
@@ -46,3 +49,21 @@ def rob6_images(pytestconfig: pytest.Config) -> images.Outcome:
     if outcome.error:
         pytest.fail(f"rob6 images not built: {outcome.error}", pytrace=False)
     return outcome
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    STARTED.clear()  # a module's system, started in this setup, is still among the fixtures
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Generator[None, pytest.TestReport, pytest.TestReport]:
+    """A failed test's report gets the last lines each of its systems printed (the services'
+    warnings and errors), which is often all that tells what happened on a slow machine."""
+    report = yield
+    if report.failed:
+        fixtures = [v for v in getattr(item, "funcargs", {}).values() if isinstance(v, System)]
+        for system in dict.fromkeys(fixtures + STARTED):
+            report.sections.append((f"rob6 system {system.robot} on port {system.port}: its last output",
+                                    "\n".join(system.output[-60:])))
+    return report
