@@ -205,7 +205,7 @@ def _native_writer(directory: Path, payloads: list[bytes], files: int) -> dict[s
         str(directory), "kr16", "bench", urdf=None, urdf_record=None, metadata={}, system=True,
         sessions=files == 2, rotate_bytes=0, rotate_seconds=0, chunk_interval=0.5, chunk_size=CHUNK_SIZE,
         compression="zstd", zstd_level=ZSTD_LEVEL, fsync=False, max_backlog=n + 1, warn_backlog=n + 1,
-        session_linger=0.5)
+        session_linger=0.5, record_schemas={})
     writer.start()
     if files == 2:
         writer.control("open_session", "1", 10.0)

@@ -303,46 +303,97 @@ def test_pose_from_fk_forms() -> None:
     assert pose is not None and pose[0] == (0, 0, 1.0)
 
 
-def test_bus_trace_adapter() -> None:
-    from rob6_recorder.adapters import bus_trace_records
+def _batch(tmp_path: Path, pairs: list[tuple[str, bytes]], received_ns: int) -> list[tuple[str, int, int, bytes, str]]:
+    """What one trace batch of ``pairs`` (suffix, record JSON) becomes in the system file:
+    ``(topic, log_time, publish_time, JSON as written, schema)`` of each record it gave."""
+    payload = b"[" + b",".join(b'["%s",%s]' % (suffix.encode(), record) for suffix, record in pairs) + b"]"
+    with Recorder(tmp_path, "kr16", "robot1", sessions=False) as rec:
+        assert rec.submit_batch(payload, received_ns) == []
+    (system,) = _files(tmp_path, "system")
+    reader = RecordingReader(system)
+    return [(r.topic, r.log_time, r.publish_time, r.data, r.schema) for r in reader.records(decode=False)
+            if r.topic.startswith(("/bus/", "/session/", "/trace/"))]
 
-    payload = (b'{"t":1700000000.5,"dt":0.002,"instance":"k-1","request":{"v":1,"cid":"abc",'
-               b'"body":{"joints":[[0,0,0,0,0,0]]}},"reply":{"v":1,"cid":"abc","ok":false,'
-               b'"error":{"code":"invalid","message":"x"}}}')
-    (req, rep) = bus_trace_records("kinematics", "fk", payload, received_ns=5)
+
+def test_a_bus_trace_gives_its_request_and_reply_records(tmp_path: Path) -> None:
+    trace = (b'{"t":1700000000.5,"dt":0.002,"instance":"k-1","request":{"v":1,"cid":"abc",'
+             b'"body":{"joints":[[0,0,0,0,0,0]]}},"reply":{"v":1,"cid":"abc","ok":false,'
+             b'"error":{"code":"invalid","message":"x"}}}')
+    (req, rep) = _batch(tmp_path, [("trace/kinematics/fk", trace)], received_ns=5)
     assert req[:3] == ("/bus/kinematics/fk/request", 1_700_000_000_500_000_000, 1_700_000_000_500_000_000)
     assert json.loads(req[3]) == {"cid": "abc", "service": "kinematics", "op": "fk", "instance": "k-1",
                                   "body": {"joints": [[0, 0, 0, 0, 0, 0]]}}
-    assert rep[0] == "/bus/kinematics/fk/reply" and rep[1] == 1_700_000_000_502_000_000 and rep[2] == 5
+    assert rep[:3] == ("/bus/kinematics/fk/reply", 1_700_000_000_502_000_000, 5)
     assert json.loads(rep[3]) == {"cid": "abc", "service": "kinematics", "op": "fk", "instance": "k-1",
                                   "ok": False, "body": None, "dt": 0.002,
                                   "error": {"code": "invalid", "message": "x"}}
+    assert (req[4], rep[4]) == ("rob6.BusRequest", "rob6.BusReply")
 
 
-def test_bus_trace_adapter_passes_the_bodies_through_as_sent() -> None:
+def test_a_bus_trace_passes_the_bodies_through_as_sent(tmp_path: Path) -> None:
     """The bodies are not decoded and printed again: numbers keep the service's digits."""
-    from rob6_recorder.adapters import bus_trace_records
-
-    payload = (b'{"t":2.0,"dt":0.5,"instance":"k-1","request":{"v":1,"cid":"c1","body":{"q":[1.50,-0.0]}},'
-               b'"reply":{"v":1,"cid":"c1","ok":true,"instance":"k-1","body":{"q":[1.000001]}}}')
-    (req, rep) = bus_trace_records("kinematics", "fk", payload)
-    assert req == ("/bus/kinematics/fk/request", 2_000_000_000, 2_000_000_000,
-                   b'{"cid":"c1","service":"kinematics","op":"fk","instance":"k-1","body":{"q":[1.50,-0.0]}}')
-    assert rep == ("/bus/kinematics/fk/reply", 2_500_000_000, 2_500_000_000,
-                   b'{"cid":"c1","service":"kinematics","op":"fk","instance":"k-1","ok":true,'
-                   b'"body":{"q":[1.000001]},"dt":0.5}')
+    trace = (b'{"t":2.0,"dt":0.5,"instance":"k-1","request":{"v":1,"cid":"c1","body":{"q":[1.50,-0.0]}},'
+             b'"reply":{"v":1,"cid":"c1","ok":true,"instance":"k-1","body":{"q":[1.000001]}}}')
+    (req, rep) = _batch(tmp_path, [("trace/kinematics/fk", trace)], received_ns=7)
+    assert req[:4] == ("/bus/kinematics/fk/request", 2_000_000_000, 2_000_000_000,
+                       b'{"cid":"c1","service":"kinematics","op":"fk","instance":"k-1","body":{"q":[1.50,-0.0]}}')
+    assert rep[:4] == ("/bus/kinematics/fk/reply", 2_500_000_000, 7,
+                       b'{"cid":"c1","service":"kinematics","op":"fk","instance":"k-1","ok":true,'
+                       b'"body":{"q":[1.000001]},"dt":0.5}')
 
 
-def test_bus_trace_adapter_keeps_a_trace_of_unexpected_shape() -> None:
+def test_a_bus_trace_of_unexpected_shape_is_kept(tmp_path: Path) -> None:
     """A trace whose fields are not what a service writes still gives both records (what is
-    there kept as the body), with the time it was received."""
-    from rob6_recorder.adapters import bus_trace_records
+    there kept as the body), at the time it was received; so does one that is not an object."""
+    records = _batch(tmp_path, [("trace/driver/ping", b'{"t":"x","dt":true,"request":null,"reply":[1,2]}'),
+                                ("trace/driver/ping", b"[3,4]")], received_ns=7)
+    assert [r[:3] for r in records] == [("/bus/driver/ping/request", 7, 7), ("/bus/driver/ping/reply", 7, 7)] * 2
+    assert json.loads(records[0][3])["body"] is None
+    assert json.loads(records[1][3]) == {"cid": "", "service": "driver", "op": "ping", "instance": "", "ok": False,
+                                         "body": [1, 2], "dt": 0.0}
+    assert json.loads(records[2][3])["body"] == [3, 4] and json.loads(records[3][3])["body"] is None
 
-    (req, rep) = bus_trace_records("driver", "ping", b'{"t":"x","dt":true,"request":null,"reply":[1,2]}', 7)
-    assert req[1:3] == (7, 7) and rep[1:3] == (7, 7)
-    assert json.loads(req[3])["body"] is None
-    assert json.loads(rep[3]) == {"cid": "", "service": "driver", "op": "ping", "instance": "", "ok": False,
-                                  "body": [1, 2], "dt": 0.0}
+
+def test_a_client_exchange_and_session_events_give_their_session_records(tmp_path: Path) -> None:
+    opened = b'{"session":3,"event":"open","peer":"10.0.0.2:4711","t":10.5,"greeting":"welcome\\n"}'
+    line = (b'{"session":3,"peer":"10.0.0.2:4711","cid":"c7","t_in":11.25,"t_out":11.5,'
+            b'"line":"GetRobot \\u00e9","reply":"kr16\\n","seq":1}')
+    quiet = b'{"session":3,"peer":"10.0.0.2:4711","cid":"c8","t_in":12.0,"t_out":12.0,"line":"","reply":null,"seq":2}'
+    closed = b'{"session":3,"event":"close","peer":"10.0.0.2:4711","t":13.0,"reason":"timeout"}'
+    records = _batch(tmp_path, [("trace/gateway/event", opened), ("trace/gateway/session", line),
+                                ("trace/gateway/session", quiet), ("trace/gateway/event", closed)], received_ns=1)
+    assert [(topic, t, json.loads(data), schema) for topic, t, _, data, schema in records] == [
+        ("/session/3/event", 10_500_000_000, {"session": 3, "event": "open", "peer": "10.0.0.2:4711"},
+         "rob6.SessionEvent"),
+        ("/session/3/client_out", 10_500_000_000, {"session": 3, "cid": "", "text": "welcome\n", "kind": "greeting"},
+         "rob6.ClientReply"),
+        ("/session/3/client_in", 11_250_000_000,
+         {"session": 3, "cid": "c7", "text": "GetRobot \u00e9\n", "peer": "10.0.0.2:4711", "seq": 1}, "rob6.ClientLine"),
+        ("/session/3/client_out", 11_500_000_000,
+         {"session": 3, "cid": "c7", "text": "kr16\n", "dt": 0.25, "seq": 1}, "rob6.ClientReply"),
+        ("/session/3/client_in", 12_000_000_000,
+         {"session": 3, "cid": "c8", "text": "\n", "peer": "10.0.0.2:4711", "seq": 2}, "rob6.ClientLine"),
+        ("/session/3/client_out", 12_000_000_000, {"session": 3, "cid": "c8", "text": "", "dt": 0.0, "seq": 2},
+         "rob6.ClientReply"),
+        ("/session/3/event", 13_000_000_000,
+         {"session": 3, "event": "close", "peer": "10.0.0.2:4711", "reason": "timeout"}, "rob6.SessionEvent"),
+    ]
+
+
+def test_a_session_record_that_cannot_be_read_is_kept_as_it_came(tmp_path: Path, caplog: LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING, logger="rob6.recorder"):
+        records = _batch(tmp_path, [("trace/gateway/session", b'{"session":"three"}')], received_ns=9)
+    assert records == [("/trace/gateway/session", 9, 9, b'{"session":"three"}', "rob6.Record")]
+    assert "trace/gateway/session: a record that could not be read" in caplog.text
+
+
+def test_the_other_records_of_a_batch_go_back_to_python_and_a_malformed_batch_is_refused(tmp_path: Path) -> None:
+    with Recorder(tmp_path, "kr16", "robot1") as rec:
+        others = rec.submit_batch(b'[["driver/state",{"q":[1,2,3,4,5,6]}],["log/driver",{"message":"m"}]]', 1)
+        assert others == [("driver/state", b'{"q":[1,2,3,4,5,6]}'), ("log/driver", b'{"message":"m"}')]
+        for bad in (b"{}", b"[1]", b'[["a"]]', b"not json"):
+            with pytest.raises(ValueError, match="not a trace batch"):
+                rec.submit_batch(bad, 1)
 
 
 def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk() -> None:

@@ -11,7 +11,6 @@ Library API (the service in ``service.py`` feeds ``Recorder``):
 * ``rob6_recorder.inspect``: ``summarize``, ``export_csv``.
 * ``rob6_recorder.session_replay``: ``load_script``, ``replay`` (a client session against a server).
 * ``rob6_recorder.playback``: ``play`` (into the live view), ``replay_joints``.
-* ``rob6_recorder.adapters``: ``bus_trace_records`` (bus trace payload -> records).
 * ``rob6_recorder.cli``: the ``rob6-log`` click commands.
 """
 

@@ -264,6 +264,14 @@ def schema_for(topic: str) -> SchemaSpec:
     return GENERIC_SPEC
 
 
+def record_schemas() -> dict[str, tuple[str, bytes]]:
+    """The schema of each kind of record the native writer makes from a trace batch
+    (``rob6_recorder_native.Writer.submit_batch``), by the kind's name there."""
+    examples = {"client_in": "/session/1/client_in", "client_out": "/session/1/client_out",
+                "event": "/session/1/event", "request": "/bus/s/op/request", "reply": "/bus/s/op/reply"}
+    return {kind: (schema_for(topic).name, schema_for(topic).data) for kind, topic in examples.items()}
+
+
 # --------------------------------------------------------------------------- helpers
 LOG_LEVELS = {"NOTSET": 0, "TRACE": 1, "DEBUG": 1, "INFO": 2, "WARN": 3, "WARNING": 3,
               "ERROR": 4, "CRITICAL": 5, "FATAL": 5}

@@ -19,14 +19,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-import msgspec
-
 import rob6
-from rob6.bus import LIVE_TOPICS, Bus, trace_records
-from rob6.messages import ClientExchange, SessionEvent
+from rob6.bus import LIVE_TOPICS, Bus
 from rob6.robots import RobotModel
 
-from .adapters import bus_trace_records
 from .live import LiveView, start_live
 from .writer import Recorder
 
@@ -52,8 +48,6 @@ class RecorderService:
         self.recorder = Recorder(directory, robot.name, bus.settings.robot_id, urdf=urdf,
                                  live=self.live.publish if self.live is not None else None, **options)
         self._prefix = len(bus.prefix) + 1
-        self._exchange = msgspec.json.Decoder(ClientExchange)
-        self._event = msgspec.json.Decoder(SessionEvent)
 
     def start(self) -> None:
         self.recorder.start()
@@ -78,16 +72,17 @@ class RecorderService:
         self._record(key[self._prefix:], payload, time.time_ns())
 
     def on_traces(self, key: str, payload: bytes) -> None:
-        """One ``trace/<service>`` batch of records."""
+        """One ``trace/<service>`` batch of records: client lines and replies, session events
+        and bus traces are split and queued natively (``Recorder.submit_batch``), the rest
+        here."""
         now = time.time_ns()
-        suffix = key[self._prefix:]
         try:
-            records = trace_records(payload)
-        except msgspec.DecodeError:
+            others = self.recorder.submit_batch(payload, now)
+        except ValueError:
             log.warning("malformed trace batch on %s (%d bytes) kept as it is", key, len(payload))
-            self.recorder.submit("/" + suffix, now, payload)
+            self.recorder.submit("/" + key[self._prefix:], now, payload)
             return
-        for record_suffix, record in records:
+        for record_suffix, record in others:
             try:
                 self._record(record_suffix, record, now)
             except Exception:  # one bad record must not cost the rest of its batch
@@ -98,32 +93,7 @@ class RecorderService:
         topic = TOPICS.get(suffix)
         if topic:
             submit(topic, now, payload)
-        elif suffix == "trace/gateway/session":
-            self._client_exchange(self._exchange.decode(payload))
-        elif suffix == "trace/gateway/event":
-            event = self._event.decode(payload)
-            t = int(event.t * 1e9)
-            record = {"session": event.session, "event": event.event, "peer": event.peer}
-            if event.reason:  # a close other than Quit or the client's close between commands
-                record["reason"] = event.reason
-            submit(f"/session/{event.session}/event", t, record)
-            if event.greeting:
-                submit(f"/session/{event.session}/client_out", t,
-                       {"session": event.session, "cid": "", "text": event.greeting, "kind": "greeting"})
-        elif suffix.startswith("trace/"):
-            _, service, op = suffix.split("/", 2)
-            for topic, log_time, publish_time, data in bus_trace_records(service, op, payload, now):
-                submit(topic, log_time, data, publish_time)
         elif suffix.startswith("log/"):
             submit("/log", now, payload)
         else:  # control messages, the planner's settings: kept as they are
             submit("/" + suffix, now, payload)
-
-    def _client_exchange(self, exchange: ClientExchange) -> None:
-        session = exchange.session
-        self.recorder.submit(f"/session/{session}/client_in", int(exchange.t_in * 1e9),
-                             {"session": session, "cid": exchange.cid, "text": exchange.line + "\n",
-                              "peer": exchange.peer, "seq": exchange.seq})
-        self.recorder.submit(f"/session/{session}/client_out", int(exchange.t_out * 1e9),
-                             {"session": session, "cid": exchange.cid, "text": exchange.reply or "",
-                              "dt": exchange.t_out - exchange.t_in, "seq": exchange.seq})

@@ -19,6 +19,11 @@ records it logs a warning (at most once a second); at ``max_backlog`` it drops t
 counts it per topic, logs it, and the writer writes the accounting into the recordings
 (``/recorder/status``) as soon as it catches up - nothing is dropped silently.
 
+``submit_batch`` takes a whole ``trace/<service>`` batch: the native writer splits it and makes
+the records of client lines and replies, session events and bus traces itself
+(services/recorder/native/src/batch.rs), so the recorder's Python does nothing per request;
+the rest (joint states, link events, logs) comes back for ``submit``.
+
 Why native: the recorder's Python per record, on its writer thread, cost the other processes'
 requests their tail on a two-CPU robot PC (docs/PERFORMANCE.md, "The recorder's writing,
 native").
@@ -43,7 +48,7 @@ from rob6_recorder_native import ROBOT_DESCRIPTION_TOPIC, STATUS_TOPIC, Writer
 from . import __version__
 from .derived_channels import JointStateDerivation
 from .payloads import as_dict, encode
-from .schemas import schema_for, to_foxglove_log
+from .schemas import record_schemas, schema_for, to_foxglove_log
 from .transforms import Fk
 
 log = logging.getLogger("rob6.recorder")
@@ -76,9 +81,6 @@ class RecorderStats:
     max_backlog_seen: int = 0
     errors: int = 0
     files: list[str] = field(default_factory=list)  # every file opened so far
-
-
-_CLOSE_EVENTS = frozenset({"close", "closed", "disconnect", "disconnected", "end", "lost"})
 
 
 class Recorder:
@@ -127,7 +129,8 @@ class Recorder:
             metadata={k: str(v) for k, v in info.items()}, system=system, sessions=sessions,
             rotate_bytes=rotate_bytes, rotate_seconds=rotate_seconds, chunk_interval=chunk_interval,
             chunk_size=chunk_size, compression=compression, zstd_level=ZSTD_LEVEL, fsync=fsync,
-            max_backlog=max_backlog, warn_backlog=warn_backlog, session_linger=session_linger)
+            max_backlog=max_backlog, warn_backlog=warn_backlog, session_linger=session_linger,
+            record_schemas=record_schemas())
         self._topics: set[str] = set()  # whose schema the writer has
         self._schema(ROBOT_DESCRIPTION_TOPIC)
         self._schema(STATUS_TOPIC)
@@ -159,23 +162,32 @@ class Recorder:
 
         ``data``: a JSON-serialisable dict/list, a msgspec Struct, or JSON bytes.
         """
-        closing = False
         if topic == LOG_TOPIC:
             data = as_dict(data)
             if isinstance(data, dict):
                 data = to_foxglove_log(data, log_time)
-        elif topic.endswith("/event") and topic.startswith("/session/"):
-            event = as_dict(data)
-            closing = isinstance(event, dict) and str(event.get("event", "")).lower() in _CLOSE_EVENTS
         payload = encode(data)
         if topic not in self._topics:
             self._schema(topic)
         accepted: bool = self._writer.submit(topic, log_time, log_time if publish_time is None else publish_time,
-                                             payload, closing)
+                                             payload)
         if self._live is not None or (topic == JOINT_STATE_TOPIC and self._derived.active):
             with self._lock:
                 self._after(topic, log_time, data, payload)
         return accepted
+
+    def submit_batch(self, payload: bytes, received_ns: int) -> list[tuple[str, bytes]]:
+        """Queue the records of one ``trace/<service>`` batch that the native writer makes
+        itself (client lines and replies, session events, bus traces: no Python per record)
+        and hand the live view its copies; never blocks. Returns the others, ``(suffix,
+        record JSON)``, for ``submit`` (joint states, link events, logs). ValueError if
+        ``payload`` is not a batch."""
+        others, copies = self._writer.submit_batch(payload, received_ns, self._live is not None)
+        if copies:
+            with self._lock:
+                for topic, log_time, record in copies:
+                    self._after(topic, log_time, record, record)
+        return others
 
     def _after(self, topic: str, log_time: int, data: Any, payload: bytes) -> None:
         """The live view's copy of a record, and what a joint state gives (``/tf``, ``/flange``)."""
@@ -189,7 +201,7 @@ class Recorder:
             for derived_topic, derived in self._derived.derive(data, log_time):
                 if derived_topic not in self._topics:
                     self._schema(derived_topic)
-                self._writer.submit(derived_topic, log_time, log_time, derived, False)
+                self._writer.submit(derived_topic, log_time, log_time, derived)
                 if self._live is not None:
                     self._after(derived_topic, log_time, derived, derived)
 

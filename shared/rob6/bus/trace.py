@@ -72,7 +72,8 @@ def _runs(keys: list[tuple[str, int]]) -> Iterator[tuple[str, int, int]]:
 
 
 def trace_records(payload: bytes) -> list[tuple[str, bytes]]:
-    """The ``(suffix, record JSON)`` pairs of one ``trace/<service>`` batch."""
+    """The ``(suffix, record JSON)`` pairs of one ``trace/<service>`` batch (for tools and
+    tests; the recorder splits its batches natively: services/recorder/native/src/batch.rs)."""
     return [(suffix, bytes(record)) for suffix, record in _trace_batch.decode(payload)]
 
 

@@ -2,7 +2,8 @@
 //! records to files, and the MCAP files themselves.
 //!
 //! `Writer` is what `rob6_recorder.writer.Recorder` drives. `submit` copies one record into the
-//! queue and returns; the writer thread takes records from it in order, without the GIL, and
+//! queue and returns; `submit_batch` splits a trace batch into its records (`batch`) and queues
+//! them in one go. The writer thread takes records from it in order, without the GIL, and
 //! writes each where it belongs:
 //!
 //! - one file per client session (`/session/<n>/...` records, plus everything else that happens
@@ -47,6 +48,9 @@ use mcap::{Attachment, Compression, WriteOptions};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
+
+mod batch;
+use batch::Kind;
 
 /// How long records that belong to no session are kept for a session file that opens later:
 /// far more than two services' trace batches apart (5 ms).
@@ -392,6 +396,20 @@ fn session_of(topic: &str) -> Option<&str> {
         None
     } else {
         Some(key)
+    }
+}
+
+/// Whether a session event record (`{"event": ...}`) ends its session.
+fn event_closes(payload: &[u8]) -> bool {
+    #[derive(serde::Deserialize)]
+    struct Event {
+        event: Option<serde_json::Value>,
+    }
+    match serde_json::from_slice::<Event>(payload) {
+        Ok(Event {
+            event: Some(serde_json::Value::String(event)),
+        }) => batch::closes_session(&event),
+        _ => false,
     }
 }
 
@@ -791,6 +809,8 @@ struct Writer {
     warn_backlog: usize,
     backlog_log: Mutex<RateLimited>,
     drop_log: Mutex<RateLimited>,
+    /// the schema of each kind of record a trace batch gives (`batch::Kind::NAMED`)
+    kind_schemas: HashMap<Kind, (String, Vec<u8>)>,
 }
 
 impl Drop for Writer {
@@ -810,6 +830,63 @@ fn compression(name: &str) -> PyResult<Option<Compression>> {
     }
 }
 
+impl Writer {
+    /// Queue records in order, under one lock, and wake the writer if it idles (or has drops to
+    /// account for); the number queued. Above `max_backlog`, or once closed, a record is dropped:
+    /// counted per topic, logged at most once a second.
+    fn push(&self, py: Python<'_>, records: Vec<Record>) -> usize {
+        let (accepted, dropped_now, n, stopping, dropped, idle) = {
+            let mut q = self.shared.queue.lock().unwrap();
+            let (mut accepted, mut dropped_now) = (0, 0);
+            for record in records {
+                if q.stopping || q.records >= self.max_backlog {
+                    let a = &mut q.account;
+                    a.dropped += 1;
+                    *a.dropped_by_topic.entry(record.topic.clone()).or_default() += 1;
+                    *a.drops_pending.entry(record.topic).or_default() += 1;
+                    if a.first_drop_ns == 0 {
+                        a.first_drop_ns = record.log_time;
+                    }
+                    a.last_drop_ns = record.log_time;
+                    dropped_now += 1;
+                } else {
+                    q.items.push_back(Item::Record(record));
+                    q.records += 1;
+                    accepted += 1;
+                }
+            }
+            (accepted, dropped_now, q.records, q.stopping, q.account.dropped, q.idle)
+        };
+        if dropped_now > 0 || (accepted > 0 && idle) {
+            self.shared.wake.notify_one();
+        }
+        if dropped_now > 0 {
+            if self.drop_log.lock().unwrap().due() {
+                let message = if stopping {
+                    format!("recorder closed: dropping records, {dropped} dropped so far")
+                } else {
+                    format!(
+                        "recorder backlog full ({n} records queued, limit {}): dropping records, {dropped} \
+                             dropped so far",
+                        self.max_backlog
+                    )
+                };
+                py_log(py, WARNING, &message);
+            }
+        } else if n >= self.warn_backlog && self.backlog_log.lock().unwrap().due() {
+            py_log(
+                py,
+                WARNING,
+                &format!(
+                    "recorder falling behind: {n} records queued (drops start at {})",
+                    self.max_backlog
+                ),
+            );
+        }
+        accepted
+    }
+}
+
 #[pymethods]
 impl Writer {
     /// `metadata`: what every file's `rob6` metadata holds beside robot, robot_id, kind, started,
@@ -817,7 +894,7 @@ impl Writer {
     #[new]
     #[pyo3(signature = (directory, robot, robot_id, *, urdf, urdf_record, metadata, system, sessions,
                         rotate_bytes, rotate_seconds, chunk_interval, chunk_size, compression, zstd_level,
-                        fsync, max_backlog, warn_backlog, session_linger))]
+                        fsync, max_backlog, warn_backlog, session_linger, record_schemas))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         directory: PathBuf,
@@ -838,7 +915,15 @@ impl Writer {
         max_backlog: usize,
         warn_backlog: usize,
         session_linger: f64,
+        record_schemas: HashMap<String, (String, Vec<u8>)>,
     ) -> PyResult<Self> {
+        let mut kind_schemas = HashMap::new();
+        for (name, schema) in record_schemas {
+            let Some((_, kind)) = Kind::NAMED.iter().find(|(n, _)| *n == name) else {
+                return Err(PyValueError::new_err(format!("no kind of record is called {name:?}")));
+            };
+            kind_schemas.insert(*kind, schema);
+        }
         let compression = self::compression(compression)?;
         let level = if matches!(compression, Some(Compression::Zstd)) {
             zstd_level
@@ -898,6 +983,7 @@ impl Writer {
             warn_backlog,
             backlog_log: Mutex::new(RateLimited { last: None }),
             drop_log: Mutex::new(RateLimited { last: None }),
+            kind_schemas,
         })
     }
 
@@ -933,8 +1019,8 @@ impl Writer {
         *self.thread.lock().unwrap() = Some(handle);
     }
 
-    /// Queue one record; never blocks. False if it had to be dropped (counted, logged).
-    #[pyo3(signature = (topic, log_time, publish_time, payload, closing=false))]
+    /// Queue one record; never blocks. False if it had to be dropped (counted, logged). A
+    /// `/session/<n>/event` record whose event ends the session closes its file (after the linger).
     fn submit(
         &self,
         py: Python<'_>,
@@ -942,62 +1028,69 @@ impl Writer {
         log_time: u64,
         publish_time: u64,
         payload: &Bound<'_, PyBytes>,
-        closing: bool,
     ) -> bool {
         let payload = payload.as_bytes().to_vec();
-        let (accepted, n, stopping, dropped, wake) = {
-            let mut q = self.shared.queue.lock().unwrap();
-            let n = q.records;
-            if q.stopping || n >= self.max_backlog {
-                let a = &mut q.account;
-                a.dropped += 1;
-                *a.dropped_by_topic.entry(topic.to_string()).or_default() += 1;
-                *a.drops_pending.entry(topic.to_string()).or_default() += 1;
-                if a.first_drop_ns == 0 {
-                    a.first_drop_ns = log_time;
-                }
-                a.last_drop_ns = log_time;
-                let dropped = a.dropped;
-                (false, n, q.stopping, dropped, true)
-            } else {
-                q.items.push_back(Item::Record(Record {
-                    topic: topic.to_string(),
-                    log_time,
-                    publish_time,
-                    payload,
-                    closing,
-                }));
-                q.records += 1;
-                (true, n, false, 0, q.idle)
-            }
+        let closing = session_of(topic).is_some() && topic.ends_with("/event") && event_closes(&payload);
+        let record = Record {
+            topic: topic.to_string(),
+            log_time,
+            publish_time,
+            payload,
+            closing,
         };
-        if wake {
-            self.shared.wake.notify_one();
+        self.push(py, vec![record]) == 1
+    }
+
+    /// Queue the records of one trace batch (`batch`: client lines and replies, session events,
+    /// bus traces), made here without Python; never blocks. Returns what Python records itself,
+    /// `(suffix, record JSON)` (joint states, link events, logs), and with `copy` the records
+    /// queued, `(topic, log_time, JSON)` (for the live view). ValueError if `payload` is not a batch.
+    #[allow(clippy::type_complexity)]
+    fn submit_batch<'py>(
+        &self,
+        py: Python<'py>,
+        payload: &[u8],
+        received_ns: u64,
+        copy: bool,
+    ) -> PyResult<(
+        Vec<(String, Bound<'py, PyBytes>)>,
+        Vec<(String, u64, Bound<'py, PyBytes>)>,
+    )> {
+        let split = batch::split(payload, received_ns)
+            .map_err(|err| PyValueError::new_err(format!("not a trace batch: {err}")))?;
+        for warning in &split.warnings {
+            py_log(py, WARNING, warning);
         }
-        if !accepted {
-            if self.drop_log.lock().unwrap().due() {
-                let message = if stopping {
-                    format!("recorder closed: dropping records, {dropped} dropped so far")
-                } else {
-                    format!(
-                        "recorder backlog full ({n} records queued, limit {}): dropping records, {dropped} \
-                             dropped so far",
-                        self.max_backlog
-                    )
-                };
-                py_log(py, WARNING, &message);
+        {
+            let mut schemas = self.shared.schemas.lock().unwrap();
+            for built in &split.built {
+                if let Some(schema) = self.kind_schemas.get(&built.kind) {
+                    if !schemas.contains_key(&built.topic) {
+                        schemas.insert(built.topic.clone(), schema.clone());
+                    }
+                }
             }
-        } else if n >= self.warn_backlog && self.backlog_log.lock().unwrap().due() {
-            py_log(
-                py,
-                WARNING,
-                &format!(
-                    "recorder falling behind: {n} records queued (drops start at {})",
-                    self.max_backlog
-                ),
-            );
         }
-        accepted
+        let copies = if copy {
+            let to_py = |b: &batch::Built| (b.topic.clone(), b.log_time, PyBytes::new(py, &b.payload));
+            split.built.iter().map(to_py).collect()
+        } else {
+            Vec::new()
+        };
+        let records = split.built.into_iter().map(|b| Record {
+            topic: b.topic,
+            log_time: b.log_time,
+            publish_time: b.publish_time,
+            payload: b.payload,
+            closing: b.closing,
+        });
+        self.push(py, records.collect());
+        let others = split
+            .others
+            .into_iter()
+            .map(|(suffix, record)| (suffix, PyBytes::new(py, &record)))
+            .collect();
+        Ok((others, copies))
     }
 
     /// A command for the writer thread, in order with the records: `flush`, `open_session`,
