@@ -811,6 +811,9 @@ struct Writer {
     drop_log: Mutex<RateLimited>,
     /// the schema of each kind of record a trace batch gives (`batch::Kind::NAMED`)
     kind_schemas: HashMap<Kind, (String, Vec<u8>)>,
+    /// the topics of those records whose schema is registered (not the writer's lock: it
+    /// holds that one while it writes)
+    batch_topics: Mutex<HashSet<String>>,
 }
 
 impl Drop for Writer {
@@ -984,6 +987,7 @@ impl Writer {
             backlog_log: Mutex::new(RateLimited { last: None }),
             drop_log: Mutex::new(RateLimited { last: None }),
             kind_schemas,
+            batch_topics: Mutex::new(HashSet::new()),
         })
     }
 
@@ -1062,11 +1066,13 @@ impl Writer {
             py_log(py, WARNING, warning);
         }
         {
-            let mut schemas = self.shared.schemas.lock().unwrap();
+            let mut known = self.batch_topics.lock().unwrap();
             for built in &split.built {
                 if let Some(schema) = self.kind_schemas.get(&built.kind) {
-                    if !schemas.contains_key(&built.topic) {
-                        schemas.insert(built.topic.clone(), schema.clone());
+                    if !known.contains(&built.topic) {
+                        known.insert(built.topic.clone());
+                        let mut schemas = self.shared.schemas.lock().unwrap();
+                        schemas.entry(built.topic.clone()).or_insert_with(|| schema.clone());
                     }
                 }
             }
