@@ -32,6 +32,19 @@ pub struct Built {
     pub closing: bool,
 }
 
+impl Built {
+    fn new(topic: String, kind: Kind, log_time: u64, publish_time: u64, payload: Vec<u8>) -> Self {
+        Built {
+            topic,
+            kind,
+            log_time,
+            publish_time,
+            payload,
+            closing: false,
+        }
+    }
+}
+
 /// What a built record is, for its schema (`rob6_recorder.schemas`).
 #[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
 pub enum Kind {
@@ -86,14 +99,13 @@ pub fn split(payload: &[u8], received_ns: u64) -> Result<Split, serde_json::Erro
             out.warnings.push(format!(
                 "{suffix}: a record that could not be read ({err}), kept as it came"
             ));
-            out.built.push(Built {
-                topic: format!("/{suffix}"),
-                kind: Kind::Kept,
-                log_time: received_ns,
-                publish_time: received_ns,
-                payload: record.get().as_bytes().to_vec(),
-                closing: false,
-            });
+            out.built.push(Built::new(
+                format!("/{suffix}"),
+                Kind::Kept,
+                received_ns,
+                received_ns,
+                record.get().as_bytes().to_vec(),
+            ));
         }
     }
     Ok(out)
@@ -172,22 +184,20 @@ fn exchange(record: &str, built: &mut Vec<Built>) -> serde_json::Result<()> {
         seq: x.seq,
     };
     let (t_in, t_out) = (truncated_ns(x.t_in), truncated_ns(x.t_out));
-    built.push(Built {
-        topic: format!("/session/{}/client_in", x.session),
-        kind: Kind::ClientIn,
-        log_time: t_in,
-        publish_time: t_in,
-        payload: json(&line),
-        closing: false,
-    });
-    built.push(Built {
-        topic: format!("/session/{}/client_out", x.session),
-        kind: Kind::ClientOut,
-        log_time: t_out,
-        publish_time: t_out,
-        payload: json(&reply),
-        closing: false,
-    });
+    built.push(Built::new(
+        format!("/session/{}/client_in", x.session),
+        Kind::ClientIn,
+        t_in,
+        t_in,
+        json(&line),
+    ));
+    built.push(Built::new(
+        format!("/session/{}/client_out", x.session),
+        Kind::ClientOut,
+        t_out,
+        t_out,
+        json(&reply),
+    ));
     Ok(())
 }
 
@@ -224,33 +234,35 @@ struct Greeting<'a> {
 fn event(record: &str, built: &mut Vec<Built>) -> serde_json::Result<()> {
     let e: Event = object(record)?;
     let t = truncated_ns(e.t);
-    built.push(Built {
-        topic: format!("/session/{}/event", e.session),
-        kind: Kind::Event,
-        log_time: t,
-        publish_time: t,
-        payload: json(&EventRecord {
-            session: e.session,
-            event: &e.event,
-            peer: &e.peer,
-            reason: &e.reason,
-        }),
-        closing: closes_session(&e.event),
-    });
+    let record = EventRecord {
+        session: e.session,
+        event: &e.event,
+        peer: &e.peer,
+        reason: &e.reason,
+    };
+    let mut event = Built::new(
+        format!("/session/{}/event", e.session),
+        Kind::Event,
+        t,
+        t,
+        json(&record),
+    );
+    event.closing = closes_session(&e.event);
+    built.push(event);
     if !e.greeting.is_empty() {
-        built.push(Built {
-            topic: format!("/session/{}/client_out", e.session),
-            kind: Kind::ClientOut,
-            log_time: t,
-            publish_time: t,
-            payload: json(&Greeting {
-                session: e.session,
-                cid: "",
-                text: &e.greeting,
-                kind: "greeting",
-            }),
-            closing: false,
-        });
+        let greeting = Greeting {
+            session: e.session,
+            cid: "",
+            text: &e.greeting,
+            kind: "greeting",
+        };
+        built.push(Built::new(
+            format!("/session/{}/client_out", e.session),
+            Kind::ClientOut,
+            t,
+            t,
+            json(&greeting),
+        ));
     }
     Ok(())
 }
@@ -379,26 +391,25 @@ fn bus_trace(service: &str, op: &str, record: &str, received_ns: u64, built: &mu
         ),
         None => (false, trace.reply.unwrap_or(null()), None),
     };
-    built.push(Built {
-        topic: format!("/bus/{service}/{op}/request"),
-        kind: Kind::Request,
-        log_time: start,
-        publish_time: start,
-        payload: json(&RequestRecord {
+    built.push(Built::new(
+        format!("/bus/{service}/{op}/request"),
+        Kind::Request,
+        start,
+        start,
+        json(&RequestRecord {
             cid: &cid,
             service,
             op,
             instance,
             body: request_body,
         }),
-        closing: false,
-    });
-    built.push(Built {
-        topic: format!("/bus/{service}/{op}/reply"),
-        kind: Kind::Reply,
-        log_time: end,
-        publish_time: received_ns,
-        payload: json(&ReplyRecord {
+    ));
+    built.push(Built::new(
+        format!("/bus/{service}/{op}/reply"),
+        Kind::Reply,
+        end,
+        received_ns,
+        json(&ReplyRecord {
             cid: &cid,
             service,
             op,
@@ -408,6 +419,5 @@ fn bus_trace(service: &str, op: &str, record: &str, received_ns: u64, built: &mu
             dt,
             error,
         }),
-        closing: false,
-    });
+    ));
 }
