@@ -58,7 +58,8 @@ class System:
         self._ready = threading.Event()
         self.process: subprocess.Popen[str] = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                         stderr=subprocess.STDOUT, text=True, start_new_session=True)
-        threading.Thread(target=self._collect, daemon=True).start()
+        self._collector = threading.Thread(target=self._collect, daemon=True)
+        self._collector.start()
 
     def _collect(self) -> None:
         assert self.process.stdout is not None  # stdout=PIPE
@@ -95,14 +96,17 @@ class System:
         return Bus(BusSettings(robot=self.robot, robot_id=self.robot_id,
                                connect=(f"tcp/127.0.0.1:{self.router_port}",)), service)
 
-    def stop(self, timeout: float = 5.0) -> int:
+    def stop(self, timeout: float = 30.0) -> int:
+        """Ctrl-C (SIGINT to ``rob6 run``), and its exit code once everything it started has
+        ended and all of its output is in ``output``; killed if it hangs for ``timeout``."""
         if self.process.poll() is None:
             self.process.send_signal(signal.SIGINT)
             try:
                 self.process.wait(timeout)
             except subprocess.TimeoutExpired:
-                os.killpg(self.process.pid, signal.SIGKILL)
+                self.process.kill()  # its children follow it (rob6.service.follow_launcher)
                 self.process.wait()
+        self._collector.join(timeout)  # the pipe ends when the last of its children did
         return self.process.returncode
 
 

@@ -33,9 +33,11 @@ from .config import DEFAULT_LIVE_PORT, BusSettings
 from .ownership import EXIT_REFUSED
 from .service import StartupError
 
-#: stop order, and how long each group may take before it is killed
-STOP_ORDER = ((("gateway",), 0.5), (("ros", "planner", "driver", "gripper", "kinematics"), 0.8),
-              (("recorder",), 1.5), (("router",), 0.3))
+#: stop order, and how long each group may take before it is killed: long enough for a
+#: clean stop on a busy machine (the gateway waits for the arm to come to rest, the
+#: recorder finishes its files), so a kill means something is wrong and is reported
+STOP_ORDER = ((("gateway",), 15.0), (("ros",), 5.0), (("planner",), 5.0),
+              (("driver", "gripper", "kinematics"), 5.0), (("recorder",), 10.0), (("router",), 5.0))
 
 
 @dataclass
@@ -60,7 +62,7 @@ class Launcher:
                         ROB6_LOG_DIR=log_dir, ROB6_DUMMY="1" if dummy else "0",
                         ROB6_ZENOH_CONNECT=self.endpoint, ROB6_LOG_LEVEL=log_level,
                         ROB6_ALLOW_SHUTDOWN="1" if allow_shutdown else "0",
-                        ROB6_SERVICES=",".join(services))
+                        ROB6_SERVICES=",".join(services), ROB6_LAUNCHER_PID=str(os.getpid()))
         self.env.pop("ROB6_ZENOH_LISTEN", None)
         self.settings = BusSettings(robot=robot, robot_id=robot_id, connect=(self.endpoint,))
         self.router = Child("router", [sys.executable, "-m", "rob6.cli", "router",
@@ -72,7 +74,9 @@ class Launcher:
 
     # ------------------------------------------------------------------ processes
     def _spawn(self, child: Child) -> None:
-        child.process = subprocess.Popen(child.argv, env=self.env, stdin=subprocess.DEVNULL)
+        # a group of its own: a terminal's Ctrl-C reaches the launcher alone, which stops the
+        # children in STOP_ORDER (always from this thread: see rob6.service.follow_launcher)
+        child.process = subprocess.Popen(child.argv, env=self.env, stdin=subprocess.DEVNULL, process_group=0)
 
     def preflight(self) -> None:
         """Everything a start can be refused for, checked before anything starts."""
@@ -182,26 +186,45 @@ class Launcher:
         child.next_start = now + min(10.0, 0.5 * 2 ** min(child.restarts - 1, 5))
         return True
 
-    def stop(self) -> None:
+    def stop(self) -> bool:
+        """Stop every child in STOP_ORDER; True when each exited 0 by itself (what was not is
+        said in one line)."""
         self.stopping.set()
-        by_name = {c.name: c for c in (*self.children, self.router)}
-        for names, grace in STOP_ORDER:
-            group = [p for n in names if n in by_name and (p := by_name[n].process) is not None]
-            _terminate([p for p in group if p.poll() is None], grace)
         if self.bus is not None:
             self.bus.close()
+        clean = True
+        by_name = {c.name: c for c in (*self.children, self.router)}
+        for names, grace in STOP_ORDER:
+            # those still running: one that ended before was reported when it did
+            group = [c for n in names if (c := by_name.get(n)) is not None and c.process is not None
+                     and c.process.poll() is None]
+            killed = _terminate(group, grace)
+            for child in group:
+                assert child.process is not None
+                if child in killed:
+                    self.echo(f"rob6: {child.name} did not stop within {grace:.0f} s; killed", err=True)
+                elif child.process.returncode != 0:
+                    self.echo(f"rob6: {child.name} stopped with exit code {child.process.returncode}", err=True)
+                clean = clean and child.process.returncode == 0 and child not in killed
+        return clean
 
 
-def _terminate(processes: list[subprocess.Popen[bytes]], grace: float) -> None:
-    for process in processes:
-        process.send_signal(signal.SIGTERM)
+def _terminate(children: list[Child], grace: float) -> list[Child]:
+    """SIGTERM to each, then up to ``grace`` seconds in all; returns those that had to be killed."""
+    for child in children:
+        assert child.process is not None
+        child.process.send_signal(signal.SIGTERM)
     deadline = time.monotonic() + grace
-    for process in processes:
+    killed = []
+    for child in children:
+        assert child.process is not None
         try:
-            process.wait(max(0.0, deadline - time.monotonic()))
+            child.process.wait(max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+            child.process.kill()
+            child.process.wait()
+            killed.append(child)
+    return killed
 
 
 def _check_free(kind: int, host: str, port: int, message: str) -> None:
@@ -232,8 +255,9 @@ def _wait_port(port: int, timeout: float, child: Child | None = None) -> bool:
 
 def run(**options: Any) -> int:
     launcher = Launcher(**options)
-    signal.signal(signal.SIGTERM, lambda *_: launcher.stopping.set())
-    signal.signal(signal.SIGINT, lambda *_: launcher.stopping.set())
+    for signum in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):  # SIGHUP: the terminal closed
+        signal.signal(signum, lambda *_: launcher.stopping.set())
+    code = 1
     try:
         launcher.start()
         if launcher.live_url:  # before the ready line: whoever waits for it sees both
@@ -241,9 +265,9 @@ def run(**options: Any) -> int:
                        f"Foxglove WebSocket)", err=True)
         click.echo(f"rob6 ready: robot {launcher.robot} on 127.0.0.1:{launcher.port} "
                    f"(Zenoh router {launcher.endpoint}); Ctrl-C stops everything", err=True)
-        return launcher.supervise()
+        code = launcher.supervise()
     except StartupError as exc:
         click.echo(f"rob6: {exc}", err=True)
-        return 1
     finally:
-        launcher.stop()
+        clean = launcher.stop()
+    return code or (0 if clean else 1)

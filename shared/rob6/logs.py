@@ -9,6 +9,8 @@ from __future__ import annotations
 import logging
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from .messages import LogRecord
@@ -32,6 +34,18 @@ def configure(service: str, level: str | int = "WARNING") -> None:
 
 def set_verbosity(level: int) -> None:
     logging.getLogger().setLevel(VERBOSITY_LEVELS[level])
+
+
+@contextmanager
+def to_bus(bus: Bus) -> Iterator[None]:
+    """Every record goes to the bus too while the block runs (``BusLogHandler``); after it,
+    the root logger no longer holds the bus, so a stopped service's objects can go."""
+    handler = BusLogHandler(bus)
+    logging.getLogger().addHandler(handler)
+    try:
+        yield
+    finally:
+        logging.getLogger().removeHandler(handler)
 
 
 class BusLogHandler(logging.Handler):

@@ -16,12 +16,13 @@ import zenoh
 from .bus import open_session
 from .config import BusSettings
 from .ownership import EXIT_REFUSED
-from .service import fail
+from .service import end_threads, fail, follow_launcher
 
 log = logging.getLogger("rob6.router")
 
 
 def run(settings: BusSettings, listen: tuple[str, ...]) -> None:
+    follow_launcher()
     stop = threading.Event()
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda *_: stop.set())
@@ -36,3 +37,4 @@ def run(settings: BusSettings, listen: tuple[str, ...]) -> None:
     log.warning("zenoh router %s listening on %s", session.zid(), ", ".join(listen) or "(config file)")
     stop.wait()
     session.close()
+    end_threads()

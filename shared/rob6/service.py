@@ -8,6 +8,8 @@ anything else.
 
 from __future__ import annotations
 
+import ctypes
+import gc
 import logging
 import os
 import signal
@@ -36,6 +38,8 @@ NEEDS: dict[str, tuple[str, ...]] = {
     "ros": ("driver", "planner"),
 }
 NEEDS_WAIT_S = 30.0
+#: how long a stopping service waits for the threads it started to end
+THREADS_END_S = 5.0
 
 
 class StartupError(ServiceError):
@@ -67,6 +71,52 @@ def wait_for_needs(bus: Bus, name: str, stop: threading.Event, timeout: float = 
             return
 
 
+#: prctl(2)'s option that asks for a signal when the parent goes
+_PR_SET_PDEATHSIG = 1
+
+
+def follow_launcher() -> None:
+    """A process that ``rob6 run`` started ends when the launcher does, even if it is killed.
+
+    The launcher puts its children in a process group of their own (a terminal's Ctrl-C
+    reaches the launcher alone, which stops them in order), so the kernel must tell them
+    when it is gone: SIGTERM, the same clean stop as the launcher's. Nothing elsewhere
+    (``ROB6_LAUNCHER_PID`` unset: a container, a service started by hand).
+    """
+    launcher = os.environ.get("ROB6_LAUNCHER_PID")
+    if not launcher or not sys.platform.startswith("linux"):
+        return
+    ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != int(launcher):  # it went before the request above was made
+        sys.exit(0)
+
+
+def end_threads(timeout: float = THREADS_END_S) -> None:
+    """The last step of a stop: every other thread of the process ends first.
+
+    From here on SIGTERM and SIGINT are ignored: the process is ending anyway, and at
+    the interpreter's exit Python puts back their default action, so a second stop
+    signal (the launcher's, after a client's Shutdown had already stopped the service)
+    would kill it then (exit code -15) instead of letting it end with 0.
+
+    A daemon thread still running when the interpreter exits keeps whatever it references
+    alive through finalization, and the native modules then report their objects as
+    leaked (nanobind: ``leaked 6 instances ... ruckig.Trajectory``). The service's cleanup
+    and the bus's close tell each thread to end; this waits for them, then collects what
+    is left in reference cycles while every module is still there.
+    """
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(signum, signal.SIG_IGN)
+    deadline = time.monotonic() + timeout
+    for thread in threading.enumerate():
+        if thread not in (threading.main_thread(), threading.current_thread()):
+            thread.join(max(0.0, deadline - time.monotonic()))
+    left = [t.name for t in threading.enumerate() if t not in (threading.main_thread(), threading.current_thread())]
+    if left:
+        log.warning("still running after %.0f s of stopping: %s", timeout, ", ".join(left))
+    gc.collect()
+
+
 def fail(name: str, message: str, code: int) -> None:
     """Say why the start failed in one line and exit."""
     print(message if message.startswith("rob6") else f"rob6-{name}: {message}", file=sys.stderr, flush=True)
@@ -94,6 +144,15 @@ def run(settings: BusSettings, name: str, log_level: str,
     cleanup function, called before the session closes.
     """
     logs.configure(name, log_level)
+    follow_launcher()
+    exit_code = _serve(settings, name, setup)
+    end_threads()  # the service's objects are unreachable now: gone before the interpreter
+    if exit_code:
+        sys.exit(exit_code)
+
+
+def _serve(settings: BusSettings, name: str, setup: Callable[[Bus], Callable[[], None] | None]) -> int:
+    """``run``'s service, from the bus's opening to its close; the exit code."""
     stop = threading.Event()
     exit_code = 0
     for signum in (signal.SIGTERM, signal.SIGINT):
@@ -106,31 +165,30 @@ def run(settings: BusSettings, name: str, log_level: str,
 
     bus = Bus(settings, name)
     ownership = claim(bus, stand_down)
-    logging.getLogger().addHandler(logs.BusLogHandler(bus))
 
     def on_verbosity(_key: str, payload: bytes) -> None:
         logs.set_verbosity(msgspec.json.decode(payload, type=Verbosity).level)
 
-    bus.subscribe("control/verbosity", on_verbosity)
-    bus.subscribe("control/shutdown", lambda *_: stop.set())
-    wait_for_needs(bus, name, stop)
-    cleanup = None
-    try:
+    with logs.to_bus(bus):
+        bus.subscribe("control/verbosity", on_verbosity)
+        bus.subscribe("control/shutdown", lambda *_: stop.set())
+        wait_for_needs(bus, name, stop)
+        cleanup = None
         try:
-            cleanup = setup(bus)
-        except StartupError as exc:
-            fail(name, str(exc), EXIT_REFUSED)
-        except Exception as exc:
-            log.debug("%s failed to start", name, exc_info=True)
-            fail(name, f"failed to start: {type(exc).__name__}: {exc} (ROB6_LOG_LEVEL=DEBUG shows where)", 1)
-        log.info("%s %s up (robot %s, id %s)", name, bus.instance, settings.robot, settings.robot_id)
-        stop.wait()
-    finally:
-        log.info("%s %s stopping", name, bus.instance)
-        if cleanup:
-            cleanup()
-        if ownership is not None:
-            ownership.release()
-        bus.close()
-    if exit_code:
-        sys.exit(exit_code)
+            try:
+                cleanup = setup(bus)
+            except StartupError as exc:
+                fail(name, str(exc), EXIT_REFUSED)
+            except Exception as exc:
+                log.debug("%s failed to start", name, exc_info=True)
+                fail(name, f"failed to start: {type(exc).__name__}: {exc} (ROB6_LOG_LEVEL=DEBUG shows where)", 1)
+            log.info("%s %s up (robot %s, id %s)", name, bus.instance, settings.robot, settings.robot_id)
+            stop.wait()
+        finally:
+            log.info("%s %s stopping", name, bus.instance)
+            if cleanup:
+                cleanup()
+            if ownership is not None:
+                ownership.release()
+    bus.close()
+    return exit_code

@@ -53,6 +53,8 @@ from .motion import CoreState, Motion, MotionCore, Offline
 log = logging.getLogger("rob6.driver")
 
 STOPPING = "waiting for the arm to stop"
+#: why a motion ended when its caller stopped it (``stop``): on purpose, not a fault
+STOP_REQUESTED = "stop requested"
 #: a state that differs from the last one published only in its time and cycle (the robot
 #: at rest) is published this often, not every cycle: each subscriber of a 250 Hz stream
 #: (gateway, recorder, live view) pays 2-4 % of a core for it (issue 13), and each state at
@@ -151,8 +153,9 @@ class DriverService:
                 return ExecuteReply(ok=False, reason=failed, error=failed, state=self.joint_state(self.core.state()))
         if motion.error:  # the link already said why, at WARNING
             log.info("motion failed: %s", motion.error)
-        elif not motion.ok:
-            log.warning("trajectory refused or stopped: %s", motion.reason)
+        elif not motion.ok:  # stopped on request (a client's Stop or its leaving, rob6 stopping) is no fault
+            log.log(logging.INFO if motion.reason == STOP_REQUESTED else logging.WARNING,
+                    "trajectory refused or stopped: %s", motion.reason)
         return ExecuteReply(ok=bool(motion.ok), reason=motion.reason or "", error=motion.error,
                             state=self.joint_state(final))
 
@@ -190,7 +193,7 @@ class DriverService:
 
     def stop(self, _req: Empty, ctx: Context) -> Ack:
         """Stop whatever runs (a trajectory, Alter) with the ramp; ``ok``: at rest."""
-        return self._stopped(self.core.stop("stop requested"), ctx)
+        return self._stopped(self.core.stop(STOP_REQUESTED), ctx)
 
     def _stopped(self, stop: Motion, ctx: Context) -> Ack:
         """The answer to an operation that stops the arm: at rest (with the state there,

@@ -22,9 +22,10 @@ from .server import AddressFilter, Server
 
 log = logging.getLogger("rob6.gateway")
 
-#: how long a stopping gateway gives the session threads to finish and queue their last
-#: records (the launcher allows the gateway 0.5 s in all: rob6.launcher.STOP_ORDER)
-SESSION_END_S = 0.3
+#: how long a stopping gateway gives the open session to end: its thread finishes and
+#: queues its last records, and the planner confirms that what it left moving is at rest
+#: (the launcher allows the gateway more: rob6.launcher.STOP_ORDER)
+SESSION_END_S = 10.0
 
 
 @click.command()
@@ -50,13 +51,18 @@ def main(settings: BusSettings, log_level: str, port: int, bind: str, allow_shut
          allow_direct_adept_cmd: bool, allow_clients: tuple[str, ...], pause_ms: float, idle_timeout: float) -> None:
     """Serve the rob6server text protocol and forward the work to the rob6 services."""
     logs.configure("gateway", log_level)
+    service.follow_launcher()
     networks = [n.strip() for item in allow_clients for n in item.split(",") if n.strip()]
-    _serve(settings, port, bind, Options(allow_shutdown, allow_direct_adept_cmd),
-           AddressFilter(networks) if networks else None, pause_ms / 1000.0, idle_timeout)
+    exit_code = _serve(settings, port, bind, Options(allow_shutdown, allow_direct_adept_cmd),
+                       AddressFilter(networks) if networks else None, pause_ms / 1000.0, idle_timeout)
+    service.end_threads()  # the gateway's objects are unreachable now: gone before the interpreter
+    if exit_code:
+        sys.exit(exit_code)
 
 
 def _serve(settings: BusSettings, port: int, bind: str, options: Options, allow: AddressFilter | None,
-           pause_s: float, idle_timeout: float) -> None:
+           pause_s: float, idle_timeout: float) -> int:
+    """The gateway from the bus's opening to its close; the exit code."""
     bus = Bus(settings, "gateway")
     stop = threading.Event()
     stood_down: list[str] = []  # an earlier gateway of this robot appeared (see rob6.ownership)
@@ -66,11 +72,23 @@ def _serve(settings: BusSettings, port: int, bind: str, options: Options, allow:
         stop.set()
 
     ownership = service.claim(bus, stand_down)
-    logging.getLogger().addHandler(logs.BusLogHandler(bus))
-    gateway = Gateway(bus, get_robot(settings.robot), options)
-    server = Server(gateway, pause_s=pause_s, idle_timeout_s=idle_timeout, allow=allow)
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda *_: stop.set())
+    with logs.to_bus(bus):
+        _serve_clients(bus, stop, settings, port, bind, Server(
+            Gateway(bus, get_robot(settings.robot), options), pause_s=pause_s, idle_timeout_s=idle_timeout,
+            allow=allow))
+        if ownership is not None:
+            ownership.release()
+    bus.close()
+    return EXIT_REFUSED if stood_down else 0
+
+
+def _serve_clients(bus: Bus, stop: threading.Event, settings: BusSettings, port: int, bind: str,
+                   server: Server) -> None:
+    """Once what the commands need is alive, clients until ``stop`` (or a client's
+    Shutdown); then the session still open ends."""
+    gateway = server.gateway
     # clients only once the services their commands reach are alive in this process'
     # own view: a client connecting the instant the port opens gets real answers
     deadline = time.monotonic() + service.NEEDS_WAIT_S
@@ -81,7 +99,6 @@ def _serve(settings: BusSettings, port: int, bind: str, options: Options, allow:
             break
         stop.wait(0.02)
     if stop.is_set():
-        bus.close()
         return
     try:
         listener = socket.create_server((bind, port), family=socket.AF_INET6 if ":" in bind else socket.AF_INET)
@@ -101,11 +118,6 @@ def _serve(settings: BusSettings, port: int, bind: str, options: Options, allow:
     listener.shutdown(socket.SHUT_RDWR)  # wakes the accepting thread (a close alone does not)
     listener.close()
     server.close(SESSION_END_S)
-    if ownership is not None:
-        ownership.release()
-    bus.close()
-    if stood_down:
-        sys.exit(EXIT_REFUSED)
 
 
 if __name__ == "__main__":

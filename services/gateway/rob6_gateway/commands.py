@@ -146,6 +146,7 @@ class Gateway:
         self.alter = False  # EnableAlter succeeded (the planner owns the mode; this is its echo)
         self.shutdown_requested = threading.Event()
         self._ending: threading.Thread | None = None  # the last session's end: its robot stopping
+        self._last_end: threading.Thread | None = None  # the last session's end, moving or not
         # a service (re)appearing gets the current verbosity, so all processes agree
         bus.on_liveliness(self._on_liveliness)
 
@@ -215,8 +216,15 @@ class Gateway:
         ending = threading.Thread(target=self._session_end, args=(session,),
                                   name=f"session-{session.number}-end", daemon=True)
         ending.start()
+        self._last_end = ending
         if moving:
             self._ending = ending
+
+    def wait_session_end(self, timeout: float) -> None:
+        """The gateway stops: the last session's end (the planner's confirmation that what it
+        left is at rest) gets up to ``timeout`` to arrive before the bus closes."""
+        if self._last_end is not None:
+            self._last_end.join(timeout)
 
     def _session_end(self, session: Session) -> None:
         """The planner stops whatever the client left running (Alter, a move), with the

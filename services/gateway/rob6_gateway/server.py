@@ -137,6 +137,7 @@ class Server:
         self._free.set()
         self._numbers = itertools.count(1)
         self._threads: list[threading.Thread] = []  # the sessions' threads, ended ones pruned
+        self.stopping = False  # rob6 stops: the session still open ends because of that, not its client
 
     def serve_forever(self, listener: socket.socket) -> None:
         """Accept clients until ``listener`` is closed; each session on a thread of its own."""
@@ -175,9 +176,11 @@ class Server:
         thread.start()
 
     def close(self, timeout: float) -> None:
-        """The gateway stops (after the listener closed): the session still open ends as if
-        its client had gone, and every session's thread gets ``timeout`` to finish, so its
-        last records (the reply to Quit, the close event) are queued before the bus closes."""
+        """The gateway stops (after the listener closed): the session still open ends (the
+        planner brings whatever it left moving to rest), and every session's thread, and
+        that end, get ``timeout`` to finish, so its last records (the reply to Quit, the
+        close event) are queued before the bus closes."""
+        self.stopping = True
         connection = self._connection
         if self.active is not None and connection is not None:
             with contextlib.suppress(OSError):  # already closed
@@ -185,6 +188,7 @@ class Server:
         deadline = time.monotonic() + timeout
         for thread in list(self._threads):
             thread.join(max(0.0, deadline - time.monotonic()))
+        self.gateway.wait_session_end(max(0.0, deadline - time.monotonic()))
 
     def handle(self, session: Session, connection: Connection) -> None:
         log.info("session %d: client %s connected", session.number, session.peer)
@@ -193,11 +197,15 @@ class Server:
         try:
             connection.send(GREETING)
             self._serve(session, connection)
-        except OSError:
-            log.info("session %d: connection to client lost", session.number)
-        except ClientGone as exc:
-            reason = str(exc)
-            log.warning("session %d: %s", session.number, reason)
+        except (OSError, ClientGone) as exc:
+            if self.stopping:  # the gateway closed the connection: not the client's doing
+                reason = "rob6 stopped"
+                log.info("session %d: %s", session.number, reason)
+            elif isinstance(exc, ClientGone):
+                reason = str(exc)
+                log.warning("session %d: %s", session.number, reason)
+            else:
+                log.info("session %d: connection to client lost", session.number)
         except Exception:
             log.exception("session %d failed", session.number)
         finally:

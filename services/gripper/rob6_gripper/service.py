@@ -99,7 +99,11 @@ class GripperService:
         self._publisher.start()
 
     def stop(self) -> None:
+        """The publisher ends before the backend and the bus close: it never reads a closed
+        port or publishes on a closed session."""
         self._stop.set()
         self._wake.set()
+        if self._publisher.is_alive():
+            self._publisher.join()
         self.backend.stop()
         self.backend.close()

@@ -15,6 +15,7 @@ Foxglove WebSocket server): the same records, as they are queued for the files.
 from __future__ import annotations
 
 import logging
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -59,13 +60,20 @@ class RecorderService:
         self._traces = self.bus.subscribe_traces(self.on_traces, self.recorder.report_missed)
 
     def stop(self) -> None:
-        # stop listening first, then write out what is queued: nothing arrives after the close
+        """Stop listening first, then write out what is queued (nothing arrives after the
+        close), and say in one line that the recordings are closed: the line a user sees
+        when rob6 stops."""
         self._traces.undeclare()
         for subscriber in self._subscribers:
             subscriber.undeclare()
-        self.recorder.close()
+        finished = self.recorder.close()
         if self.live is not None:
             self.live.close()
+        stats = self.recorder.stats()
+        if finished:  # the writer said what it could not finish, at ERROR
+            lost = f", {stats.dropped} records dropped" if stats.dropped else ""
+            print(f"rob6-recorder: recordings closed: {stats.written} records in {len(stats.files)} files "
+                  f"in {self.recorder.directory}{lost}", file=sys.stderr, flush=True)
 
     def on_sample(self, key: str, payload: bytes) -> None:
         """A live publication (a control message, the planner's settings)."""

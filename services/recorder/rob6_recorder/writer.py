@@ -150,10 +150,10 @@ class Recorder:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def close(self, timeout: float = 30.0) -> None:
-        """Write everything queued, finish every file (summary, index) and stop. Records
-        submitted from now on are dropped (counted)."""
-        self._writer.close(timeout)
+    def close(self, timeout: float = 30.0) -> bool:
+        """Write everything queued, finish every file (summary, index) and stop; False if that
+        took longer than ``timeout`` (logged). Records submitted from now on are dropped (counted)."""
+        return bool(self._writer.close(timeout))
 
     # ----------------------------------------------------------------- hot path
     def submit(self, topic: str, log_time: int, data: Any,

@@ -66,6 +66,7 @@ class RosService:
         self._last_sent = -math.inf
         self._lock = threading.Lock()
         self.latest: JointState | None = None
+        self._stopped = False  # under _lock: no joint state goes out after the node closed
         self.joint_states = self.node.publisher("joint_states", "sensor_msgs/msg/JointState")
         self.description = self.node.publisher("robot_description", "std_msgs/msg/String", LATCHED_QOS)
         self.action = FollowJointTrajectoryServer(self.node, bus, self.joint_names, lambda: self.latest,
@@ -73,7 +74,7 @@ class RosService:
 
     def start(self) -> None:
         self.description.publish({"data": self.urdf})
-        self.bus.subscribe("driver/state", self._on_state, owner="driver")
+        self._states = self.bus.subscribe("driver/state", self._on_state, owner="driver")
         self.bus.announce()
         log.info("ROS 2 node %s up: %s", self.node.name, self.joint_states.key)
 
@@ -82,10 +83,10 @@ class RosService:
         with self._lock:
             self.latest = state
             now = time.monotonic()
-            if state.moving and now - self._last_sent < self.min_period:
+            if self._stopped or (state.moving and now - self._last_sent < self.min_period):
                 return
             self._last_sent = now
-        self.joint_states.publish(self.joint_state_message(state))
+            self.joint_states.publish(self.joint_state_message(state))
 
     def joint_state_message(self, state: JointState) -> dict[str, Any]:
         return {"header": {"stamp": stamp(time.time()), "frame_id": ""}, "name": self.joint_names,
@@ -93,4 +94,7 @@ class RosService:
                 "effort": []}
 
     def stop(self) -> None:
+        self._states.undeclare()
+        with self._lock:  # a state on its way out goes first
+            self._stopped = True
         self.node.close()

@@ -409,7 +409,12 @@ class _Watcher:
         self._exchanges: set[_Exchange] = set()
         self._lock = threading.Lock()
         self._watching = threading.Event()  # set while there is an exchange: idle, it sleeps
-        threading.Thread(target=self._run, name=f"{bus.service}-bus-watch", daemon=True).start()
+        self.thread = threading.Thread(target=self._run, name=f"{bus.service}-bus-watch", daemon=True)
+        self.thread.start()
+
+    def wake(self) -> None:
+        """The bus closed: the thread sees it now, not at its next idle wake-up."""
+        self._watching.set()
 
     def add(self, exchange: _Exchange) -> None:
         with self._lock:
@@ -429,7 +434,7 @@ class _Watcher:
                 if not exchanges:
                     self._watching.clear()
             if not exchanges:
-                self._watching.wait(1.0)  # woken by the next exchange; a closed bus ends within 1 s
+                self._watching.wait(1.0)  # woken by the next exchange, or by the bus's close
                 continue
             now = time.monotonic()
             for exchange in exchanges:

@@ -6,6 +6,8 @@ session, started in order and closed."""
 from __future__ import annotations
 
 import logging
+import threading
+import time
 
 from ..config import BusSettings
 from .call import Calling
@@ -14,6 +16,9 @@ from .pubsub import PubSub
 from .serve import Serving
 
 log = logging.getLogger("rob6.bus")
+
+#: how long a closing bus waits for its own threads (a worker finishing its request)
+CLOSE_JOIN_S = 5.0
 
 
 class Bus(Serving, Calling, PubSub):
@@ -45,3 +50,16 @@ class Bus(Serving, Calling, PubSub):
             self.session.close()
         except Exception:
             log.debug("closing the zenoh session failed", exc_info=True)
+        self._end_threads()
+
+    def _end_threads(self) -> None:
+        """The bus's own threads end with it (the workers after their request), so none
+        holds the service's objects while the interpreter exits."""
+        threads = list(self._workers)
+        if self._watcher is not None:
+            self._watcher.wake()
+            threads.append(self._watcher.thread)
+        deadline = time.monotonic() + CLOSE_JOIN_S
+        for thread in threads:
+            if thread is not threading.current_thread():
+                thread.join(max(0.0, deadline - time.monotonic()))
