@@ -289,7 +289,7 @@ def test_an_unknown_statement_keeps_the_program_from_being_selected(pc: Responde
 
 def test_rsi_on_without_a_motion_first_is_kss01443(pc: Responder, tmp_path: Path) -> None:
     files = installed(tmp_path)
-    edit(files[0], r"\r\nPTP \$AXIS_ACT", "")
+    edit(files[0], r"\r\nPTP [^\r]*", "")  # the program's motion before RSI_ON
     with sim(pc, files=files) as kuka:
         st = kuka.wait_for(lambda s: s["program"].startswith("stopped"), what="the program to stop")
         assert st["messages"] == ["KSS01443 Impermissible start motion: RSI_ON needs a motion first (BCO run)"]
