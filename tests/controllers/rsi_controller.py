@@ -27,9 +27,9 @@ from tests.controllers.sim_process import SimProcess, Status
 DEPLOY = Path(os.environ.get("ROB6_KUKA_DEPLOY", Path(__file__).resolve().parents[2] / "deploy" / "kuka"))
 #: the KSS releases running RSI 3.x
 RSI3_KSS = ("8.3", "8.4")
-#: RSI's Timeout for tests of the whole system: a CI machine is no real-time PC, and the
-#: late packets it makes would add up to the shipped Timeout over a long session. The
-#: Timeout rule itself is tested against the shipped value in test_kuka_rsi_sim.
+#: RSI's Timeout (``--timeout``) for tests of the whole system: a CI machine is no real-time
+#: PC, and the late packets it makes would add up to the shipped Timeout (100 a run) over a
+#: long session. The Timeout rule is tested in test_kuka_rsi_sim, the shipped value read there.
 SYSTEM_TIMEOUT = 1_000_000
 
 
@@ -45,13 +45,12 @@ def edit(path: Path, pattern: str, replacement: str) -> None:
     path.write_bytes(new.encode("ascii"))
 
 
-def install(dest: Path, kss: str = "8.6", robot: str = "kr16rt", timeout: int | None = None,
-            deploy: Path = DEPLOY) -> tuple[Path, Path]:
+def install(dest: Path, kss: str = "8.6", robot: str = "kr16rt", deploy: Path = DEPLOY) -> tuple[Path, Path]:
     """Install deploy/kuka on a controller as its README says; (program .src, SensorInterface).
 
     KRC:\\R1\\Program gets rob6_rsi.src/.dat (rob6IpoFast FALSE for kr3/kr16); SensorInterface
     the Ethernet configuration and the context: rob6_rsi.rsix, or on RSI 3.x the three files
-    of rsi3/ with rob6Context[]="rob6_rsi.rsi". ``timeout`` replaces the ETHERNET object's."""
+    of rsi3/ with rob6Context[]="rob6_rsi.rsi"."""
     program, sensor = dest / "Program", dest / "SensorInterface"
     program.mkdir(parents=True)
     sensor.mkdir(parents=True)
@@ -61,28 +60,20 @@ def install(dest: Path, kss: str = "8.6", robot: str = "kr16rt", timeout: int | 
     dat = program / "rob6_rsi.dat"
     if not robot.endswith("rt"):
         edit(dat, r"rob6IpoFast=TRUE", "rob6IpoFast=FALSE")
-    contexts = []
     if kss in RSI3_KSS:
         for path in sorted((deploy / "rsi3").iterdir()):
             shutil.copy(path, sensor)
-            contexts.append(sensor / path.name)
         edit(dat, r'rob6Context\[\]="rob6_rsi"', 'rob6Context[]="rob6_rsi.rsi"')
     else:
         shutil.copy(deploy / "rob6_rsi.rsix", sensor)
-        contexts.append(sensor / "rob6_rsi.rsix")
-    if timeout is not None:
-        for path in contexts:
-            if path.suffix in (".rsix", ".xml"):
-                edit(path, r'(Name="Timeout" Param[Ii][Dd]="\d+" ParamValue=")\d+', rf"\g<1>{timeout}")
-            elif path.suffix == ".rsi":
-                edit(path, r'(name="Timeout" value=")\d+', rf"\g<1>{timeout}")
     return program / "rob6_rsi.src", sensor
 
 
 class RsiController(SimProcess):
     """Starts ``python -m kuka_rsi_sim`` on freshly installed files, sending to ``rob6``; more
     CLI flags via ``args`` (e.g. ``"--cycle-ms", "40"``). ``files``: an installation to use
-    instead (``install``'s result, e.g. after a test changed a file)."""
+    instead (``install``'s result, e.g. after a test changed a file). ``timeout`` replaces
+    the context's Timeout (``--timeout``)."""
 
     module = "kuka_rsi_sim"
     label = "kuka-rsi-sim"
@@ -97,11 +88,12 @@ class RsiController(SimProcess):
         self._dir: tempfile.TemporaryDirectory[str] | None = None
         if files is None:
             self._dir = tempfile.TemporaryDirectory(prefix="kr-c4-")
-            files = install(Path(self._dir.name), kss, robot, timeout)
+            files = install(Path(self._dir.name), kss, robot)
         self.files = files
         target = [] if rob6 is None else ["--rob6", f"{rob6[0]}:{rob6[1]}"]
+        limit = [] if timeout is None else ["--timeout", str(timeout)]
         super().__init__(["--program", str(files[0]), "--sensor-interface", str(files[1]), "--kss", kss,
-                          "--robot", robot, *target, "--control", "127.0.0.1:0", *args], start_timeout)
+                          "--robot", robot, *target, *limit, "--control", "127.0.0.1:0", *args], start_timeout)
         cycle = [int(args[i + 1]) for i, a in enumerate(args[:-1]) if a == "--cycle-ms"]
         self.cycle_ms = cycle[0] if cycle else 4 if robot.endswith("rt") else 12
 

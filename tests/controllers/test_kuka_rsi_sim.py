@@ -219,7 +219,7 @@ def test_start_pose_outside_limits_refused(pc: Responder) -> None:
         sim(pc, "--start-pose", "0,-90,-120,0,0,0", robot="kr3").start()
 
 
-def test_kss_8_5_refuses_the_rsi_4_1_context(pc: Responder, tmp_path: Path) -> None:
+def test_kss_8_5_refuses_the_rsi_4_1_context(pc: Responder) -> None:
     """RSI 4.0 stores contexts in another format than 4.1's .rsix: RSI_CREATE fails, HALT."""
     with sim(pc, kss="8.5") as kuka:
         st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
@@ -449,9 +449,9 @@ def test_a_pc_that_stops_answering_after_its_stop_costs_no_fault(pc: Responder) 
 
 
 # ---------------------------------------------------------------------------- late packets
-def test_no_answer_counts_delay_and_stops_after_timeout(pc: Responder, tmp_path: Path) -> None:
+def test_no_answer_counts_delay_and_stops_after_timeout(pc: Responder) -> None:
     pc.policy = silent
-    with sim(pc, kss="8.3", files=installed(tmp_path, "8.3", timeout=5)) as kuka:
+    with sim(pc, kss="8.3", timeout=5) as kuka:
         st = kuka.wait_for(ended, what="timeout")
         assert [p["D"] for p in pc.packets] == [0, 1, 2, 3, 4]
         assert st["delay"] == 5 and st["late_total"] == 5
@@ -465,7 +465,7 @@ def test_no_answer_counts_delay_and_stops_after_timeout(pc: Responder, tmp_path:
         assert st["runs"] == 2 and st["late_total"] >= 5
 
 
-def test_timeout_counts_every_late_packet_of_the_run(pc: Responder, tmp_path: Path) -> None:
+def test_timeout_counts_every_late_packet_of_the_run(pc: Responder) -> None:
     """Timeout is the most packets a run may answer late, in a row or not (RSI 4.x: RSITimeout)."""
     answered = 0
 
@@ -475,16 +475,16 @@ def test_timeout_counts_every_late_packet_of_the_run(pc: Responder, tmp_path: Pa
         return sen(pkt["IPOC"]) if answered % 2 else None
 
     pc.policy = every_other
-    with sim(pc, *SLOW, files=installed(tmp_path, timeout=3)) as kuka:
+    with sim(pc, *SLOW, timeout=3) as kuka:
         st = kuka.wait_for(ended, what="timeout")
         assert st["stop_reason"] == "KSS29002 Signal flow (running): Object Ethernet_1 returns error RSITimeout"
         assert st["delay"] == 3 and st["replies_ok"] >= 2  # answered ones in between did not reset it
 
 
 @pytest.mark.parametrize("offset", [1, -12], ids=["wrong", "stale"])
-def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, tmp_path: Path, offset: int) -> None:
+def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, offset: int) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"] + offset, [1.0, 0, 0, 0, 0, 0])
-    with sim(pc, files=installed(tmp_path, timeout=6)) as kuka:
+    with sim(pc, timeout=6) as kuka:
         st = kuka.wait_for(ended, what="timeout")
         assert "returns error RSITimeout" in st["stop_reason"] and st["delay"] == 6
         assert st["ak"] == [0, 0, 0, 0, 0, 0] and all(p["aipos"] == HOME for p in pc.packets)
@@ -509,10 +509,10 @@ def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, tmp_p
     ('<Sen Type="ImFree"><AK A1="x" A2="0" A3="0" A4="0" A5="0" A6="0"/><Stop>0</Stop><IPOC>{ipoc}</IPOC></Sen>',
      "AK.A1 'x' is not a DOUBLE"),
 ], ids=["sentype", "TYPE", "no-stop", "no-a4", "bool", "double"])
-def test_an_answer_the_configuration_cannot_take_counts_late(pc: Responder, tmp_path: Path, answer: str,
+def test_an_answer_the_configuration_cannot_take_counts_late(pc: Responder, answer: str,
                                                               why: str) -> None:
     pc.policy = lambda pkt: answer.format(ipoc=pkt["IPOC"]).encode()
-    with sim(pc, files=installed(tmp_path, timeout=4)) as kuka:
+    with sim(pc, timeout=4) as kuka:
         st = kuka.wait_for(ended, what="timeout")
         assert "returns error RSITimeout" in st["stop_reason"] and st["replies"]["bad_replies"] >= 3
         assert st["replies_ok"] == 0 and all(p["aipos"] == HOME for p in pc.packets)
@@ -600,8 +600,8 @@ def test_fault_lose_both_directions(pc: Responder) -> None:
         assert max(gaps) >= 0.2
 
 
-def test_fault_lose_longer_than_timeout_trips(pc: Responder, tmp_path: Path) -> None:
-    with sim(pc, "--lose-s", "5", files=installed(tmp_path, timeout=10)) as kuka:
+def test_fault_lose_longer_than_timeout_trips(pc: Responder) -> None:
+    with sim(pc, "--lose-s", "5", timeout=10) as kuka:
         st = kuka.wait_for(ended, what="timeout")
         assert "returns error RSITimeout" in st["stop_reason"] and pc.packets == []
         assert st["fault_stats"]["lost_out"] == 10

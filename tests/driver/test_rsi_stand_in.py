@@ -9,6 +9,7 @@ link's."""
 from __future__ import annotations
 
 import socket
+from collections.abc import Callable
 
 import numpy as np
 
@@ -23,6 +24,10 @@ from tests.driver.test_rsi_link import ptp, wait
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
 
 
+def connected(link: RsiLink) -> Callable[[], bool]:
+    return lambda: link.state == "connected"
+
+
 def test_stop_and_restart_twice_without_a_fault() -> None:
     robot = get_robot("kr16")
     port = free_port(socket.SOCK_DGRAM)
@@ -35,11 +40,11 @@ def test_stop_and_restart_twice_without_a_fault() -> None:
             try:
                 if run > 1:
                     assert kuka.restart()["program"] == "running"  # the operator starts the program again
-                wait(lambda: link.state == "connected", timeout=10)
+                wait(connected(link), timeout=10)
                 start = core.state().q.copy()
                 assert np.allclose(start, kuka.status()["aipos"], atol=1e-4)
                 target = start + [0.5, 0.0, 0.0, 0.0, 0.0, 0.0]
-                motion = ptp(core, target)
+                motion = ptp(core, target.tolist())
                 assert motion.wait(10) and motion.ok, motion.error
             finally:
                 link.stop()

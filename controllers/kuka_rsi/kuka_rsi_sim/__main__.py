@@ -63,6 +63,9 @@ def _numbers(value: str, what: str) -> list[float]:
 @click.option("--t1/--aut", "t1", default=False,
               help="operating mode: T1 makes each RSI_ON wait for the operator to confirm its warning "
                    "(control request confirm)")
+@click.option("--timeout", type=click.IntRange(min=1), default=None,
+              help="replace the ETHERNET object's Timeout of the context (a stand-in on a host that is no "
+                   "real-time PC; a lab runs the file's value)")
 @click.option("--cycle-ms", type=click.IntRange(min=1, max=1000), default=None,
               help="for tests only: replace the cycle RSI_ON chooses (4 ms #IPO_FAST, 12 ms #IPO)")
 @click.option("--auto-ack", type=click.FloatRange(min=0), default=None,
@@ -79,7 +82,7 @@ def _numbers(value: str, what: str) -> list[float]:
 @click.option("--vanish-s", type=click.FloatRange(min=0, min_open=True), default=None,
               help="fault: stay silent (controller off) for the first T seconds")
 def main(program: Path, sensor_dir: Path, kss: str, robot: str, rob6: str | None, bind: str, control: str,
-         start_pose: str, t1: bool, cycle_ms: int | None, auto_ack: float | None, lose_s: float | None,
+         start_pose: str, t1: bool, timeout: int | None, cycle_ms: int | None, auto_ack: float | None, lose_s: float | None,
          drop_every: int | None, delay_ms: float | None, duplicate_every: int | None, reorder_every: int | None,
          vanish_s: float | None) -> None:
     """A KUKA KR C4 running the installed KRL program and RSI context against the rob6 PC.
@@ -110,6 +113,7 @@ def main(program: Path, sensor_dir: Path, kss: str, robot: str, rob6: str | None
         bind=_address(bind, "--bind", default_host="0.0.0.0"),
         control=_address(control, "--control"),
         start_pose=tuple(pose),
+        timeout=timeout,
         cycle_ms=cycle_ms,
         t1=t1,
         auto_ack=auto_ack,

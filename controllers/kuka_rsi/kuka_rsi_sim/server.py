@@ -12,6 +12,7 @@ clock; replies and control requests are handled as they arrive in between.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import selectors
@@ -50,6 +51,7 @@ class Options:
     bind: tuple[str, int]
     control: tuple[str, int]
     start_pose: tuple[float, ...]
+    timeout: int | None  # replaces the ETHERNET object's Timeout
     cycle_ms: int | None  # replaces RSI_ON's #IPO_FAST / #IPO cycle
     t1: bool  # T1: each RSI_ON waits for the operator to confirm its warning
     auto_ack: float | None
@@ -306,6 +308,8 @@ class Simulator:
             self._message("RSI_ON: no context created")
             return "RSI_ON failed"
         cont_id, flow, _ = max(self.contexts.values(), key=lambda c: c[0])
+        if self.opts.timeout is not None:
+            flow = dataclasses.replace(flow, timeout=self.opts.timeout)
         if not self._resolve(flow):
             return "RSI_ON failed"
         self.active = cont_id
