@@ -184,13 +184,14 @@ class RsiLink(Link):
         after RSI_MOVECORR returns."""
         if self._thread is not None and self.state == "connected":
             self._stopping = True
-            deadline = time.monotonic() + max(STOP_WAIT_S, 2 * self.lost_after_s)
-            self._stop_sent.wait(max(0.0, deadline - time.monotonic()))
+            wait_s = max(STOP_WAIT_S, 2 * self.lost_after_s)
+            deadline = time.monotonic() + wait_s
+            self._stop_sent.wait(wait_s)
             while self.state == "connected" and time.monotonic() < deadline:
                 time.sleep(self.cycle_s)
             if self.state == "connected":
                 log.warning("driver: the controller still sends after %.1f s of <Stop>1</Stop>: is the Stop object "
-                            "wired to the RECEIVE element Stop (deploy/kuka)?", STOP_WAIT_S)
+                            "wired to the RECEIVE element Stop (deploy/kuka)?", wait_s)
         self._closing = True
         if self._thread is not None:
             self._thread.join(1.0)
