@@ -208,8 +208,8 @@ def test_the_shipped_files_run_on_each_kss(pc: Responder, kss: str) -> None:
 
 def test_fast_cycle_from_the_program_and_the_kr3_r540(pc: Responder) -> None:
     with sim(pc, "--start-pose", "0,-90,90,0,90,0", robot="kr3rt") as kuka:
-        assert kuka.status()["cycle_ms"] == 4  # rob6IpoFast TRUE: #IPO_FAST
         first = pc.wait(lambda p: len(p) >= 3)[0]
+        assert kuka.status()["cycle_ms"] == 4  # rob6IpoFast TRUE: #IPO_FAST
         # KR 3 R540 home, flange facing down: x = a1 + d4, z = d1 + a2 + a3 - d6 (a3 = -20); flange A 0 B 90 C 0
         assert close(first["rist"], [20 + 260, 0, 345 + 260 - 20 - 75, 0, 90, 0])
 
@@ -258,6 +258,17 @@ def test_the_ethernet_configuration_is_read_strictly(pc: Responder, tmp_path: Pa
     with sim(pc, files=files) as kuka:
         st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
         assert "ELEMENT 'AK.A3' has unknown attribute(s) ['Type']" in st["messages"][0]
+
+
+def test_a_misspelt_receive_tag_is_waited_for_in_every_answer(pc: Responder, tmp_path: Path) -> None:
+    """The configuration says what an answer must hold: with "Stopp", no answer of the PC is
+    taken, every packet counts late, and RSI stops at Timeout."""
+    files = installed(tmp_path)
+    edit(files[1] / "rob6_rsi_ethernet.xml", r'TAG="Stop"', 'TAG="Stopp"')
+    with sim(pc, files=files, timeout=5) as kuka:
+        st = kuka.wait_for(ended, what="timeout")
+        assert "returns error RSITimeout" in st["stop_reason"] and st["replies_ok"] == 0
+        assert any("no <Stopp>" in line for line in kuka.stderr_lines)
 
 
 def test_the_configured_send_elements_and_precision(pc: Responder, tmp_path: Path) -> None:

@@ -640,7 +640,7 @@ class Simulator:
             "robot": rsi.machine.name,
             "kss": self.opts.kss,
             "rsi": RSI_NAMES[self.opts.generation],
-            "cycle_ms": self.cycle_ms,
+            "cycle_ms": self.cycle_ms if rsi.runs else None,  # RSI_ON's cycle
             "cycle": rsi.cycle,
             "ipoc": rsi.ipoc,
             "aipos": _r(aipos),
