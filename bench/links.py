@@ -19,6 +19,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from harness.ports import free_port
 from harness.system import running
 from rob6.messages import Empty, LinkQuery, LinkStatus
 from rob6.robots import get_robot
+from tests.controllers.rsi_controller import SYSTEM_TIMEOUT, install
 
 from .latency import REACH_S, bare_relay, percentiles
 from .tables import Row, Table
@@ -131,8 +133,11 @@ def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> d
                 # while the client measures
                 ros_subscriber = bus.session.declare_subscriber(
                     "0/joint_states/**", zenoh.handlers.FifoChannel(JOINT_STATES_KEPT))
-            if link == "rsi":
-                kuka = ControllerSim("kuka_rsi_sim", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{udp}",
+            if link == "rsi":  # the stand-in runs deploy/kuka as installed on a KSS 8.6 (RSI 4.1)
+                program, sensor = install(Path(logs) / "kr-c4", "8.6", "kr16rt")
+                kuka = ControllerSim("kuka_rsi_sim", "--program", str(program), "--sensor-interface", str(sensor),
+                                     "--kss", "8.6", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{udp}",
+                                     "--timeout", str(SYSTEM_TIMEOUT),
                                      "--start-pose", START.replace(" ", ","))
                 while bus.request("driver", "link", LinkQuery()).state != "connected":
                     time.sleep(0.05)
@@ -294,7 +299,8 @@ def links_table(seconds: float, table: Table) -> None:
                f"{rsi['n']} / {rsi['rate']:.1f} Hz", "250 Hz"),
               ("driver cycles run / missed", f"{sim['cycles']} / {sim['missed']}",
                f"{rsi['cycles']} / {rsi['missed']}", "missed 0"),
-              ("late packets counted by the controller / RSI stops", "-", f"{rsi['late']} / {rsi['trips']}", "0 / 0"),
+              ("late packets counted by the controller (shipped Timeout: 100 a run) / RSI stops", "-",
+               f"{rsi['late']} / {rsi['trips']}", "0 / 0"),
               ("packet in -> answer out (driver) p50 / p99 / max, ms", "-",
                f"{lat[0] / 1000:.3f} / {lat[1] / 1000:.3f} / {lat[2] / 1000:.3f}"
                f"{'' if rsi['realtime'] else ' (no RT priority)'}", "p99 <= 1, max < 4"),

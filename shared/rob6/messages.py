@@ -190,7 +190,7 @@ class LinkStatus(Struct):
     """The driver's link to the robot (``driver/link`` operation)."""
 
     link: str  # sim | rsi
-    state: str  # connected | lost | waiting
+    state: str  # connected | lost | waiting | stopped (rsi: RSI switched off after the driver's Stop)
     address: str = ""  # where the driver listens (rsi: udp HOST:PORT)
     peer: str = ""  # the controller's address
     packets: int = 0  # cycles the plant ran (rsi: packets answered)
@@ -207,7 +207,7 @@ class LinkEvent(Struct):
     """A link event of the driver (``rob6/<id>/driver/link``), recorded."""
 
     t: float  # wall time, epoch seconds
-    event: str  # waiting | run_start | restart | late | lost | back | trip | stop_sent | garbage
+    event: str  # waiting | run_start | restart | late | lost | back | trip | stop_sent | stopped | garbage
     message: str
     link: str = "rsi"
     cycle: int = 0  # the driver cycle it happened at

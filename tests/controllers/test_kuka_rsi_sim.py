@@ -1,10 +1,13 @@
-"""kuka-rsi-sim against a tiny RSI responder written here from the protocol.
+"""kuka-rsi-sim running the shipped deploy/kuka files against a tiny RSI responder written here.
 
-The responder (the PC side: a UDP server answering <Sen>) reads the controller's <Rob>
-packets with its own regular expressions and writes its answers by hand, so these tests
-check the wire format as well as the behaviour. Assertions are about behaviour (counters,
-positions, messages), never about how fast the shared machine is; where an answer must be
-on time the cycle is long (40 ms) so a loaded machine still makes it.
+The stand-in KR C4 runs the KRL program, the RSI context and the Ethernet configuration of
+deploy/kuka as a lab installs them (tests/controllers/rsi_controller.py ``install``), so
+these tests fail when a shipped file is wrong: a program that does not end cleanly after a
+Stop, a context the controller's RSI generation cannot load, a wiring or a window that
+does not fit. The responder (the PC side: a UDP server answering <Sen>) reads the
+controller's <Rob> packets with its own regular expressions and writes its answers by
+hand. Assertions are about behaviour (counters, positions, messages), never about how
+fast the shared machine is; where an answer must be on time the cycle is long (40 ms).
 """
 
 from __future__ import annotations
@@ -18,11 +21,12 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from itertools import pairwise
+from pathlib import Path
 from typing import Any
 
 import pytest
 
-from tests.controllers.rsi_controller import RsiController, RsiControllerError
+from tests.controllers.rsi_controller import RSI3_KSS, RsiController, RsiControllerError, edit, install
 from tests.controllers.sim_process import Status
 
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
@@ -40,13 +44,13 @@ Packet = dict[str, Any]
 Policy = Callable[[Packet], bytes | None]
 
 
-def parse_rob(data: bytes) -> Packet:
+def parse_rob(data: bytes, decimals: int = 4) -> Packet:
     assert data.startswith(b'<Rob TYPE="KUKA">') and data.endswith(b"</Rob>"), data
     text = {tag.decode(): {k.decode(): v.decode() for k, v in _ATTR.findall(attrs)}
             for tag, attrs in _ELEMENT.findall(data)}
     for tag in ("RIst", "RSol", "AIPos", "ASPos"):
-        for value in text[tag].values():
-            assert re.fullmatch(r"-?\d+\.\d{4}", value), (tag, value)  # 4 decimals like the KR C4
+        for value in text.get(tag, {}).values():  # the context's Precision: 4 decimals as shipped
+            assert re.fullmatch(rf"-?\d+\.\d{{{decimals}}}", value), (tag, value)
     pkt: dict[str, Any] = {tag: {k: float(v) for k, v in attrs.items()} for tag, attrs in text.items()}
     ipoc = _IPOC.search(data)
     assert ipoc is not None, data
@@ -55,14 +59,14 @@ def parse_rob(data: bytes) -> Packet:
     pkt["aipos"] = [pkt["AIPos"][f"A{i}"] for i in range(1, 7)]
     pkt["aspos"] = [pkt["ASPos"][f"A{i}"] for i in range(1, 7)]
     pkt["rist"] = [pkt["RIst"][k] for k in "XYZABC"]
-    pkt["rsol"] = [pkt["RSol"][k] for k in "XYZABC"]
+    pkt["rsol"] = [pkt["RSol"][k] for k in "XYZABC"] if "RSol" in pkt else None
     return pkt
 
 
 def sen(ipoc: int, ak: Sequence[float] = (0.0,) * 6, stop: bool = False, sen_type: str = "ImFree") -> bytes:
+    """An answer with every RECEIVE element of the shipped configuration (Stop, AK.A1..A6)."""
     axes = " ".join(f'A{i}="{v:.4f}"' for i, v in enumerate(ak, 1))
-    return (f'<Sen Type="{sen_type}"><AK {axes}/>' + ("<Stop>1</Stop>" if stop else "")
-            + f"<IPOC>{ipoc}</IPOC></Sen>").encode()
+    return f'<Sen Type="{sen_type}"><AK {axes}/><Stop>{int(stop)}</Stop><IPOC>{ipoc}</IPOC></Sen>'.encode()
 
 
 def zero(pkt: Packet) -> bytes:
@@ -81,21 +85,21 @@ class Follow:
         self.target = list(target)
         self.step = step
         self.sen_type = sen_type
-        self.stop_next = False
+        self.stopping = False  # answer <Stop>1</Stop> from now on (until the packets stop)
         self.applied = [0.0] * 6
         self.sent: list[float] | None = None
         self.aspos: list[float] | None = None
         self.last_delay: int | None = None
 
     def __call__(self, pkt: Packet) -> bytes:
-        if pkt["aspos"] != self.aspos:  # a new run: AK counts from the new start pose
-            self.aspos, self.applied, self.sent = pkt["aspos"], [0.0] * 6, None
+        if pkt["aspos"] != self.aspos or pkt["D"] < (self.last_delay or 0):  # a new run: from where it stands
+            self.aspos, self.sent = pkt["aspos"], None
+            self.applied = [q - s for q, s in zip(pkt["aipos"], pkt["aspos"], strict=True)]
         elif self.sent is not None and pkt["D"] == self.last_delay:
             self.applied = self.sent
         self.last_delay = pkt["D"]
         self.sent = [a + max(-self.step, min(self.step, t - a)) for a, t in zip(self.applied, self.target, strict=True)]
-        stop, self.stop_next = self.stop_next, False
-        return sen(pkt["IPOC"], self.sent, stop=stop, sen_type=self.sen_type)
+        return sen(pkt["IPOC"], self.sent, stop=self.stopping, sen_type=self.sen_type)
 
 
 class Responder:
@@ -103,6 +107,7 @@ class Responder:
 
     def __init__(self, policy: Policy = zero) -> None:
         self.policy = policy
+        self.decimals = 4
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(0.1)
@@ -121,7 +126,7 @@ class Responder:
                 continue
             except OSError:
                 return
-            pkt = parse_rob(data)
+            pkt = parse_rob(data, self.decimals)
             pkt["t"] = time.monotonic()
             self.raw.append(data)
             self.packets.append(pkt)
@@ -155,18 +160,36 @@ def pc() -> Iterator[Responder]:
     r.close()
 
 
-def sim(pc: Responder, *args: str, robot: str = "kr16") -> RsiController:
-    return RsiController(*args, rob6=pc.address, robot=robot)
+def sim(pc: Responder, *args: str, robot: str = "kr16", **kw: Any) -> RsiController:
+    return RsiController(*args, rob6=pc.address, robot=robot, **kw)
+
+
+def installed(tmp_path: Path, kss: str = "8.6", robot: str = "kr16", **kw: Any) -> tuple[Path, Path]:
+    return install(tmp_path / "kr-c4", kss, robot, **kw)
+
+
+def context_file(files: tuple[Path, Path]) -> Path:
+    """The installed context the controller runs (rob6_rsi.rsix or rob6_rsi.rsi.xml)."""
+    sensor = files[1]
+    return sensor / "rob6_rsi.rsix" if (sensor / "rob6_rsi.rsix").exists() else sensor / "rob6_rsi.rsi.xml"
 
 
 def close(a: Sequence[float], b: Sequence[float], tol: float = 1e-4) -> bool:
     return all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
-# ---------------------------------------------------------------------------- start-up
-def test_first_packets_zero_correction(pc: Responder) -> None:
-    with sim(pc, robot="kr16") as kuka:
-        assert kuka.cycle_ms == 12  # kr16: RSI_ON(#ABSOLUTE, #IPO)
+def ended(st: Status) -> bool:
+    """RSI is off and the program no longer runs."""
+    return bool(st["state"] == "stopped" and st["program"] != "running")
+
+
+# ---------------------------------------------------------------------------- start-up, every generation
+@pytest.mark.parametrize("kss", ["8.3", "8.4", "8.6", "8.7"])
+def test_the_shipped_files_run_on_each_kss(pc: Responder, kss: str) -> None:
+    """Installed as the README says for that KSS, the program runs: RSI_CREATE loads the
+    context of that RSI generation, RSI_ON starts the packets, zero correction holds the arm."""
+    with sim(pc, kss=kss) as kuka:
+        assert kuka.cycle_ms == 12  # kr16: rob6IpoFast FALSE, RSI_ON(#ABSOLUTE, #IPO)
         pkts = pc.wait(lambda p: len(p) >= 20)
         first = pkts[0]
         assert first["aspos"] == HOME and first["aipos"] == HOME and first["D"] == 0
@@ -175,26 +198,134 @@ def test_first_packets_zero_correction(pc: Responder) -> None:
         assert first["rsol"] == first["rist"]
         steps = [b["IPOC"] - a["IPOC"] for a, b in pairwise(pkts[:20])]
         assert all(s > 0 and s % 12 == 0 for s in steps), steps  # a time stamp, ms, by the cycle
-        assert all(p["aipos"] == HOME and p["aspos"] == HOME for p in pkts[:20])
         st = kuka.status()
-        assert st["state"] == "running" and st["runs"] == 1 and st["trips"] == []
-        assert st["packets_sent"] >= 20  # each packet answered in time or counted late:
+        assert st["state"] == "running" and st["program"] == "running" and st["runs"] == 1
+        assert st["trips"] == [] and st["messages"] == [] and st["timeout"] == 100
+        assert st["rsi"] == ("RSI 3.x" if kss in RSI3_KSS else "RSI 4.1" if kss == "8.6" else "RSI 5.x")
         assert st["replies_ok"] + st["late_total"] >= 19
         assert st["rtt_ms"]["n"] >= 19 and st["rtt_ms"]["p50"] > 0
 
 
-def test_fast_variant_cycle_and_options(pc: Responder) -> None:
-    with sim(pc, "--start-pose", "0,-90,90,0,90,0", "--eipos", robot="kr3rt") as kuka:
-        assert kuka.cycle_ms == 4  # #IPO_FAST
+def test_fast_cycle_from_the_program_and_the_kr3_r540(pc: Responder) -> None:
+    with sim(pc, "--start-pose", "0,-90,90,0,90,0", robot="kr3rt") as kuka:
         first = pc.wait(lambda p: len(p) >= 3)[0]
-        assert first["EIPos"] == {f"E{i}": 0.0 for i in range(1, 7)}
-        # kr3 home, flange facing down: x = a1 + d4, z = d1 + a2 - d6; KUKA flange A 0 B 90 C 0
-        assert close(first["rist"], [100 + 270, 0, 350 + 265 - 75, 0, 90, 0])
+        assert kuka.status()["cycle_ms"] == 4  # rob6IpoFast TRUE: #IPO_FAST
+        # KR 3 R540 home, flange facing down: x = a1 + d4, z = d1 + a2 + a3 - d6 (a3 = -20); flange A 0 B 90 C 0
+        assert close(first["rist"], [20 + 260, 0, 345 + 260 - 20 - 75, 0, 90, 0])
 
 
 def test_start_pose_outside_limits_refused(pc: Responder) -> None:
-    with pytest.raises(RsiControllerError, match="A3 = 160 is outside"):
-        sim(pc, "--start-pose", "0,-90,160,0,0,0", robot="kr3").start()
+    with pytest.raises(RsiControllerError, match="A3 = -120 is outside -110 .. 155 of kr3"):
+        sim(pc, "--start-pose", "0,-90,-120,0,0,0", robot="kr3").start()
+
+
+def test_kss_8_5_refuses_the_rsi_4_1_context(pc: Responder) -> None:
+    """RSI 4.0 stores contexts in another format than 4.1's .rsix: RSI_CREATE fails, HALT."""
+    with sim(pc, kss="8.5") as kuka:
+        st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
+        assert st["runs"] == 0 and pc.packets == []
+        assert "RSI 4.0 stores contexts in another format" in st["messages"][0]
+
+
+def test_rsi3_needs_the_rsi_name_the_readme_tells_to_set(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path, "8.3")
+    edit(files[0].with_suffix(".dat"), r'rob6Context\[\]="rob6_rsi.rsi"', 'rob6Context[]="rob6_rsi"')
+    with sim(pc, kss="8.3", files=files) as kuka:
+        st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
+        assert 'RSI 3.x loads <name>.rsi (RSI_CREATE("rob6_rsi.rsi"))' in st["messages"][0]
+
+
+def test_rsi3_context_needs_the_diagram_and_its_model(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path, "8.4")
+    (files[1] / "rob6_rsi.rsi.diagram").unlink()
+    with sim(pc, kss="8.4", files=files) as kuka:
+        st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
+        assert "rob6_rsi.rsi.diagram not found" in st["messages"][0]
+
+
+@pytest.mark.parametrize("kss", ["8.3", "8.6"])
+def test_an_attribute_no_reference_shows_fails_rsi_create(pc: Responder, tmp_path: Path, kss: str) -> None:
+    files = installed(tmp_path, kss)
+    edit(context_file(files), r'(Name="Mode")', r'Visible="true" \1')
+    with sim(pc, kss=kss, files=files) as kuka:
+        st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
+        assert "attribute(s) ['Visible']" in st["messages"][0] and st["runs"] == 0
+
+
+def test_the_ethernet_configuration_is_read_strictly(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path)
+    edit(files[1] / "rob6_rsi_ethernet.xml", r'TAG="AK.A3" TYPE=', 'TAG="AK.A3" Type=')
+    with sim(pc, files=files) as kuka:
+        st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
+        assert "ELEMENT 'AK.A3' has unknown attribute(s) ['Type']" in st["messages"][0]
+
+
+def test_a_misspelt_receive_tag_is_waited_for_in_every_answer(pc: Responder, tmp_path: Path) -> None:
+    """The configuration says what an answer must hold: with "Stopp", no answer of the PC is
+    taken, every packet counts late, and RSI stops at Timeout."""
+    files = installed(tmp_path)
+    edit(files[1] / "rob6_rsi_ethernet.xml", r'TAG="Stop"', 'TAG="Stopp"')
+    with sim(pc, files=files, timeout=5) as kuka:
+        st = kuka.wait_for(ended, what="timeout")
+        assert "returns error RSITimeout" in st["stop_reason"] and st["replies_ok"] == 0
+        assert any("no <Stopp>" in line for line in kuka.stderr_lines)
+
+
+def test_the_configured_send_elements_and_precision(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path)
+    edit(files[1] / "rob6_rsi_ethernet.xml", r'\s*<ELEMENT TAG="DEF_RSol"[^>]*/>', "")
+    edit(context_file(files), r'(Name="Precision" ParamId="7" ParamValue=")4', r"\g<1>2")
+    pc.decimals = 2
+    with sim(pc, files=files):
+        pc.wait(lambda p: len(p) >= 2)
+        assert b"<RSol" not in pc.raw[0] and b'<AIPos A1="0.00" A2="-90.00"' in pc.raw[0]
+
+
+def test_ip_number_and_port_of_the_configuration(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path)
+    host, port = pc.address
+    edit(files[1] / "rob6_rsi_ethernet.xml", r"<IP_NUMBER>[^<]*</IP_NUMBER>", f"<IP_NUMBER>{host}</IP_NUMBER>")
+    edit(files[1] / "rob6_rsi_ethernet.xml", r"<PORT>\d+</PORT>", f"<PORT>{port}</PORT>")
+    with RsiController(rob6=None, robot="kr16", files=files):
+        pc.wait(lambda p: len(p) >= 3, what="packets sent to IP_NUMBER:PORT")
+
+
+# ---------------------------------------------------------------------------- the KRL program
+def test_an_unknown_statement_keeps_the_program_from_being_selected(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path)
+    edit(files[0], r"RSI_MOVECORR\(\)", "RSI_MOVECORR()\r\nRSI_SETPUBLICPAR(contId)")
+    with pytest.raises(RsiControllerError, match=r"'RSI_SETPUBLICPAR\(contId\)' is not a statement"):
+        sim(pc, files=files).start()
+
+
+def test_rsi_on_without_a_motion_first_is_kss01443(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path)
+    edit(files[0], r"\r\nPTP [^\r]*", "")  # the program's motion before RSI_ON
+    with sim(pc, files=files) as kuka:
+        st = kuka.wait_for(lambda s: s["program"].startswith("stopped"), what="the program to stop")
+        assert st["messages"] == ["KSS01443 Impermissible start motion: RSI_ON needs a motion first (BCO run)"]
+        assert pc.packets == []
+
+
+def test_a_block_selection_to_rsi_on_is_kss01443(pc: Responder) -> None:
+    with sim(pc) as kuka:
+        pc.wait(lambda p: len(p) >= 3)
+        src = Path(kuka.files[0]).read_text("ascii").splitlines()
+        line = next(n for n, text in enumerate(src, 1) if "RSI_ON(#ABSOLUTE, #IPO)" in text)
+        st = kuka.restart(line=line)
+        assert st["program"].startswith("stopped: KSS01443 Impermissible start motion")
+        assert kuka.status()["state"] == "stopped"
+
+
+def test_t1_each_rsi_on_waits_for_the_warning_to_be_confirmed(pc: Responder) -> None:
+    with sim(pc, "--t1") as kuka:
+        st = kuka.wait_for(lambda s: s["program"] == "waiting for confirmation", what="the warning")
+        time.sleep(0.1)
+        assert pc.packets == [] and kuka.status()["runs"] == 0
+        kuka.confirm()
+        pc.wait(lambda p: len(p) >= 3)
+        assert kuka.status()["state"] == "running"
+        assert st["aipos"] == HOME
 
 
 # ---------------------------------------------------------------------------- corrections
@@ -225,15 +356,15 @@ def test_rated_speed_step_accepted(pc: Responder) -> None:
         assert st["max_ak_step"][0] == pytest.approx(0.98 * 1.872, abs=1e-4)
 
 
-def test_too_fast_step_trips_command_velocity(pc: Responder) -> None:
+def test_too_fast_step_trips_command_velocity_and_stops_the_program(pc: Responder) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"], [3.0, 0, 0, 0, 0, 0])  # 3 deg in 12 ms: 250 deg/s
-    with sim(pc, "--restart-delay", "0.05") as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
-        assert st["trips"] == ["Command velocity A1"] and st["stop_reason"] == "Command velocity A1"
+    with sim(pc) as kuka:
+        st = kuka.wait_for(ended, what="trip")
+        assert st["trips"] == ["Command velocity A1"] and st["program"] == "stopped: Command velocity A1"
         assert st["max_ak_step"][0] == 3.0 and st["aipos"] == HOME
         assert all(p["aipos"] == HOME for p in pc.packets)
         n = len(pc.packets)
-        time.sleep(0.3)  # a fault waits for the operator: no restart after --restart-delay
+        time.sleep(0.3)  # the program stopped: nothing until the operator starts it again
         assert kuka.status()["state"] == "stopped" and len(pc.packets) == n
         assert any("TRIP Command velocity A1" in line for line in kuka.stderr_lines)
 
@@ -241,57 +372,132 @@ def test_too_fast_step_trips_command_velocity(pc: Responder) -> None:
 def test_software_limit_switch(pc: Responder) -> None:
     pc.policy = Follow(target=[5, 0, 0, 0, 0, 0], step=0.5)
     with sim(pc, "--start-pose", "183,-90,90,0,0,0") as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
+        st = kuka.wait_for(ended, what="trip")
         assert st["trips"] == ["Software limit switch +A1"]
         assert max(p["aipos"][0] for p in pc.packets) <= 185.0
 
 
-def test_correction_window(pc: Responder) -> None:
+def test_axiscorr_clamps_the_correction_to_its_window(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path)
+    edit(context_file(files), r'(Name="LowerLimA6" ParamId="5" ParamValue=")-700', r"\g<1>-1.5")
     pc.policy = Follow(target=[0, 0, 0, 0, 0, -3], step=0.5)
-    with sim(pc, "--corr-window", "1.5") as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
-        assert st["trips"] == ["Correction limit A6"]
+    with sim(pc, *SLOW, files=files) as kuka:
+        pc.wait(lambda p: len(p) > 12 and p[-1]["aipos"][5] == -1.5, what="A6 held at -1.5")
+        st = kuka.status()
+        assert st["trips"] == [] and st["ak"][5] == -1.5
         assert min(p["aipos"][5] for p in pc.packets) >= -1.5
 
 
-def test_stop_ends_run_and_next_run_starts_where_the_robot_stands(pc: Responder) -> None:
+def test_axiscorrmon_stops_rsi_beyond_its_window(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path, "8.3")
+    edit(context_file(files), r'(Name="MaxA6" ParamID="6" ParamValue=")700.0', r"\g<1>1.5")
+    edit(files[1] / "rob6_rsi.rsi", r'(name="MaxA6" value=")700.0', r"\g<1>1.5")
+    pc.policy = Follow(target=[0, 0, 0, 0, 0, -3], step=0.5)
+    with sim(pc, kss="8.3", files=files) as kuka:
+        st = kuka.wait_for(ended, what="trip")
+        assert st["trips"] == ["AXISCORRMON: correction limit A6 exceeded"]
+        assert min(p["aipos"][5] for p in pc.packets) >= -1.5
+
+
+def test_aspos_stays_the_programmed_pose(pc: Responder) -> None:
+    pc.policy = Follow(target=[2, 0, 0, 0, 0, 0], step=0.5)
+    with sim(pc, *SLOW) as kuka:
+        last = pc.wait(lambda p: p[-1]["aipos"][0] == 2.0, what="A1 at 2")[-1]
+        assert last["aspos"] == HOME and kuka.status()["aspos"] == HOME
+
+
+# ---------------------------------------------------------------------------- Stop and restart
+def stop_and_restart(pc: Responder, kuka: RsiController, follow: Follow, run: int) -> list[Packet]:
+    """The PC answers Stop until the packets end; the program ends cleanly; the operator
+    starts it again: the packets of the new run."""
+    follow.stopping = True
+    st = kuka.wait_for(lambda s: s["program"] == "ended", what=f"run {run}: the program to end")
+    assert st["state"] == "stopped" and st["stop_reason"] == "RSI_OFF" and st["trips"] == []
+    assert st["messages"] == [] and st["delay"] == 0  # every packet up to RSI_OFF answered
+    n = len(pc.packets)
+    time.sleep(0.2)
+    assert len(pc.packets) == n, "no RSI_ON after the program ended"
+    follow.stopping = False
+    assert kuka.restart()["program"] == "running"
+    kuka.wait_for(lambda s: s["runs"] == run + 1 and s["state"] == "running", what=f"run {run + 1}")
+    return pc.wait(lambda p: len(p) > n + 2)[n:]
+
+
+def test_stop_ends_the_program_cleanly_twice_in_a_row(pc: Responder) -> None:
+    """The stop and restart cycle the README describes, twice: no fault, and each new run
+    starts where the arm stands, with ASPos = AIPos (the program's PTP $AXIS_ACT)."""
     follow = Follow(target=[2, 0, 0, 0, 0, 0], step=0.5)
     pc.policy = follow
-    with sim(pc, *SLOW, "--restart-delay", "0.2") as kuka:
+    with sim(pc, *SLOW) as kuka:
         pc.wait(lambda p: p[-1]["aipos"][0] == 2.0, what="A1 at 2")
-        n_before = len(pc.packets)
-        follow.stop_next = True
-        st = kuka.wait_for(lambda s: s["runs"] == 2 and s["state"] == "running", what="second run")
-        assert st["trips"] == []
-        new = pc.wait(lambda p: any(q["aspos"] != HOME for q in p[n_before:]))
-        first = next(q for q in new[n_before:] if q["aspos"] != HOME)
-        assert first["aspos"] == first["aipos"] == [2.0, -90, 90, 0, 0, 0] and first["D"] == 0
-        assert first["IPOC"] > new[n_before - 1]["IPOC"]
-        assert any("ended: Stop from the PC" in line for line in kuka.stderr_lines)
+        new = stop_and_restart(pc, kuka, follow, 1)
+        assert new[0]["aspos"] == new[0]["aipos"] == [2.0, -90, 90, 0, 0, 0] and new[0]["D"] == 0
+        follow.target = [1, 0, 0, 0, 0, 0]  # AK counts from the new ASPos: A1 to 3
+        pc.wait(lambda p: p[-1]["aipos"][0] == 3.0, what="A1 at 3")
+        new = stop_and_restart(pc, kuka, follow, 2)
+        assert new[0]["aspos"] == new[0]["aipos"] == [3.0, -90, 90, 0, 0, 0]
+        st = kuka.status()
+        assert st["trips"] == [] and st["messages"] == [] and st["runs"] == 3
+        assert sum("Stop from the PC" in line for line in kuka.stderr_lines) == 2
+
+
+def test_a_pc_that_stops_answering_after_its_stop_costs_no_fault(pc: Responder) -> None:
+    """The rob6 of old: one Stop, then silence. The program still ends without RSIBad."""
+    stopped = threading.Event()
+
+    def once(pkt: Packet) -> bytes | None:
+        if stopped.is_set():
+            return None
+        if len(pc.packets) > 5:
+            stopped.set()
+            return sen(pkt["IPOC"], stop=True)
+        return sen(pkt["IPOC"])
+
+    pc.policy = once
+    with sim(pc, *SLOW) as kuka:
+        st = kuka.wait_for(lambda s: s["program"] == "ended", what="the program to end")
+        assert st["trips"] == [] and st["messages"] == []
 
 
 # ---------------------------------------------------------------------------- late packets
 def test_no_answer_counts_delay_and_stops_after_timeout(pc: Responder) -> None:
     pc.policy = silent
-    with sim(pc, "--timeout", "5", "--restart-delay", "0.05") as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
+    with sim(pc, kss="8.3", timeout=5) as kuka:
+        st = kuka.wait_for(ended, what="timeout")
         assert [p["D"] for p in pc.packets] == [0, 1, 2, 3, 4]
         assert st["delay"] == 5 and st["late_total"] == 5
-        assert st["stop_reason"].startswith("RSI timeout: 5 consecutive late packets")
+        assert st["stop_reason"] == "KSS29002 Signal flow (running): Object ETHERNET1 returns error RSIBad"
+        assert st["program"] == f"stopped: {st['stop_reason']}"
         time.sleep(0.3)
         assert kuka.status()["state"] == "stopped" and len(pc.packets) == 5
-        pc.policy = zero  # the operator acknowledges and starts the program again
+        pc.policy = zero  # the operator acknowledges, resets and starts the program again
         kuka.restart()
         st = kuka.wait_for(lambda s: s["state"] == "running" and s["replies_ok"] >= 3, what="restart")
         assert st["runs"] == 2 and st["late_total"] >= 5
 
 
+def test_timeout_counts_every_late_packet_of_the_run(pc: Responder) -> None:
+    """Timeout is the most packets a run may answer late, in a row or not (RSI 4.x: RSITimeout)."""
+    answered = 0
+
+    def every_other(pkt: Packet) -> bytes | None:
+        nonlocal answered
+        answered += 1
+        return sen(pkt["IPOC"]) if answered % 2 else None
+
+    pc.policy = every_other
+    with sim(pc, *SLOW, timeout=3) as kuka:
+        st = kuka.wait_for(ended, what="timeout")
+        assert st["stop_reason"] == "KSS29002 Signal flow (running): Object Ethernet_1 returns error RSITimeout"
+        assert st["delay"] == 3 and st["replies_ok"] >= 2  # answered ones in between did not reset it
+
+
 @pytest.mark.parametrize("offset", [1, -12], ids=["wrong", "stale"])
 def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, offset: int) -> None:
     pc.policy = lambda pkt: sen(pkt["IPOC"] + offset, [1.0, 0, 0, 0, 0, 0])
-    with sim(pc, "--timeout", "6") as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
-        assert st["stop_reason"].startswith("RSI timeout") and st["delay"] == 6
+    with sim(pc, timeout=6) as kuka:
+        st = kuka.wait_for(ended, what="timeout")
+        assert "returns error RSITimeout" in st["stop_reason"] and st["delay"] == 6
         assert st["ak"] == [0, 0, 0, 0, 0, 0] and all(p["aipos"] == HOME for p in pc.packets)
         replies = st["replies"]
         assert replies["wrong_ipoc_replies"] + replies["stale_replies"] >= 5
@@ -299,57 +505,39 @@ def test_answer_with_wrong_ipoc_is_late_and_correction_held(pc: Responder, offse
             assert replies["stale_replies"] >= 4
 
 
-def every_other() -> Policy:
-    """A policy answering the first packet, then every other one (the rest: no answer)."""
-    answered = 0
-
-    def policy(pkt: Packet) -> bytes | None:
-        nonlocal answered
-        answered += 1
-        return sen(pkt["IPOC"]) if answered % 2 else None
-
-    return policy
-
-
-def test_timeout_counts_consecutive_late_packets(pc: Responder) -> None:
-    # every other answer missing: Delay grows past Timeout, but never 3 in a row
-    pc.policy = every_other()
-    with sim(pc, *SLOW, "--timeout", "3") as kuka:
-        st = kuka.wait_for(lambda s: s["delay"] >= 8, what="8 late packets")
-        assert st["state"] == "running" and st["trips"] == [] and st["late_consecutive"] < 3
-
-
-def test_timeout_counts_total_when_asked(pc: Responder) -> None:
-    pc.policy = every_other()
-    with sim(pc, "--timeout", "3", "--timeout-counts", "total") as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
-        assert st["stop_reason"] == "RSI timeout: 3 late packets (Timeout 3)"
-        assert st["replies_ok"] >= 1  # answered ones in between did not reset the count
-
-
 # ---------------------------------------------------------------------------- Sen answers
-def test_wrong_sen_type_stops_rsi(pc: Responder) -> None:
-    pc.policy = lambda pkt: sen(pkt["IPOC"], sen_type="Other")
-    with sim(pc) as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="trip")
-        assert st["trips"] == ["Sen Type 'Other' does not match SENTYPE 'ImFree'"]
+@pytest.mark.parametrize(("answer", "why"), [
+    ('<Sen Type="Other"><AK A1="0" A2="0" A3="0" A4="0" A5="0" A6="0"/><Stop>0</Stop><IPOC>{ipoc}</IPOC></Sen>',
+     "Sen Type 'Other' is not SENTYPE 'ImFree'"),
+    ('<Sen TYPE="ImFree"><AK A1="0" A2="0" A3="0" A4="0" A5="0" A6="0"/><Stop>0</Stop><IPOC>{ipoc}</IPOC></Sen>',
+     "Sen Type None is not SENTYPE 'ImFree'"),
+    ('<Sen Type="ImFree"><AK A1="0" A2="0" A3="0" A4="0" A5="0" A6="0"/><IPOC>{ipoc}</IPOC></Sen>',
+     "no <Stop> (RECEIVE element Stop)"),
+    ('<Sen Type="ImFree"><AK A1="0" A2="0" A3="0" A5="0" A6="0"/><Stop>0</Stop><IPOC>{ipoc}</IPOC></Sen>',
+     "<AK> has no A4 (RECEIVE element AK.A4)"),
+    ('<Sen Type="ImFree"><AK A1="0" A2="0" A3="0" A4="0" A5="0" A6="0"/><Stop>true</Stop><IPOC>{ipoc}</IPOC></Sen>',
+     "Stop 'true' is not a BOOL"),
+    ('<Sen Type="ImFree"><AK A1="x" A2="0" A3="0" A4="0" A5="0" A6="0"/><Stop>0</Stop><IPOC>{ipoc}</IPOC></Sen>',
+     "AK.A1 'x' is not a DOUBLE"),
+], ids=["sentype", "TYPE", "no-stop", "no-a4", "bool", "double"])
+def test_an_answer_the_configuration_cannot_take_counts_late(pc: Responder, answer: str,
+                                                              why: str) -> None:
+    pc.policy = lambda pkt: answer.format(ipoc=pkt["IPOC"]).encode()
+    with sim(pc, timeout=4) as kuka:
+        st = kuka.wait_for(ended, what="timeout")
+        assert "returns error RSITimeout" in st["stop_reason"] and st["replies"]["bad_replies"] >= 3
         assert st["replies_ok"] == 0 and all(p["aipos"] == HOME for p in pc.packets)
+        assert any(why in line for line in kuka.stderr_lines), kuka.stderr_lines
 
 
-def test_own_sentype(pc: Responder) -> None:
-    pc.policy = Follow(target=[0, 1, 0, 0, 0, 0], sen_type="Rob6PC")
-    with sim(pc, "--sentype", "Rob6PC") as kuka:
-        pc.wait(lambda p: p[-1]["aipos"][1] == -89.0, what="A2 moved")
-        assert kuka.status()["trips"] == []
-
-
-def test_answers_read_tolerantly(pc: Responder) -> None:
+def test_answers_read_as_xml(pc: Responder) -> None:
     variants = [
-        '<Sen TYPE="ImFree"><AK A6="0" A5="0" A4="0" A3="0" A2="0.5" A1="-0.25" /><IPOC>{ipoc}</IPOC></Sen>',
-        '<Sen  Type = "ImFree" >\n  <IPOC> {ipoc} </IPOC>\n  <EStr>rob6</EStr><Tech T21="1"/>\n'
+        '<Sen Type="ImFree"><AK A6="0" A5="0" A4="0" A3="0" A2="0.5" A1="-0.25" /><Stop>0</Stop>'
+        "<IPOC>{ipoc}</IPOC></Sen>",
+        '<Sen  Type = "ImFree" >\n  <IPOC> {ipoc} </IPOC>\n  <EStr>rob6</EStr><Tech T21="1"/><Stop> 0 </Stop>\n'
         '  <AK A1="-0.25"  A2="0.5"\tA3="0" A4="0" A5="0" A6="0"/>\n</Sen>\n',
-        '<?xml version="1.0"?><Sen Type="ImFree"><AK A1="-0.25" A2="0.5"/><Stop>0</Stop>'
-        "<IPOC>{ipoc}</IPOC></Sen>",  # missing axes hold their value (HOLDON)
+        '<?xml version="1.0"?><Sen Type="ImFree"><AK A1="-0.25" A2="0.5" A3="0" A4="0" A5="0" A6="0"></AK>'
+        "<Stop>0</Stop><IPOC>{ipoc}</IPOC></Sen>",
     ]
     pc.policy = lambda pkt: variants[pkt["IPOC"] // 40 % 3].format(ipoc=pkt["IPOC"]).encode()
     with sim(pc, *SLOW) as kuka:
@@ -358,26 +546,18 @@ def test_answers_read_tolerantly(pc: Responder) -> None:
         assert st["delay"] == 0 and st["trips"] == [] and st["replies"]["bad_replies"] == 0
 
 
-def test_unreadable_answer_counts_late(pc: Responder) -> None:
-    pc.policy = lambda pkt: b'<Sen Type="ImFree"><AK A1="x"/><IPOC>%d</IPOC></Sen>' % pkt["IPOC"]
-    with sim(pc, "--timeout", "4") as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
-        assert st["stop_reason"].startswith("RSI timeout") and st["replies"]["bad_replies"] >= 3
-        assert any("unreadable answer" in line for line in kuka.stderr_lines)
-
-
 # ---------------------------------------------------------------------------- faults
 def ipoc_steps(pkts: list[Packet], cycle: int) -> list[int]:
     return [(b["IPOC"] - a["IPOC"]) // cycle for a, b in pairwise(pkts)]
 
 
 def test_fault_drop_every(pc: Responder) -> None:
-    with sim(pc, "--drop-every", "5") as kuka:
+    with sim(pc, "--drop-every", "5", timeout=1000) as kuka:
         pc.wait(lambda p: len(p) >= 20)
         st = kuka.status()
         assert st["faults"]["drop_every"] == 5 and st["fault_stats"]["dropped"] >= 4
         assert 2 in ipoc_steps(pc.packets[:20], 12)  # the PC never saw the dropped one
-        assert st["delay"] >= 3 and st["state"] == "running"  # unanswered, but never 100 in a row
+        assert st["delay"] >= 3 and st["state"] == "running"
 
 
 def under_fault(pc: Responder, packets: int, **fault: int) -> Status:
@@ -404,7 +584,7 @@ def test_fault_reorder_every(pc: Responder) -> None:
 
 
 def test_fault_delay_for_a_while(pc: Responder) -> None:
-    with sim(pc, *SLOW, "--timeout", "1000") as kuka:
+    with sim(pc, *SLOW, timeout=1000) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.fault(delay_ms=100, for_s=0.6)  # 100 ms > 40 ms cycle: every answer late
         st = kuka.wait_for(lambda s: s["faults"]["delay_ms"] == 0, what="delay over")
@@ -421,8 +601,7 @@ def test_fault_lose_both_directions(pc: Responder) -> None:
         pc.wait(lambda p: len(p) >= 3)
         skipped = kuka.status()["replies"]["overruns"]
         kuka.fault(lose_s=0.3)  # 25 cycles of 12 ms: fewer than Timeout 100
-        st = kuka.wait_for(lambda s: s["faults"]["lose_s"] == 0 and s["late_consecutive"] == 0
-                           and s["delay"] > 0, what="loss over")
+        st = kuka.wait_for(lambda s: s["faults"]["lose_s"] == 0 and s["replies_ok"] > 3 + 25, what="loss over")
         # a simulator woken late skips whole cycles (as a controller never sends bursts): on a
         # loaded machine the 25 cycles of the window are partly skipped, not lost
         skipped = st["replies"]["overruns"] - skipped
@@ -433,18 +612,18 @@ def test_fault_lose_both_directions(pc: Responder) -> None:
 
 
 def test_fault_lose_longer_than_timeout_trips(pc: Responder) -> None:
-    with sim(pc, "--lose-s", "5", "--timeout", "10") as kuka:
-        st = kuka.wait_for(lambda s: s["state"] == "stopped", what="timeout")
-        assert st["stop_reason"].startswith("RSI timeout") and pc.packets == []
+    with sim(pc, "--lose-s", "5", timeout=10) as kuka:
+        st = kuka.wait_for(ended, what="timeout")
+        assert "returns error RSITimeout" in st["stop_reason"] and pc.packets == []
         assert st["fault_stats"]["lost_out"] == 10
 
 
-def test_vanish_for_a_while_then_new_run(pc: Responder) -> None:
+def test_vanish_for_a_while_then_the_program_runs_again(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.vanish(0.5)
         st = kuka.status()
-        assert st["state"] == "vanished" and st["stop_reason"] == "vanished"
+        assert st["state"] == "vanished" and st["stop_reason"] == "vanished" and st["program"] == "off"
         n = len(pc.packets)
         time.sleep(0.2)
         assert len(pc.packets) == n and kuka.status()["state"] == "vanished"
@@ -453,7 +632,7 @@ def test_vanish_for_a_while_then_new_run(pc: Responder) -> None:
         assert first["D"] == 0 and first["aspos"] == first["aipos"] == HOME
 
 
-def test_vanish_until_restart_with_new_start_pose(pc: Responder) -> None:
+def test_vanish_until_restart_with_the_arm_jogged(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.vanish(None)
@@ -467,10 +646,10 @@ def test_vanish_until_restart_with_new_start_pose(pc: Responder) -> None:
         st = kuka.wait_for(lambda s: s["state"] == "running", what="restart")
         assert st["runs"] == 2 and st["aspos"] == pose
         first = pc.wait(lambda p: len(p) > n)[n]
-        assert first["aspos"] == first["aipos"] == pose  # the PTP happened while RSI was off
+        assert first["aspos"] == first["aipos"] == pose  # jogged while RSI was off
 
 
-def test_restart_mid_run_with_new_start_pose(pc: Responder) -> None:
+def test_restart_mid_run_with_the_arm_jogged(pc: Responder) -> None:
     with sim(pc) as kuka:
         pc.wait(lambda p: len(p) >= 3)
         kuka.restart(start=[-30, -100, 100, 10, 20, 30])
@@ -506,6 +685,8 @@ def test_control_channel_refuses_bad_requests_and_stays_up(pc: Responder) -> Non
             b'{"cmd": "fault", "lose_s": 1, "drop_every": -2}',
             b'{"cmd": "restart", "start": [0, 0, 0, 0, 0]}',
             b'{"cmd": "restart", "start": [0, -90, 90, 0, 200, 0]}',
+            b'{"cmd": "restart", "line": 0}',
+            b'{"cmd": "confirm"}',
             b'{"cmd": "vanish", "for_s": -1}',
             b"\xff\xfe",
         ]
@@ -534,7 +715,7 @@ def test_forward_kinematics_known_poses() -> None:
 
     kr16, kr3 = Kinematics(MACHINES["kr16"]), Kinematics(MACHINES["kr3"])
     assert close(kr16.pose([0] * 6), [1768, 0, 640, 0, 0, 0])  # robots.md: flange at q = 0
-    assert close(kr3.pose([0] * 6), [710, 0, 350, 0, 0, 0])
+    assert close(kr3.pose([0] * 6), [20 + 260 + 260 + 75, 0, 345 - 20, 0, 0, 0])
     assert close(kr16.pose([0, -90, 90, 0, 90, 0]), [1088 - 158, 0, 1320 - 158, 0, 90, 0])
     # A6 turns the flange about its own x axis; A4 and A6 coincide when A5 = 0
     assert close(kr16.pose([0, 0, 0, 0, 0, 30]), kr16.pose([0, 0, 0, 30, 0, 0]))

@@ -91,9 +91,11 @@ def test_random_bytes_never_crash_the_parser() -> None:
 
 
 def test_the_answer() -> None:
+    """Every element the shipped configuration reads (RECEIVE: Stop, AK.A1..A6), always:
+    an answer without <Stop> is one the controller cannot take."""
     sen = format_sen(b"ImFree", [0.1, -2.0, 0.0, 1e-7, 123.456789, -0.0000004], b"4208105428")
     assert sen == (b'<Sen Type="ImFree"><AK A1="0.100000" A2="-2.000000" A3="0.000000" A4="0.000000" '
-                   b'A5="123.456789" A6="-0.000000"/><IPOC>4208105428</IPOC></Sen>')
+                   b'A5="123.456789" A6="-0.000000"/><Stop>0</Stop><IPOC>4208105428</IPOC></Sen>')
     stop = format_sen(b"ImFree", [0.0] * 6, b"17", stop=True)
     assert stop.endswith(b"/><Stop>1</Stop><IPOC>17</IPOC></Sen>")
 

@@ -1,12 +1,14 @@
 """The RSI link's rules, packet by packet, against a scripted controller on real UDP:
-zero correction on a run's first packet, one step per cycle, the same setpoint again when
-an answer came too late, duplicates and garbage unanswered, link lost and back (from
-AIPos), a restart re-based on the new start pose, Stop at the end."""
+a run's first packet answered from where the arm stands, one step per cycle, the same
+setpoint again when an answer came too late, duplicates and garbage unanswered, link lost
+and back (from AIPos), a restart re-based on the new start pose, Stop answered until the
+controller switches RSI off."""
 
 from __future__ import annotations
 
 import re
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
@@ -23,7 +25,7 @@ from rob6_planner.trajectory import TrajectoryPlanner
 
 HOME = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
 SEN = re.compile(rb'<Sen Type="ImFree"><AK A1="([^"]+)" A2="([^"]+)" A3="([^"]+)" A4="([^"]+)" '
-                 rb'A5="([^"]+)" A6="([^"]+)"/>(<Stop>1</Stop>)?<IPOC>(\d+)</IPOC></Sen>$')
+                 rb'A5="([^"]+)" A6="([^"]+)"/><Stop>([01])</Stop><IPOC>(\d+)</IPOC></Sen>$')
 
 
 def axes(name: str, q: Sequence[float]) -> str:
@@ -60,7 +62,7 @@ class Controller:
             return None
         m = SEN.match(data)
         assert m, data
-        return np.array([float(x) for x in m.groups()[:6]]), m.group(7) is not None, int(m.group(8))
+        return np.array([float(x) for x in m.groups()[:6]]), m.group(7) == b"1", int(m.group(8))
 
     def cycle(self, **kw: Any) -> np.ndarray:
         ipoc = self.send(**kw)
@@ -178,24 +180,47 @@ def test_a_restart_rebases_on_the_new_start_pose(rig: Rig) -> None:
     assert np.array_equal(ctl.cycle(aipos=new_start, aspos=new_start), np.zeros(6))
 
 
-def test_stop_ends_the_correction_run() -> None:
+def test_a_new_run_starts_where_the_arm_stands_whatever_aspos(rig: Rig) -> None:
+    """RSI_OFF/RSI_ON without a motion keeps the old programmed ASPos while the arm stands
+    where the corrections put it: AK = AIPos - ASPos holds it there (zero would jump back)."""
+    core, link, ctl, states, events = rig
+    ctl.cycle()
+    motion = ptp(core, (5.0, -90.0, 90.0, 0.0, 0.0, 0.0))
+    while not motion.done.is_set():
+        last = ctl.cycle()
+    assert motion.ok and last[0] == pytest.approx(5.0)
+    stands = (5.0, -90.0, 90.0, 0.0, 0.0, 0.0)
+    ctl.cycle(aipos=stands, delay=3)  # a few late ones in this run
+    first = ctl.cycle(aipos=stands, delay=0)  # Delay from 0 again: RSI_ON, ASPos as before
+    assert np.allclose(first, np.array(stands) - HOME) and link.runs == 2
+    assert core.state().q.tolist() == list(stands)
+
+
+def test_stop_is_answered_until_the_controller_switches_rsi_off() -> None:
+    """The program's RSI_OFF comes after RSI_MOVECORR returned: every packet until then is
+    answered (with Stop), and stop() returns once the packets have ended."""
     robot = get_robot("kr16rt")
     core = MotionCore(robot)
-    link = RsiLink(core, robot, "127.0.0.1:0", lambda s: None)
+    events: list[LinkEvent] = []
+    # lost_after_s: the silence that tells RSI is off; long, so that a loaded machine's pauses
+    # between the packets below never look like it
+    link = RsiLink(core, robot, "127.0.0.1:0", lambda s: None, events.append, lost_after_s=1.0)
     link.start()
     ctl = Controller(link.address)
     try:
-        ctl.cycle()
-        import threading
+        assert ctl.cycle() is not None
         stopper = threading.Thread(target=link.stop)
         stopper.start()
-        time.sleep(0.05)
-        ipoc = ctl.send()
-        answer = ctl.answer()
-        assert answer is not None
-        ak, stop, echoed = answer
-        assert stop and echoed == ipoc and np.array_equal(ak, np.zeros(6))
-        stopper.join(5)
-        assert not stopper.is_alive()
+        wait(lambda: link._stopping)
+        for _ in range(3):  # RSI_MOVECORR returns with the first; RSI_OFF comes later
+            ipoc = ctl.send()
+            answer = ctl.answer()
+            assert answer is not None
+            ak, stop, echoed = answer
+            assert stop and echoed == ipoc and np.array_equal(ak, np.zeros(6))
+        assert stopper.is_alive(), "stop() returned while the controller still sends"
+        stopper.join(5)  # no more packets: RSI is off
+        assert not stopper.is_alive() and link.state == "stopped"
+        wait(lambda: "stopped" in [e.event for e in events])
     finally:
         ctl.sock.close()

@@ -15,7 +15,7 @@ import numpy as np
 from harness.ports import free_port
 from harness.system import System, driver_state, link_status, running
 from tests.controllers.adept_controller import AdeptController
-from tests.controllers.rsi_controller import RsiController
+from tests.controllers.rsi_controller import SYSTEM_TIMEOUT, RsiController
 from tests.motion.link_session import wait_until
 from tests.motion.test_rsi_realtime import rsi_system
 
@@ -68,7 +68,7 @@ def rig(robot: str, link: str, log_dir: Path) -> Iterator[Rig]:
         elif link == "rsi":
             port = free_port(socket.SOCK_DGRAM)
             system = stack.enter_context(rsi_system(port, log_dir=str(log_dir)))
-            kuka = stack.enter_context(RsiController(rob6=("127.0.0.1", port), robot=robot))
+            kuka = stack.enter_context(RsiController(rob6=("127.0.0.1", port), robot=robot, timeout=SYSTEM_TIMEOUT))
             wait_until(lambda: link_status(system).state == "connected", what="the RSI link to be up")
             wait_until(lambda: np.allclose(driver_state(system).q, kuka.status()["aipos"], atol=2e-4),
                        what="rob6 to follow the KR C4")

@@ -23,7 +23,7 @@ from harness.ports import free_port
 from harness.system import System, link_status, running
 from rob6.robots import get_robot
 from rob6_recorder.reader import read_records
-from tests.controllers.rsi_controller import RsiController
+from tests.controllers.rsi_controller import SYSTEM_TIMEOUT, RsiController
 from tests.motion.link_session import joints, reply, wait_until
 from tests.motion.realtime_rig import driver_refusal, recorded_states
 from tests.motion.test_realtime_system import assert_within_limits
@@ -42,6 +42,11 @@ POSITION_TOL = 2e-4
 def rsi_system(port: int, **kwargs: Any) -> AbstractContextManager[System]:
     return running("kr16rt", dummy=False, extra_env={"ROB6_LINK": "rsi", "ROB6_RSI_LISTEN": f"127.0.0.1:{port}"},
                    **kwargs)
+
+
+def controller(port: int, *args: str) -> RsiController:
+    """The stand-in KR C4 running the shipped files, sending to the driver on ``port``."""
+    return RsiController(*args, rob6=("127.0.0.1", port), robot="kr16rt", timeout=SYSTEM_TIMEOUT)
 
 
 def connected(client: Client, kuka: RsiController, system: System) -> np.ndarray:
@@ -109,7 +114,7 @@ def test_ptp_lin_alter_over_rsi_within_limits_and_replayed_on_the_simulation(tmp
                 f"ERROR: driver: robot not connected (waiting for RSI on 127.0.0.1:{port})\nfalse\n")
             assert reply(client, "MoveRTJoints 10 -90 90 0 0 0") == "false\n"  # Alter mode is off
             assert reply(client, "MovePTPJoints 999 0 0 0 0 0") == "false\n"  # refused before the driver
-            kuka = RsiController(*zero, rob6=("127.0.0.1", port), robot="kr16rt").start()
+            kuka = controller(port, *zero).start()
             assert np.array_equal(connected(client, kuka, system), np.zeros(6))
         try:
             with system.client() as client:  # session 2: the one replayed below
@@ -159,7 +164,7 @@ def long_move(client: Client, kuka: RsiController) -> None:
 
 def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi: tuple[System, int]) -> None:
     system, port = rsi
-    with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
+    with controller(port) as kuka, system.client() as client:
         connected(client, kuka, system)
         long_move(client, kuka)
         kuka.fault(lose_s=0.3)  # 75 cycles without a packet either way: the controller holds
@@ -177,7 +182,7 @@ def test_packets_lost_mid_motion_end_it_and_rob6_resumes_from_aipos(rsi: tuple[S
 
 def test_every_50th_packet_dropped_the_motion_completes(rsi: tuple[System, int]) -> None:
     system, port = rsi
-    with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
+    with controller(port) as kuka, system.client() as client:
         connected(client, kuka, system)
         before = link_status(system).late
         kuka.fault(drop_every=50)
@@ -196,7 +201,7 @@ def test_every_50th_packet_dropped_the_motion_completes(rsi: tuple[System, int])
 
 def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi: tuple[System, int]) -> None:
     system, port = rsi
-    with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
+    with controller(port) as kuka, system.client() as client:
         connected(client, kuka, system)
         long_move(client, kuka)
         new_start = [-20.0, -70.0, 80.0, 10.0, 20.0, 0.0]
@@ -215,7 +220,7 @@ def test_rsi_restarted_on_a_new_start_pose_rebases_without_a_jump(rsi: tuple[Sys
 
 def test_controller_vanishes_and_returns(rsi: tuple[System, int]) -> None:
     system, port = rsi
-    with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
+    with controller(port) as kuka, system.client() as client:
         connected(client, kuka, system)
         long_move(client, kuka)
         kuka.vanish()  # switched off until restarted

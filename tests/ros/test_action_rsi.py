@@ -14,9 +14,8 @@ import pytest
 
 from harness.ports import free_port
 from harness.system import System
-from tests.controllers.rsi_controller import RsiController
 from tests.motion.link_session import joints
-from tests.motion.test_rsi_realtime import POSITION_TOL, assert_no_jump, connected, rsi_system
+from tests.motion.test_rsi_realtime import POSITION_TOL, assert_no_jump, connected, controller, rsi_system
 
 zsdk = pytest.importorskip("zenoh_ros2_sdk")
 from tests.ros import msgdefs  # noqa: E402
@@ -37,7 +36,7 @@ def rsi(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[System, int]
 
 def test_goals_over_rsi_without_a_trip(rsi: tuple[System, int]) -> None:
     system, port = rsi
-    with RsiController(rob6=("127.0.0.1", port), robot="kr16rt") as kuka, system.client() as client:
+    with controller(port) as kuka, system.client() as client:
         start = connected(client, kuka, system).tolist()
         peer = Peer()
         feedback: queue.Queue[Any] = queue.Queue()

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import signal
 import sys
+from pathlib import Path
 from types import FrameType
 from typing import NoReturn
 
 import click
 
+from . import krl
+from .context import KSS_RSI, RSI_NAMES, generation
 from .machine import HOME, MACHINES
 from .server import Options, Shutdown, Simulator, log
 
@@ -38,31 +41,36 @@ def _numbers(value: str, what: str) -> list[float]:
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"], "show_default": True})
+@click.option("--program", "program", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="the KRL program the operator selects (KRC:\\R1\\Program\\<name>.src; its .dat beside it)")
+@click.option("--sensor-interface", "sensor_dir", required=True,
+              type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="the controller's C:\\KRC\\ROBOTER\\Config\\User\\Common\\SensorInterface: "
+                   "RSI contexts and Ethernet configurations")
+@click.option("--kss", type=click.Choice(sorted(KSS_RSI)), default="8.6",
+              help="the KUKA System Software release: it decides the RSI generation (8.3, 8.4: RSI 3.x; "
+                   "8.5: 4.0; 8.6: 4.1; 8.7: 5.x) and so which context format RSI_CREATE loads")
 @click.option("--robot", type=click.Choice(sorted(MACHINES)), default="kr16rt",
-              help="robot type: machine data and RSI cycle (rt: 4 ms #IPO_FAST, else 12 ms #IPO)")
-@click.option("--rob6", "rob6", default="127.0.0.1:49152", metavar="HOST:PORT",
-              help="the rob6 PC: IP_NUMBER and PORT of the Ethernet configuration")
+              help="robot type: its machine data (kr3: the KR 3 R540 of a KR C4)")
+@click.option("--rob6", "rob6", default=None, metavar="HOST:PORT",
+              help="send to this address instead of IP_NUMBER:PORT of the Ethernet configuration "
+                   "(the stand-in's network is not the lab's)")
 @click.option("--bind", default="0.0.0.0:0", metavar="HOST[:PORT]", help="the controller's own RSI address")
 @click.option("--control", default="127.0.0.1:0", metavar="HOST:PORT",
               help="TCP control channel (newline-delimited JSON); port 0 picks a free one")
-@click.option("--sentype", default="ImFree", help="SENTYPE: the Type the PC's <Sen> must carry")
-@click.option("--timeout", type=click.IntRange(min=1), default=100,
-              help="ETHERNET object Timeout: late packets before RSI stops")
-@click.option("--timeout-counts", type=click.Choice(["consecutive", "total"]), default="consecutive",
-              help="what reaching Timeout means: consecutive late packets (KUKA's documented behaviour) "
-                   "or all late packets of the run (a stricter check)")
-@click.option("--corr-window", default=None, metavar="W | W1,..,W6",
-              help="AXISCORR/AXISCORRMON window, +-degrees per axis [default: the axis range width]")
 @click.option("--start-pose", default=",".join(f"{v:g}" for v in HOME), metavar="A1,..,A6",
-              help="axis angles (deg) where the first run starts")
+              help="axis angles (deg) where the arm stands at power-on")
+@click.option("--t1/--aut", "t1", default=False,
+              help="operating mode: T1 makes each RSI_ON wait for the operator to confirm its warning "
+                   "(control request confirm)")
+@click.option("--timeout", type=click.IntRange(min=1), default=None,
+              help="replace the ETHERNET object's Timeout of the context (a stand-in on a host that is no "
+                   "real-time PC; a lab runs the file's value)")
 @click.option("--cycle-ms", type=click.IntRange(min=1, max=1000), default=None,
-              help="override the RSI cycle of --robot")
-@click.option("--restart-delay", type=click.FloatRange(min=0), default=1.0,
-              help="seconds from <Stop>1</Stop> until the KRL loop starts the next run")
+              help="for tests only: replace the cycle RSI_ON chooses (4 ms #IPO_FAST, 12 ms #IPO)")
 @click.option("--auto-ack", type=click.FloatRange(min=0), default=None,
-              help="after a fault, restart after this many seconds like an operator would "
-                   "[default: stay stopped until a restart request]")
-@click.option("--eipos/--no-eipos", default=False, help="also send EIPos E1..E6 (no external axes: 0)")
+              help="after the program stopped (a fault) or ended, start it again after this many seconds "
+                   "like an operator would [default: wait for a restart request]")
 @click.option("--lose-s", type=click.FloatRange(min=0), default=None,
               help="fault: lose every packet in both directions for the first T seconds")
 @click.option("--drop-every", type=click.IntRange(min=0), default=None, help="fault: drop every Nth packet")
@@ -73,15 +81,16 @@ def _numbers(value: str, what: str) -> list[float]:
               help="fault: send every Nth packet after its successor")
 @click.option("--vanish-s", type=click.FloatRange(min=0, min_open=True), default=None,
               help="fault: stay silent (controller off) for the first T seconds")
-def main(robot: str, rob6: str, bind: str, control: str, sentype: str, timeout: int, timeout_counts: str,
-         corr_window: str | None, start_pose: str, cycle_ms: int | None, restart_delay: float, auto_ack: float | None,
-         eipos: bool, lose_s: float | None, drop_every: int | None, delay_ms: float | None,
-         duplicate_every: int | None, reorder_every: int | None, vanish_s: float | None) -> None:
-    """A KUKA KR C4 running RSI (RobotSensorInterface) against the rob6 PC.
+def main(program: Path, sensor_dir: Path, kss: str, robot: str, rob6: str | None, bind: str, control: str,
+         start_pose: str, t1: bool, timeout: int | None, cycle_ms: int | None, auto_ack: float | None, lose_s: float | None,
+         drop_every: int | None, delay_ms: float | None, duplicate_every: int | None, reorder_every: int | None,
+         vanish_s: float | None) -> None:
+    """A KUKA KR C4 running the installed KRL program and RSI context against the rob6 PC.
 
-    Every IPO cycle it sends <Rob> (RIst, RSol, AIPos, ASPos, Delay, IPOC) to --rob6 and
-    expects <Sen Type=SENTYPE><AK A1..A6/>[<Stop>1</Stop>]<IPOC/></Sen> before the next
-    tick. See controllers/kuka_rsi/README.md for the behaviour and the control channel.
+    It selects and starts --program as an operator would; the program's RSI_CREATE loads
+    the context from --sensor-interface in the format of the --kss release's RSI, and while
+    RSI is on the controller sends <Rob> every cycle and reads <Sen> as the Ethernet
+    configuration says. See controllers/kuka_rsi/README.md.
     """
     machine = MACHINES[robot]
     pose = _numbers(start_pose, "--start-pose")
@@ -91,32 +100,23 @@ def main(robot: str, rob6: str, bind: str, control: str, sentype: str, timeout: 
         if not lo <= v <= hi:
             raise click.BadParameter(f"A{n + 1} = {v:g} is outside {lo:g} .. {hi:g} of {robot}",
                                      param_hint="--start-pose")
-    if corr_window is None:
-        window = machine.range_width()
-    else:
-        w = _numbers(corr_window, "--corr-window")
-        if len(w) == 1:
-            w = w * 6
-        if len(w) != 6 or any(v <= 0 for v in w):
-            raise click.BadParameter("one window or six, all > 0 (degrees)", param_hint="--corr-window")
-        window = tuple(w)
     faults = {k: v for k, v in dict(lose_s=lose_s, drop_every=drop_every, delay_ms=delay_ms,
                                     duplicate_every=duplicate_every, reorder_every=reorder_every).items()
               if v is not None}
     opts = Options(
         machine=machine,
-        cycle_ms=cycle_ms or machine.ipo_ms,
-        rob6=_address(rob6, "--rob6"),
+        kss=kss,
+        generation=generation(kss),
+        program=program,
+        sensor_dir=sensor_dir,
+        rob6=None if rob6 is None else _address(rob6, "--rob6"),
         bind=_address(bind, "--bind", default_host="0.0.0.0"),
         control=_address(control, "--control"),
-        sentype=sentype,
-        timeout=timeout,
-        timeout_counts=timeout_counts,
-        corr_window=window,
         start_pose=tuple(pose),
-        restart_delay=restart_delay,
+        timeout=timeout,
+        cycle_ms=cycle_ms,
+        t1=t1,
         auto_ack=auto_ack,
-        eipos=eipos,
         faults=faults,
         vanish_s=vanish_s,
     )
@@ -128,13 +128,14 @@ def main(robot: str, rob6: str, bind: str, control: str, sentype: str, timeout: 
     signal.signal(signal.SIGINT, stop)
     try:
         sim = Simulator(opts)
-    except OSError as e:
-        raise click.ClickException(f"cannot open the sockets: {e}") from None
+    except krl.KrlError as e:
+        raise click.ClickException(f"program {program.name} cannot be selected: {e}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise click.ClickException(f"cannot start: {e}") from None
     host, port = sim.control_address
-    print(f"kuka-rsi-sim ready: control {host}:{port}, sending to {opts.rob6[0]}:{opts.rob6[1]} "
-          f"every {opts.cycle_ms} ms", flush=True)
-    log(f"{robot}, SENTYPE {sentype}, Timeout {timeout} ({timeout_counts}), start pose "
-        + " ".join(f"{v:g}" for v in pose))
+    print(f"kuka-rsi-sim ready: control {host}:{port}, KSS {kss} ({RSI_NAMES[opts.generation]}), "
+          f"program {program.stem}", flush=True)
+    log(f"{robot}, KSS {kss}, {'T1' if t1 else 'AUT'}, the arm at " + " ".join(f"{v:g}" for v in pose))
     try:
         sim.serve()
     except Shutdown as e:

@@ -12,7 +12,6 @@ from typing import Any
 @dataclass(frozen=True)
 class Machine:
     name: str
-    ipo_ms: int  # RSI cycle: 4 ms with RSI_ON(#ABSOLUTE, #IPO_FAST), 12 ms with #IPO
     rated: tuple[float, ...]  # rated axis speeds, deg/s
     lower: tuple[float, ...]  # software limit switches (here: the hardware ranges)
     upper: tuple[float, ...]
@@ -34,19 +33,24 @@ _KR16: dict[str, Any] = dict(
     upper=(185.0, 35.0, 154.0, 350.0, 125.0, 350.0),
     d1=675.0, a1=260.0, a2=680.0, a3=-35.0, d4=670.0, d6=158.0,
 )
+# The KR 3 a KR C4 drives is the KR 3 R540 (KR AGILUS): axis ranges and speeds of
+# ros-industrial/kuka_experimental kuka_kr3_support/urdf/kr3r540_macro.xacro; its
+# geometry (d1 345, a1 20, a2 260, a3 20, d4 260, d6 75) is that of the same robot.
 _KR3: dict[str, Any] = dict(
-    rated=(240.0, 210.0, 240.0, 375.0, 300.0, 375.0),
-    lower=(-180.0, -135.0, -135.0, -180.0, -135.0, -350.0),
-    upper=(180.0, 45.0, 135.0, 180.0, 135.0, 350.0),
-    d1=350.0, a1=100.0, a2=265.0, a3=0.0, d4=270.0, d6=75.0,
+    rated=(530.0, 529.0, 538.0, 600.0, 600.0, 800.0),
+    lower=(-170.0, -170.0, -110.0, -175.0, -120.0, -350.0),
+    upper=(170.0, 50.0, 155.0, 175.0, 120.0, 350.0),
+    d1=345.0, a1=20.0, a2=260.0, a3=-20.0, d4=260.0, d6=75.0,
 )
 
+#: rob6's robot names: the cycle is the program's choice (RSI_ON #IPO_FAST or #IPO)
 MACHINES: dict[str, Machine] = {
-    "kr16": Machine("kr16", 12, **_KR16),
-    "kr16rt": Machine("kr16rt", 4, **_KR16),
-    "kr3": Machine("kr3", 12, **_KR3),
-    "kr3rt": Machine("kr3rt", 4, **_KR3),
+    "kr16": Machine("kr16", **_KR16),
+    "kr16rt": Machine("kr16rt", **_KR16),
+    "kr3": Machine("kr3", **_KR3),
+    "kr3rt": Machine("kr3rt", **_KR3),
 }
 
-# KUKA's usual home (upper arm vertical, forearm horizontal): inside every limit of both types
+# where the arm stands at power-on by default: KUKA's usual home (upper arm vertical, forearm
+# horizontal), inside every limit of both types
 HOME = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)

@@ -1,7 +1,9 @@
-"""The simulated KR C4's main loop: IPO clock, RSI UDP client, KRL run loop, control channel.
+"""The simulated KR C4's main loop: the KRL program, the IPO clock, the RSI UDP client, the control channel.
 
-The controller's main loop: its own IPO clock, the RSI UDP client, the KRL program's
-run loop, and a TCP control channel for tests and operators.
+The controller runs the selected KRL program (krl.py) with the files installed on it: the
+program decides when RSI is created, switched on and off; while RSI is on, the IPO clock
+sends a packet every cycle and settles the answer to the last one. A TCP control channel
+serves tests and operators (status, faults, restart, confirm).
 
 One thread: every tick sleeps (in select) until the absolute deadline on the monotonic
 clock; replies and control requests are handled as they arrive in between.
@@ -10,6 +12,7 @@ clock; replies and control requests are handled as they arrive in between.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import selectors
@@ -17,35 +20,41 @@ import socket
 import sys
 import time
 from array import array
-from collections.abc import Iterable
+from collections.abc import Generator, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+from . import krl
+from .context import RSI_NAMES, ContextError, SignalFlow, load_context
 from .link import FaultError, Link
 from .machine import Machine
 from .rsi import Rsi
-from .wire import RobWriter, Sen, SenError, parse_sen
+from .wire import Sen, SenError, parse_sen
 
 RTT_WINDOW = 2048  # replies kept for the percentiles of the status
 SENT_RING = 256  # packets remembered for matching late replies (RTT, stale counts)
 MAX_LINE = 65536  # control channel request size limit
+MESSAGES_KEPT = 100
+#: how fast a PTP between runs moves the axes, as a share of their rated speed
+PTP_SPEED = 0.2
 
 
 @dataclass
 class Options:
     machine: Machine
-    cycle_ms: int
-    rob6: tuple[str, int]
+    kss: str
+    generation: str  # the RSI generation of that KSS
+    program: Path  # KRC:\R1\Program\<name>.src (its .dat beside it)
+    sensor_dir: Path  # C:\KRC\ROBOTER\Config\User\Common\SensorInterface
+    rob6: tuple[str, int] | None  # replaces IP_NUMBER/PORT of the Ethernet configuration
     bind: tuple[str, int]
     control: tuple[str, int]
-    sentype: str
-    timeout: int
-    timeout_counts: str
-    corr_window: tuple[float, ...]
     start_pose: tuple[float, ...]
-    restart_delay: float
+    timeout: int | None  # replaces the ETHERNET object's Timeout
+    cycle_ms: int | None  # replaces RSI_ON's #IPO_FAST / #IPO cycle
+    t1: bool  # T1: each RSI_ON waits for the operator to confirm its warning
     auto_ack: float | None
-    eipos: bool
     faults: dict[str, float]
     vanish_s: float | None
 
@@ -62,18 +71,12 @@ def log(msg: str) -> None:
 class Simulator:
     def __init__(self, opts: Options) -> None:
         self.opts = opts
-        self.period = opts.cycle_ms / 1000.0
-        self.rsi = Rsi(
-            opts.machine,
-            opts.cycle_ms,
-            sentype=opts.sentype,
-            timeout=opts.timeout,
-            timeout_counts=opts.timeout_counts,
-            corr_window=opts.corr_window,
-            start_pose=opts.start_pose,
-            writer=RobWriter(precision=4, eipos=opts.eipos),
-            log=log,
-        )
+        src = opts.program
+        self.program = krl.parse_program(src.read_text("ascii"), src.with_suffix(".dat").read_text("ascii"),
+                                         src.stem)
+        self.rsi = Rsi(opts.machine, opts.generation, opts.start_pose, log)
+        self.cycle_ms = opts.cycle_ms or 12
+        self.period = self.cycle_ms / 1000.0
         # select(): microsecond timeouts (epoll and poll round up to whole milliseconds)
         self.sel = selectors.SelectSelector()
         self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -96,10 +99,24 @@ class Simulator:
         self.ipoc_base = self.epoch_ms
         self.tick_n = 0
         self.next_tick: float | None = None  # None: nothing to do every cycle (RSI off)
-        self.restart_at: float | None = None  # the KRL loop's next RSI_ON
         self.vanished = False
         self.vanish_until: float | None = None  # None while vanished: until restart/clear
         self.quit = False
+
+        # the KRL program and what it waits for
+        self.run: Generator[krl.Wait, None, str] | None = None
+        self.waiting: krl.Wait | None = None
+        self.program_state = "not started"
+        self.resume_at: float | None = None  # a PTP or WAIT SEC ends
+        self.restart_at: float | None = None  # the operator starts the program again (auto-ack)
+        self.ptp: tuple[list[float], list[float], float, float] | None = None  # start, target, t0, t1
+        self.bco = False  # a motion since the program started: RSI_ON may run
+        self.programmed: list[float] = list(opts.start_pose)  # the last motion's target
+        self.contexts: dict[str, tuple[int, SignalFlow, bool]] = {}  # name -> (id, flow, permanent)
+        self.active: int | None = None  # the context RSI_ON switched on
+        self.next_id = 1
+        self.rsi_off_pending = False
+        self.messages: list[str] = []
 
         # the packet waiting for its answer
         self.pending_ipoc: int | None = None
@@ -130,7 +147,7 @@ class Simulator:
     # ------------------------------------------------------------------ the loop
     def serve(self) -> None:
         if not self.vanished:
-            self._start_run(time.monotonic())  # the KRL program is running: first RSI_ON
+            self._start_program(time.monotonic())  # the operator selected the program and pressed Start
         while not self.quit:
             wake = self._next_wake()
             timeout = None if wake is None else max(0.0, wake - time.monotonic())
@@ -153,7 +170,7 @@ class Simulator:
         self.sel.close()
 
     def _next_wake(self) -> float | None:
-        times = [t for t in (self.next_tick, self.restart_at, self.link.next_due()) if t is not None]
+        times = [t for t in (self.next_tick, self.resume_at, self.restart_at, self.link.next_due()) if t is not None]
         if self.vanished and self.vanish_until is not None:
             times.append(self.vanish_until)
         return min(times) if times else None
@@ -163,35 +180,192 @@ class Simulator:
             self._end_vanish(now, "back on")
         if self.restart_at is not None and now >= self.restart_at:
             self.restart_at = None
-            self._start_run(now)
+            log("the operator acknowledges and starts the program again")
+            self._start_program(now)
+        if self.resume_at is not None and now >= self.resume_at:
+            self.resume_at = None
+            if self.ptp is not None:
+                self.rsi.move_to(self.ptp[1])
+                self.ptp = None
+            self._advance(now)
 
-    def _start_run(self, now: float) -> None:
-        """The KRL program reaches RSI_ON and RSI_MOVECORR: the first packet leaves now."""
-        if self.rsi.running or not self._resolve():
-            return
-        self.rsi.start_run()
+    # ------------------------------------------------------------------ the KRL program
+    def _start_program(self, now: float, line: int | None = None) -> None:
+        """Reset the program and start it (at ``line``: a block selection, no BCO yet)."""
+        self._stop_program()
+        self.contexts = {k: c for k, c in self.contexts.items() if c[2]}  # RSI_CREATE(..., TRUE) survives
+        self.bco = False
+        self.run = krl.run(self.program, self, line)
+        self.program_state = "running"
+        log(f"program {self.program.name} started" + (f" at line {line}" if line else ""))
+        self._advance(now)
+
+    def _stop_program(self) -> None:
+        self.run = None
+        self.waiting = None
+        self.resume_at = None
+        self.ptp = None
+        self.rsi_off_pending = False
+
+    def _message(self, text: str) -> None:
+        self.messages.append(text)
+        del self.messages[:-MESSAGES_KEPT]
+        log(f"message: {text}")
+
+    def _advance(self, now: float) -> None:
+        """Run the program until it waits for something or ends."""
+        while self.run is not None:
+            try:
+                wait = next(self.run)
+            except StopIteration as end:
+                self._stop_program()
+                self.program_state = "ended" if end.value == "END" else str(end.value)
+                log(f"program {self.program.name}: {self.program_state}")
+                self._after_stop(now)
+                return
+            except krl.ProgramStop as e:
+                self._fault_stop(now, str(e))
+                return
+            self.waiting = wait
+            if wait.kind == "ptp":
+                target = [float(v) for v in wait.value]
+                problem = self.rsi.within_limits(target)
+                if problem:
+                    self._fault_stop(now, f"PTP: {problem} (software limit switch)")
+                    return
+                self.bco = True
+                self.programmed = target
+                start = list(self.rsi.aipos)
+                duration = max(abs(t - s) / (r * PTP_SPEED)
+                               for t, s, r in zip(target, start, self.opts.machine.rated, strict=True))
+                if duration > 0:
+                    self.ptp = (start, target, now, now + duration)
+                    self.resume_at = now + duration
+                    return
+                self.rsi.move_to(target)
+            elif wait.kind == "sec":
+                self.resume_at = now + float(wait.value)
+                return
+            elif wait.kind == "confirm":
+                self.program_state = "waiting for confirmation"
+                log(f"T1: RSI_ON at line {wait.value}: confirm 'Attention - sensor correction goes active'")
+                return
+            elif wait.kind == "movecorr":
+                if not self.rsi.running:
+                    self._fault_stop(now, "RSI_MOVECORR: RSI is not on")
+                    return
+                self.rsi.in_movecorr = True
+                return
+            elif wait.kind == "rsi_off" and self.rsi.running:
+                self.rsi_off_pending = True  # takes effect with the next IPO cycle
+                return
+
+    def _fault_stop(self, now: float, message: str) -> None:
+        """The controller stops the program with a message; the operator must act."""
+        self._message(message)
+        self.rsi.end_run(message, "fault")
+        self.next_tick = None
+        self._stop_program()
+        self.program_state = f"stopped: {message}"
+        self._after_stop(now)
+
+    def _after_stop(self, now: float) -> None:
+        self.pending_ipoc = None
+        self.answer = None
+        if self.opts.auto_ack is not None:
+            self.restart_at = now + self.opts.auto_ack
+            log(f"auto-acknowledge: the program starts again in {self.opts.auto_ack:g} s")
+
+    # what the program asks of the controller (krl.Controller)
+    def axis_act(self) -> list[float]:
+        return list(self.rsi.aipos)
+
+    def needs_confirm(self) -> bool:
+        return self.opts.t1
+
+    def rsi_create(self, name: str, permanent: bool) -> tuple[str, int]:
+        if name in self.contexts:
+            return krl.RSIOK, self.contexts[name][0]
+        try:
+            flow = load_context(name, self.opts.sensor_dir, self.opts.generation)
+        except ContextError as e:
+            self._message(f"RSI_CREATE({name!r}) on {RSI_NAMES[self.opts.generation]}: {e}")
+            return "RSI_CREATE failed", 0
+        cont_id = self.next_id
+        self.next_id += 1
+        self.contexts[name] = (cont_id, flow, permanent)
+        log(f"RSI_CREATE({name!r}): context {cont_id}, {flow.ethernet_id} Timeout {flow.timeout}, "
+            f"SENTYPE {flow.ethernet.sentype}")
+        return krl.RSIOK, cont_id
+
+    def rsi_on(self, mode: str, cycle_ms: int) -> str:
+        if not self.bco:
+            raise krl.ProgramStop("KSS01443 Impermissible start motion: RSI_ON needs a motion first (BCO run)")
+        if self.rsi.running:
+            self._message("RSI_ON: RSI is already on")
+            return "RSI_ON failed"
+        if not self.contexts:
+            self._message("RSI_ON: no context created")
+            return "RSI_ON failed"
+        cont_id, flow, _ = max(self.contexts.values(), key=lambda c: c[0])
+        if self.opts.timeout is not None:
+            flow = dataclasses.replace(flow, timeout=self.opts.timeout)
+        if not self._resolve(flow):
+            return "RSI_ON failed"
+        self.active = cont_id
+        self.cycle_ms = self.opts.cycle_ms or cycle_ms
+        self.period = self.cycle_ms / 1000.0
+        self.rsi.set_flow(flow, self.cycle_ms)
+        self.rsi.start_run(self.programmed)
         self._reset_run_stats()
+        now = time.monotonic()
         self.t0 = now
         self.tick_n = 0
         stamp = self.epoch_ms + int((now - self.epoch) * 1000)
-        self.ipoc_base = max(stamp, self.rsi.ipoc + self.opts.cycle_ms)
+        self.ipoc_base = max(stamp, self.rsi.ipoc + self.cycle_ms)
         self._tick(now)
+        return krl.RSIOK
 
+    def rsi_off(self) -> str:
+        if not self.rsi.running:
+            self._message("RSI_OFF: RSI is not on")
+            return "RSI_OFF failed"
+        return krl.RSIOK
+
+    def rsi_delete(self, cont_id: int) -> str:
+        for name, (cid, _, _) in list(self.contexts.items()):
+            if cid == cont_id and not (self.rsi.running and self.active == cid):
+                del self.contexts[name]
+                return krl.RSIOK
+        self._message(f"RSI_DELETE({cont_id}): no such context, or RSI is on")
+        return "RSI_DELETE failed"
+
+    # ------------------------------------------------------------------ the IPO clock
     def _tick(self, now: float) -> None:
         rsi = self.rsi
-        ipoc = self.ipoc_base + self.tick_n * self.opts.cycle_ms
+        if self.rsi_off_pending:  # RSI_OFF: no more packets
+            self.rsi_off_pending = False
+            rsi.end_run("RSI_OFF", "program")
+            self.next_tick = None
+            self.pending_ipoc = None
+            self.answer = None
+            self._advance(now)
+            return
+        ipoc = self.ipoc_base + self.tick_n * self.cycle_ms
         if rsi.running:
             answer, self.answer = self.answer, None
             packet = rsi.step(answer, ipoc)
             if packet is not None:
                 self.pending_ipoc = ipoc
-                i = (ipoc // self.opts.cycle_ms) % SENT_RING
+                i = (ipoc // self.cycle_ms) % SENT_RING
                 self.sent_ipoc[i] = ipoc
                 self.sent_t[i] = 0.0  # set when it really leaves (it may be delayed)
                 self.sent_answered[i] = 0
                 self.link.transmit(packet, ipoc, now)
-            else:
-                self._run_ended(now)
+            else:  # a monitor stopped RSI: the program stops with its message
+                self.next_tick = None
+                self._fault_stop(now, rsi.stop_reason)
+                return
         if rsi.running:
             n = self.tick_n + 1
             behind = math.floor((time.monotonic() - self.t0) / self.period) + 1
@@ -202,24 +376,16 @@ class Simulator:
             self.next_tick = self.t0 + n * self.period
         else:
             self.next_tick = None
+        if rsi.movecorr_done:  # the Stop object ended RSI_MOVECORR: the program goes on
+            rsi.movecorr_done = False
+            self._advance(now)
 
-    def _run_ended(self, now: float) -> None:
-        self.pending_ipoc = None
-        self.answer = None
-        if self.rsi.stop_kind == "pc":  # RSI_MOVECORR returned: the KRL loop turns RSI on again
-            self.restart_at = now + self.opts.restart_delay
-        elif self.rsi.stop_kind == "fault" and self.opts.auto_ack is not None:
-            self.restart_at = now + self.opts.auto_ack  # the operator acknowledges and restarts
-            log(f"auto-acknowledge: new run in {self.opts.auto_ack:g} s")
-
-    def _resolve(self) -> bool:
-        host, port = self.opts.rob6
+    def _resolve(self, flow: SignalFlow) -> bool:
+        host, port = self.opts.rob6 or (flow.ethernet.ip_number, flow.ethernet.port)
         try:
             info = socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
         except OSError as e:
-            log(f"cannot resolve the rob6 PC {host}: {e}; retrying in 1 s")
-            self.rsi.stop_reason = f"cannot resolve {host}"
-            self.restart_at = time.monotonic() + 1.0
+            self._message(f"RSI_ON: cannot reach the PC {host}: {e}")
             return False
         address, resolved_port = info[0][4][:2]  # AF_INET: (host, port)
         self.link.dest = (str(address), int(resolved_port))
@@ -227,7 +393,7 @@ class Simulator:
 
     # ------------------------------------------------------------------ replies
     def _on_sent(self, ipoc: int, t: float) -> None:
-        i = (ipoc // self.opts.cycle_ms) % SENT_RING
+        i = (ipoc // self.cycle_ms) % SENT_RING
         if self.sent_ipoc[i] == ipoc and self.sent_t[i] == 0.0:
             self.sent_t[i] = t
 
@@ -243,15 +409,21 @@ class Simulator:
             if self.vanished or self.link.losing(now):
                 self.link.stats["lost_in"] += 1
                 continue
+            flow = self.rsi.flow
+            if flow is None:  # no context: nobody reads
+                continue
             try:
-                sen = parse_sen(data)
+                sen = parse_sen(data, flow.ethernet)
+                if sen.type != flow.ethernet.sentype:
+                    raise SenError(f"Sen Type {sen.type!r} is not SENTYPE {flow.ethernet.sentype!r}")
             except SenError as e:
                 self.counters["bad_replies"] += 1
+                self.rsi.not_taken += 1
                 if self._bad_logged_run != self.rsi.runs:
                     self._bad_logged_run = self.rsi.runs
-                    log(f"unreadable answer (counted late; logged once per run): {e}")
+                    log(f"answer not taken (counted late; logged once per run): {e}")
                 continue
-            i = (sen.ipoc // self.opts.cycle_ms) % SENT_RING
+            i = (sen.ipoc // self.cycle_ms) % SENT_RING
             known = self.sent_ipoc[i] == sen.ipoc
             if known and not self.sent_answered[i]:
                 self.sent_answered[i] = 1
@@ -361,7 +533,9 @@ class Simulator:
         return {"ok": True, "faults": self.link.describe(now)}
 
     def _cmd_restart(self, req: dict[str, Any], now: float) -> dict[str, Any]:
-        _only_fields("restart", req, {"start"})
+        """The operator: stop the program (RSI ends), jog the arm to ``start`` if given, reset
+        the program and start it, from its first line or from ``line`` (a block selection)."""
+        _only_fields("restart", req, {"start", "line"})
         start = req.get("start")
         if start is not None:
             if (
@@ -373,18 +547,33 @@ class Simulator:
             problem = self.rsi.within_limits(start)
             if problem:
                 raise ValueError(f"start pose outside the software limits: {problem}")
+        line = req.get("line")
+        if line is not None and (isinstance(line, bool) or not isinstance(line, int) or line < 1):
+            raise ValueError(f"line must be a line number of the program, got {line!r}")
         self.rsi.end_run("restart requested", "operator")
+        self._stop_program()
+        self.next_tick = None
         self.pending_ipoc = None
         self.answer = None
+        self.restart_at = None
         if self.vanished:
             self.vanished = False
             self.vanish_until = None
             log("switched on again (restart)")
-        if start is not None:  # the KRL program's PTP to the new start pose, RSI off
+        if start is not None:  # jogged there with RSI off
             self.rsi.move_to(start)
-        self.restart_at = None
-        self._start_run(now)
-        return {"ok": True, "start": [round(v, 6) for v in self.rsi.aipos]}
+        self._start_program(now, line)
+        return {"ok": True, "start": [round(v, 6) for v in self.rsi.aipos], "program": self.program_state}
+
+    def _cmd_confirm(self, req: dict[str, Any], now: float) -> dict[str, Any]:
+        """The operator confirms RSI_ON's warning in T1."""
+        _no_fields("confirm", req)
+        if self.waiting is None or self.waiting.kind != "confirm":
+            raise ValueError("nothing to confirm")
+        self.program_state = "running"
+        self.waiting = None
+        self._advance(now)
+        return {"ok": True, "program": self.program_state}
 
     def _cmd_vanish(self, req: dict[str, Any], now: float) -> dict[str, Any]:
         _only_fields("vanish", req, {"for_s"})
@@ -394,6 +583,8 @@ class Simulator:
         ):
             raise ValueError(f"for_s must be a number > 0 or null (until restart), got {for_s!r}")
         self.rsi.end_run("vanished", "off")
+        self._stop_program()
+        self.program_state = "off"
         self.pending_ipoc = None
         self.answer = None
         self.link.reset()
@@ -415,22 +606,29 @@ class Simulator:
         "fault": _cmd_fault,
         "clear": _cmd_clear,
         "restart": _cmd_restart,
+        "confirm": _cmd_confirm,
         "vanish": _cmd_vanish,
         "quit": _cmd_quit,
     }
 
     def _end_vanish(self, now: float, why: str) -> None:
-        """Switched on again: the KRL program starts a new run from where the robot stands."""
+        """Switched on again: the operator starts the program."""
         self.vanished = False
         self.vanish_until = None
         log(f"switched on again ({why})")
-        self._start_run(now)
+        self._start_program(now)
 
     def status(self, now: float) -> dict[str, Any]:
         rsi = self.rsi
         state = "vanished" if self.vanished else "running" if rsi.running else "stopped"
         n = min(self.rtt_n, RTT_WINDOW)
         rtts = sorted(self.rtt[:n]) if n else []
+        aipos = rsi.aipos
+        if self.ptp is not None:  # a PTP between runs: where the axes are now
+            start, target, t0, t1 = self.ptp
+            f = min(1.0, max(0.0, (now - t0) / (t1 - t0)))
+            aipos = [s + (t - s) * f for s, t in zip(start, target, strict=True)]
+        flow = rsi.flow
 
         def ms(v: float) -> float:
             return round(v * 1000.0, 3)
@@ -438,21 +636,24 @@ class Simulator:
         return {
             "ok": True,
             "state": state,
+            "program": self.program_state,
             "robot": rsi.machine.name,
-            "cycle_ms": self.opts.cycle_ms,
+            "kss": self.opts.kss,
+            "rsi": RSI_NAMES[self.opts.generation],
+            "cycle_ms": self.cycle_ms if rsi.runs else None,  # RSI_ON's cycle
             "cycle": rsi.cycle,
             "ipoc": rsi.ipoc,
-            "aipos": _r(rsi.aipos),
+            "aipos": _r(aipos),
             "aspos": _r(rsi.aspos),
-            "ak": _r(rsi.ak),
+            "ak": _r(rsi.corr),
             "delay": rsi.delay,
             "late_total": rsi.late_total,
-            "late_consecutive": rsi.late_consecutive,
             "packets_sent": self.link.packets_sent,
             "replies_ok": rsi.replies_ok,
             "runs": rsi.runs,
             "stop_reason": rsi.stop_reason,
             "trips": list(rsi.trips),
+            "messages": list(self.messages),
             "max_ak_step": _r(rsi.max_ak_step),
             "rtt_ms": {
                 "p50": ms(rtts[(n - 1) // 2]) if n else None,
@@ -460,8 +661,8 @@ class Simulator:
                 "max": ms(self.rtt_max) if n else None,
                 "n": self.rtt_n,
             },
-            "sentype": rsi.sentype,
-            "timeout": rsi.timeout,
+            "sentype": flow.ethernet.sentype if flow else None,
+            "timeout": flow.timeout if flow else None,
             "faults": self.link.describe(now),
             "fault_stats": dict(self.link.stats),
             "replies": dict(self.counters),

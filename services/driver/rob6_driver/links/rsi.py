@@ -12,9 +12,13 @@ answer; events are logged and published by a separate thread.
 Rules that keep the robot from jumping (the controller trips "Command velocity" on a
 step faster than an axis can move, and stops RSI after ``Timeout`` late packets):
 
-* The first packet of a run (the first ever, or a new ``ASPos``, or ``Delay`` going
-  back: RSI was switched off and on) is answered with zero correction: the core
-  resumes at the start pose, at rest.
+* A new run is recognised by what the controller changes at ``RSI_ON``: ``Delay``
+  starts again from 0, and ``ASPos`` is the programmed pose, which the shipped program
+  (deploy/kuka) sets to where the arm stands with ``PTP $AXIS_ACT`` before each
+  ``RSI_ON``. (A controller keeps the old ASPos across RSI_OFF/RSI_ON without a motion;
+  then nothing tells the runs apart, and nothing needs to: the arm stands where rob6
+  commanded it.) The first packet of a run is answered with ``AK = AIPos - ASPos``: the
+  core resumes where the arm stands, at rest, whatever ASPos the program left.
 * No packet for ``LOST_AFTER_CYCLES`` cycles (25: 100 ms at 4 ms, 300 ms at 12 ms; far
   above Python's scheduling jitter on a loaded machine, well inside RSI's 100-packet
   timeout) means the link is lost: a running motion ends with ``false`` and an error
@@ -71,7 +75,8 @@ STALE_WINDOW_CYCLES = 1000
 NOT_ARRIVING = 10
 LATENCY_BIN_US = 5
 LATENCY_BINS = 4000  # 20 ms; slower answers land in the last bin (the max is exact)
-STOP_WAIT_S = 0.5
+#: how long ``stop()`` answers (with Stop) at most, waiting for the controller to switch RSI off
+STOP_WAIT_S = 2.0
 #: SCHED_FIFO priority of the receive thread (below the kernel's own threaded IRQs at 50)
 RT_PRIORITY = 40
 #: a bus worker holding the GIL would delay the receive thread by up to the switch
@@ -173,10 +178,20 @@ class RsiLink(Link):
         self._thread.start()
 
     def stop(self) -> None:
-        """End the correction run (``<Stop>1</Stop>`` in the next answer), then close."""
+        """End the correction run: answer ``<Stop>1</Stop>`` until the controller has left
+        RSI_MOVECORR and switched RSI off (no packet for ``lost_after_s``), then close. A
+        packet left unanswered would count late, and the program's RSI_OFF comes a cycle
+        after RSI_MOVECORR returns."""
         if self._thread is not None and self.state == "connected":
             self._stopping = True
-            self._stop_sent.wait(max(STOP_WAIT_S, 10 * self.cycle_s))
+            wait_s = max(STOP_WAIT_S, 2 * self.lost_after_s)
+            deadline = time.monotonic() + wait_s
+            self._stop_sent.wait(wait_s)
+            while self.state == "connected" and time.monotonic() < deadline:
+                time.sleep(self.cycle_s)
+            if self.state == "connected":
+                log.warning("driver: the controller still sends after %.1f s of <Stop>1</Stop>: is the Stop object "
+                            "wired to the RECEIVE element Stop (deploy/kuka)?", wait_s)
         self._closing = True
         if self._thread is not None:
             self._thread.join(1.0)
@@ -327,7 +342,7 @@ class RsiLink(Link):
             self.publish(state)
 
     def _begin_run(self, pkt: RobPacket, addr: tuple[str, int]) -> None:
-        """A new RSI run: zero correction, the core at rest on the start pose."""
+        """A new RSI run: the core at rest where the arm stands (AIPos), AK = AIPos - ASPos."""
         previous = self._aspos
         was = self.state
         self.runs += 1
@@ -339,7 +354,7 @@ class RsiLink(Link):
         moving = self._moving_when_lost or (was == "connected" and self.core.state().moving)
         self._moving_when_lost = False
         pose = " ".join(f"{a:.3f}" for a in pkt.aspos)
-        self.core.online(pkt.aspos, reason="the controller restarted RSI during the motion")
+        self.core.online(pkt.aipos, reason="the controller restarted RSI during the motion")
         self.state, self.peer = "connected", addr
         if previous is None:
             self._report("run_start", f"driver: RSI run started by {_peer(addr)}, start pose {pose}",
@@ -368,8 +383,13 @@ class RsiLink(Link):
                          f"({self.late} in all): {what}", level, pkt)
 
     def _on_silence(self) -> None:
-        """No packet for ``lost_after_s``: the link is lost (or still not there)."""
-        if self.state == "connected":
+        """No packet for ``lost_after_s``: the link is lost (or still not there), or after
+        our Stop the controller switched RSI off."""
+        if self.state == "connected" and self._stopping:
+            self.state = "stopped"
+            self.core.offline("RSI stopped by the driver")
+            self._report("stopped", "driver: the controller left RSI_MOVECORR and switched RSI off", logging.INFO)
+        elif self.state == "connected":
             self.state = "lost"
             ms = round(self.lost_after_s * 1000)
             reason = f"RSI link lost: no packet from the controller at {_peer(self.peer)} for {ms} ms"

@@ -13,10 +13,12 @@ Every cycle the controller sends::
 
 and the PC answers, before the cycle ends::
 
-    <Sen Type="ImFree"><AK A1=".." ... A6=".."/><IPOC>4208105428</IPOC></Sen>
+    <Sen Type="ImFree"><AK A1=".." ... A6=".."/><Stop>0</Stop><IPOC>4208105428</IPOC></Sen>
 
 ``AK`` is the absolute axis correction from the start pose (``RSI_ON(#ABSOLUTE)``);
-``<Stop>1</Stop>`` ends the correction run.
+``<Stop>1</Stop>`` ends the correction run. Every answer carries every element the
+controller's Ethernet configuration reads (RECEIVE: Stop, AK.A1..A6), as the references'
+PC sides always send them (deploy/kuka/REFERENCES.md).
 
 The parser is tolerant of what varies between RSI versions and configurations:
 attribute order, ``Type``/``TYPE``, single or double quotes, spaces and new lines,
@@ -125,10 +127,10 @@ def ipoc_of(data: bytes) -> int:
 
 
 _SEN = (b'<Sen Type="%s"><AK A1="%.6f" A2="%.6f" A3="%.6f" A4="%.6f" A5="%.6f" A6="%.6f"/>'
-        b"%s<IPOC>%s</IPOC></Sen>")
-_STOP = b"<Stop>1</Stop>"
+        b"<Stop>%d</Stop><IPOC>%s</IPOC></Sen>")
 
 
 def format_sen(sen_type: bytes, ak: Sequence[float], ipoc: bytes, stop: bool = False) -> bytes:
-    """The answer: absolute axis correction ``ak`` (6 values, deg) for the packet ``ipoc``."""
-    return _SEN % (sen_type, ak[0], ak[1], ak[2], ak[3], ak[4], ak[5], _STOP if stop else b"", ipoc)
+    """The answer: absolute axis correction ``ak`` (6 values, deg) for the packet ``ipoc``;
+    ``stop``: ``<Stop>1</Stop>``, the program leaves RSI_MOVECORR (else ``<Stop>0</Stop>``)."""
+    return _SEN % (sen_type, ak[0], ak[1], ak[2], ak[3], ak[4], ak[5], stop, ipoc)

@@ -1,0 +1,59 @@
+"""The RSI link against the stand-in KR C4 running the shipped program: stop and restart.
+
+rob6's stop ends the program cleanly (RSI_MOVECORR returns, RSI_OFF, END, no message) and
+an operator's restart brings a new run the link follows from where the arm stands, twice
+in a row. Each run stays under 100 packets of 12 ms, so the shipped Timeout (100 late
+packets a run) cannot trip however slow the machine is: a fault here is the files' or the
+link's."""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Callable
+
+import numpy as np
+
+from harness.ports import free_port
+from rob6.messages import LinkEvent
+from rob6.robots import get_robot
+from rob6_driver.links.rsi import RsiLink
+from rob6_driver.motion import MotionCore
+from tests.controllers.rsi_controller import RsiController
+from tests.driver.test_rsi_link import ptp, wait
+
+HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
+
+
+def connected(link: RsiLink) -> Callable[[], bool]:
+    return lambda: link.state == "connected"
+
+
+def test_stop_and_restart_twice_without_a_fault() -> None:
+    robot = get_robot("kr16")
+    port = free_port(socket.SOCK_DGRAM)
+    with RsiController(rob6=("127.0.0.1", port), robot="kr16") as kuka:
+        for run in (1, 2, 3):
+            core = MotionCore(robot)
+            events: list[LinkEvent] = []
+            link = RsiLink(core, robot, f"127.0.0.1:{port}", lambda s: None, events.append)
+            link.start()
+            try:
+                if run > 1:
+                    assert kuka.restart()["program"] == "running"  # the operator starts the program again
+                wait(connected(link), timeout=10)
+                start = core.state().q.copy()
+                assert np.allclose(start, kuka.status()["aipos"], atol=1e-4)
+                target = start + [0.5, 0.0, 0.0, 0.0, 0.0, 0.0]
+                motion = ptp(core, target.tolist())
+                assert motion.wait(10) and motion.ok, motion.error
+            finally:
+                link.stop()
+            st = kuka.wait_for(lambda s: s["state"] == "stopped" and s["program"] != "running", timeout=15,
+                               what=f"run {run}: the program to end after rob6's Stop")
+            assert st["program"] == "ended", st["program"]
+            assert st["trips"] == [] and st["messages"] == [], (st["trips"], st["messages"])
+            assert st["runs"] == run and st["stop_reason"] == "RSI_OFF"
+            assert np.allclose(st["aipos"], target, atol=1e-3)  # the arm stays where rob6 left it
+            assert np.allclose(st["aspos"], start, atol=1e-3)  # ASPos: where this run's PTP $AXIS_ACT was
+            assert [e.event for e in events][-2:] == ["stop_sent", "stopped"]
+        assert np.allclose(kuka.status()["aipos"], np.array(HOME) + [1.5, 0, 0, 0, 0, 0], atol=1e-3)
