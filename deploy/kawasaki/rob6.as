@@ -9,7 +9,7 @@
 ;   rob6_state  PC program 2: the state line every 50 ms while a driver is connected.
 ;   rob6_motion robot program (EXECUTE rob6_motion): JMOVEs the queued points.
 ;
-; Shared globals, each written by one program only (kflush by the two PC programs): the
+; Shared globals, each written by one program only (kflush, kend: see below): the
 ; queue ring kq1[]..kq6[] (joints, deg), kms[] (ms), kfin[] (final 0/1), kseq[] of kcap
 ; points; kin points written (rob6_pc), kout points taken (rob6_motion), kflush the points
 ; dropped by a cancel or a stop; ksock the driver's socket (-1 none); kdone, kunder, ke[]
@@ -239,7 +239,8 @@
 .END
 
 .PROGRAM rob6_state()
-  ; every 50 ms: a stop drops the queue; while a driver is connected, the state line
+  ; every 50 ms: a stop drops the queue and the last target (the arm braked short of it);
+  ; while a driver is connected, the state line
   .n = 0
   HERE .#was
   DECOMPOSE .was[1] = .#was
@@ -254,6 +255,7 @@
   END
   IF (.power == 0) OR (.teach == 1) OR (ERROR <> 0) THEN
     kflush = kin
+    kend = 0
   END
   HERE .#now
   DECOMPOSE .j[1] = .#now
@@ -314,7 +316,6 @@
   IF kfin[.r] == 1 THEN
     ACCURACY 1 FINE
   END
-  JMOVE #PPOINT(kq1[.r], kq2[.r], kq3[.r], kq4[.r], kq5[.r], kq6[.r])
   ke[1] = kq1[.r]
   ke[2] = kq2[.r]
   ke[3] = kq3[.r]
@@ -323,6 +324,7 @@
   ke[6] = kq6[.r]
   kend = 1
   kdone = kseq[.r]
+  JMOVE #PPOINT(ke[1], ke[2], ke[3], ke[4], ke[5], ke[6])
   kout = kout + 1
   IF kfin[.r] == 1 THEN
     BREAK

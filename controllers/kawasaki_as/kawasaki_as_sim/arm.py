@@ -5,8 +5,8 @@ the previous one ends, lasting its SPEED ... S time (never less than the slowest
 needs at its rated speed), both stretched by the monitor speed (at 10 % ten times
 longer). The controller plans one motion ahead: while a segment runs, the next JMOVE is
 taken and starts when it ends (blended, the path does not stop); a further JMOVE waits
-until there is room (``room``). When no segment follows, the path stops at the last
-point.
+until that one has started (``room``). When no segment follows, the path stops at the
+last point.
 
 The joints follow the commanded path like servos with the FS03N's speed and acceleration
 limits (they accelerate and brake at their limits and round the corners between
@@ -31,9 +31,6 @@ RATED_SPEED = (360.0, 250.0, 225.0, 540.0, 225.0, 540.0)
 MAX_ACCEL = tuple(v * 4.0 for v in RATED_SPEED)
 #: braking at a stop (E-stop, motor power off): twice that
 STOP_DECEL = tuple(a * 2.0 for a in MAX_ACCEL)
-#: motions planned: the one under way and the next
-PLAN_DEPTH = 2
-
 DT = 0.002  # integration step, s
 KP = 50.0  # 1/s: how firmly the joints close the last bit of a gap
 BRAKE_MARGIN = 0.9
@@ -69,7 +66,7 @@ class Arm:
 
     # ---- the robot program's view ---------------------------------------------
     def room(self) -> bool:
-        return len(self.plan) + (self._seg is not None) < PLAN_DEPTH
+        return not self.plan
 
     def move(self, seg: Segment) -> None:
         self.plan.append(seg)

@@ -107,6 +107,7 @@ class Interpreter:
         if prog.params:
             return f"{program} takes parameters"
         self.tasks[task] = Task(task, [Frame(prog)], started=self.machine.now())
+        self._run(self.tasks[task])  # it starts at once, up to its first wait
         return ""
 
     def abort(self, task: str, why: str) -> None:
