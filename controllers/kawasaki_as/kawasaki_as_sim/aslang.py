@@ -317,10 +317,9 @@ def _step(text: str, line: int) -> Step:
         p.take()
         name = p.take().text
         args: list[Expr] = []
-        if p.accept("("):
-            if not p.accept(")"):
-                args = p.args()
-                p.expect(")")
+        if p.accept("(") and not p.accept(")"):
+            args = p.args()
+            p.expect(")")
         p.done()
         return Step("call", line, text, name=name, args=args)
     if word == "print":

@@ -148,8 +148,9 @@ class Interpreter:
             return
         caller = task.frames[-1]
         for param, var in frame.out:
-            if param in frame.locals:
-                self._assign(caller, var, frame.locals[param])
+            value = frame.locals.get(param)
+            if value is not None and not isinstance(value, dict):
+                self._assign(caller, var, value)
         caller.pc += 1
 
     # ---------------------------------------------------------------- steps
@@ -201,9 +202,8 @@ class Interpreter:
             return True
         elif kind == "print":
             self.machine.print_line(task.name, "".join(_text(self.eval(frame, e)) for e in step.args))
-        elif kind == "instr":
-            if not self._instruction(task, frame, step):
-                return False
+        elif kind == "instr" and not self._instruction(task, frame, step):
+            return False
         frame.pc += 1
         return True
 
@@ -294,9 +294,7 @@ class Interpreter:
         name = step.name
         values: list[Value] = []
         for i, e in enumerate(step.args[1:], start=1):
-            if name == "tcp_recv" and i in (2, 3):
-                values.append(0.0)
-            elif name == "tcp_accept" and i == 3:
+            if name == "tcp_recv" and i in (2, 3) or name == "tcp_accept" and i == 3:
                 values.append(0.0)
             elif name == "tcp_send" and i == 2:
                 if not isinstance(e, Var) or e.kind != "string":
@@ -308,20 +306,20 @@ class Interpreter:
         result = self.machine.tcp(name, values, task.started)
         if result is None:
             return False
-        target = step.args[0]
-        if not isinstance(target, Var):
+        result_var = step.args[0]
+        if not isinstance(result_var, Var):
             raise AsError("", f"{name.upper()}: the result goes into a variable")
-        self._assign(frame, target, result[0])
+        self._assign(frame, result_var, result[0])
         if name == "tcp_recv":
-            array, count = step.args[2], step.args[3]
-            assert isinstance(array, Var) and isinstance(count, Var)
+            array, counter = step.args[2], step.args[3]
+            assert isinstance(array, Var) and isinstance(counter, Var)
             if array.kind != "string":
                 raise AsError("", "TCP_RECV receives into a string array")
             elements = result[1:]
             base = self._index(frame, array) if array.index is not None else 0
-            for k, text in enumerate(elements):
-                self._assign(frame, Var(array.name, Num(float(base + k))), text)
-            self._assign(frame, count, float(len(elements)))
+            for k, piece in enumerate(elements):
+                self._assign(frame, Var(array.name, Num(float(base + k))), piece)
+            self._assign(frame, counter, float(len(elements)))
         elif name == "tcp_accept" and len(result) > 1:
             ip = step.args[3]
             assert isinstance(ip, Var)

@@ -72,10 +72,10 @@ class TcpOption:
                 self.listeners[port] = sock
             return (0.0,)
         if name == "tcp_end_listen":
-            sock = self.listeners.pop(_port(args[0]), None)
-            if sock is None:
+            listening = self.listeners.pop(_port(args[0]), None)
+            if listening is None:
                 return (FAILED,)
-            sock.close()
+            listening.close()
             return (0.0,)
         if name == "tcp_accept":
             port, timeout = _port(args[0]), _timeout(args[1])
@@ -95,9 +95,9 @@ class TcpOption:
             self.accepted += 1
             self._on_accept(conn)
             return (float(number), *(float(b) for b in socket.inet_aton(peer[0])))
-        conn = self.conns.get(_number(args[0]))
+        client = self.conns.get(_number(args[0]))
         if name == "tcp_close":
-            if conn is None:
+            if client is None:
                 return (FAILED,)
             self._close(_number(args[0]))
             return (0.0,)
@@ -105,27 +105,27 @@ class TcpOption:
             timeout, most = _timeout(args[3]), args[4]
             if not isinstance(most, float) or most != int(most) or not 1 <= most <= MAX_ELEMENT:
                 raise AsError("E4007", f"TCP_RECV: at most {MAX_ELEMENT} characters an element, not {most!r}")
-            if conn is None or conn.failed:
+            if client is None or client.failed:
                 return (FAILED,)
-            data = self._take(conn, now)
-            if data:
-                text = data.decode("latin-1")
+            received = self._take(client, now)
+            if received:
+                text = received.decode("latin-1")
                 step = int(most)
                 return (0.0, *(text[i:i + step] for i in range(0, len(text), step)))
-            if conn.closed_by_peer and not conn.inbound:
+            if client.closed_by_peer and not client.inbound:
                 return (0.0,)
             return (TIMEOUT,) if now - started >= timeout else None
         if name == "tcp_send":
-            data, timeout = args[1], _timeout(args[3])
-            assert isinstance(data, str)
-            if conn is None or conn.failed or conn.closed_by_peer:
+            payload, timeout = args[1], _timeout(args[3])
+            assert isinstance(payload, str)
+            if client is None or client.failed or client.closed_by_peer:
                 return (FAILED,)
-            if len(conn.outbound) > 65536:  # the peer does not read: wait for room
+            if len(client.outbound) > 65536:  # the peer does not read: wait for room
                 return (TIMEOUT,) if now - started >= timeout else None
-            raw = data.encode("latin-1")
-            conn.outbound += raw
-            self._on_sent(conn, raw, now)
-            self._flush(conn)
+            raw = payload.encode("latin-1")
+            client.outbound += raw
+            self._on_sent(client, raw, now)
+            self._flush(client)
             return (0.0,)
         raise AsError("", f"unknown instruction {name.upper()}")
 

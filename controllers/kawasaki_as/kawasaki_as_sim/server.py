@@ -9,8 +9,8 @@ teach mode, an error, a program's run-time error) brakes the arm and stops the r
 program; the operator starts it again (``execute``, the terminal's ``EXECUTE``).
 
 A tap on the connections counts what crosses them for the status: lines received, the
-answers (``A seq code ...``) the program sent by code, and the time from a line's arrival
-to its answer. It only watches; the program alone decides what is sent.
+answers (``A seq code ...``) the program sent by code, the time from a line's arrival to
+its answer, and the underruns the last state line reported. It only watches; the program alone decides what is sent.
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ class Tap:
 
     lines: int = 0
     answers: dict[str, int] = field(default_factory=dict)
+    underruns: int = 0  # as the last state line sent said
     latencies_ms: deque[float] = field(default_factory=lambda: deque(maxlen=LATENCY_WINDOW))
     _arrivals: dict[int, deque[float]] = field(default_factory=dict)
     _partial: dict[int, bytes] = field(default_factory=dict)
@@ -79,6 +80,8 @@ class Tap:
             self._partial[id(conn)] = rest
         for line in lines:
             fields = line.split()
+            if fields[:1] == [b"S"] and fields[-1].isdigit():
+                self.underruns = int(fields[-1])
             if fields[:1] == [b"A"] and len(fields) > 2:
                 code = fields[2].decode("ascii", "replace")
                 self.answers[code] = self.answers.get(code, 0) + 1
@@ -210,6 +213,7 @@ class Controller:
             "error": self.error, "monitor_speed": self.arm.monitor_speed,
             "client": self.net.connected(), "connections": self.net.accepted,
             "lines_received": self.tap.lines, "answers": dict(sorted(self.tap.answers.items())),
+            "underruns_reported": self.tap.underruns,
             "segments": self.arm.executed, "max_speed_ratio": round(self.arm.max_speed_ratio, 4),
             "ack_ms": [_pct(lat, 0.5), _pct(lat, 0.99), lat[-1] if lat else 0.0],
             "tasks": self.tasks(),
