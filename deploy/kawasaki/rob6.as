@@ -286,7 +286,10 @@
 .END
 
 .PROGRAM rob6_motion()
-  ; starts a motion at kstart points or a final one; every point one JMOVE, the final one exact
+  ; starts a motion at kstart points or a final one; every point one JMOVE, the final one exact.
+  ; A JMOVE waits until the motion before it has begun, so the program runs one point ahead of
+  ; the arm; .ahead is how long the motions planned still run (at 100 %), as the program counts
+  ; it: the next point is late (an underrun) only when that time has run out
   kout = kin
   kend = 0
   ACCURACY 50 ALWAYS
@@ -301,15 +304,23 @@
   TWAIT 0.008
   GOTO 10
 20
+  .ahead = 0
+  .prev = 0
+30
   IF kflush > kout THEN
     kout = kflush
     BREAK
     GOTO 10
   END
   IF kin <= kout THEN
-    kunder = (kunder + 1) MOD 1000000
-    BREAK
-    GOTO 10
+    IF .ahead <= 0 THEN
+      ; the arm has run out of motions: it stands at the last point until kstart points come
+      kunder = (kunder + 1) MOD 1000000
+      GOTO 10
+    END
+    TWAIT 0.008
+    .ahead = .ahead - 0.008
+    GOTO 30
   END
   .r = kout MOD kcap
   SPEED kms[.r] / 1000 S
@@ -326,9 +337,15 @@
   kdone = kseq[.r]
   JMOVE #PPOINT(ke[1], ke[2], ke[3], ke[4], ke[5], ke[6])
   kout = kout + 1
+  ; the motion before this one has begun (now, or already while the program waited)
+  IF .ahead > .prev THEN
+    .ahead = .prev
+  END
+  .prev = kms[.r] / 1000
+  .ahead = .ahead + .prev
   IF kfin[.r] == 1 THEN
     BREAK
     GOTO 10
   END
-  GOTO 20
+  GOTO 30
 .END

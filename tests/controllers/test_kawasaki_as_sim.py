@@ -124,6 +124,18 @@ def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim: Kawasaki
     assert sim.status()["position_ctrl_deg"][0] == 7.0 and sim.type("kunder") == 1
 
 
+def test_a_point_is_in_time_while_the_motions_planned_still_run(sim: KawasakiController, client: Client) -> None:
+    """The program takes a point one motion ahead of the arm: once point 3 is planned (point 2
+    under way) the queue is empty, yet the arm has two seconds of path left; a point sent
+    then is in time, no underrun, no stop."""
+    for n in (1, 2, 3):
+        assert client.send(point(n, 2 * n, 1000))[2] == "0"
+    wait_until(lambda: sim.type("kout") == 3, what="point 3 planned")
+    assert client.send(point(4, 8, 1000, final=True))[2] == "0"
+    wait_until(lambda: sim.type("kdone") == 4 and not sim.status()["moving"], what="the final point")
+    assert sim.status()["position_ctrl_deg"][0] == 8.0 and sim.type("kunder") == 0
+
+
 def test_cancel_drops_the_queue_and_the_arm_stops_after_the_motion_under_way(sim: KawasakiController,
                                                                             client: Client) -> None:
     for n in range(1, 11):

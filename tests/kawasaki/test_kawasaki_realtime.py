@@ -66,6 +66,7 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> N
             assert set(status["answers"]) == {"0"}  # every line accepted
             assert status["answers"]["0"] > 100
             assert status["max_speed_ratio"] <= 1.0  # no axis above its rated speed, ever
+            assert ctl.type("kunder") == 0  # the arm never ran out of points mid-path
             link = link_status(system)
             assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
             assert link.packets == status["answers"]["0"]

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from functools import cached_property
 
 # ---------------------------------------------------------------------- tokens
 TOKEN = re.compile(r"""
@@ -73,11 +74,11 @@ class Var:
     name: str
     index: Expr | None = None
 
-    @property
+    @cached_property
     def local(self) -> bool:
         return self.name.startswith(".")
 
-    @property
+    @cached_property
     def kind(self) -> str:
         bare = self.name.lstrip(".")
         return "string" if bare.startswith("$") else "joints" if bare.startswith("#") else "real"

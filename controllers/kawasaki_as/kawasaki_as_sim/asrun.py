@@ -34,6 +34,18 @@ STEPS_PER_TICK = 5000
 Value = float | str | tuple[float, ...]
 
 
+#: the numeric operators but / and MOD (which check their divisor); comparisons and logic give TRUE or 0
+ARITHMETIC: dict[str, Callable[[float, float], float]] = {
+    "+": lambda x, y: x + y, "-": lambda x, y: x - y, "*": lambda x, y: x * y,
+    "^": lambda x, y: x ** y,
+    "and": lambda x, y: TRUE if x and y else 0.0, "or": lambda x, y: TRUE if x or y else 0.0,
+    "==": lambda x, y: TRUE if x == y else 0.0, "<>": lambda x, y: TRUE if x != y else 0.0,
+    "!=": lambda x, y: TRUE if x != y else 0.0, "<": lambda x, y: TRUE if x < y else 0.0,
+    ">": lambda x, y: TRUE if x > y else 0.0, "<=": lambda x, y: TRUE if x <= y else 0.0,
+    ">=": lambda x, y: TRUE if x >= y else 0.0,
+}
+
+
 class AsError(Exception):
     """A run-time error: the task stops and the controller shows it (``code`` may be "")."""
 
@@ -419,20 +431,11 @@ class Interpreter:
             raise AsError("", f"{op.upper()} between strings")
         if not isinstance(a, float) or not isinstance(b, float):
             raise AsError("", "a position in arithmetic")
-        ops: dict[str, Callable[[float, float], float]] = {
-            "+": lambda x, y: x + y, "-": lambda x, y: x - y, "*": lambda x, y: x * y,
-            "^": lambda x, y: x ** y,
-            "and": lambda x, y: TRUE if x and y else 0.0, "or": lambda x, y: TRUE if x or y else 0.0,
-            "==": lambda x, y: TRUE if x == y else 0.0, "<>": lambda x, y: TRUE if x != y else 0.0,
-            "!=": lambda x, y: TRUE if x != y else 0.0, "<": lambda x, y: TRUE if x < y else 0.0,
-            ">": lambda x, y: TRUE if x > y else 0.0, "<=": lambda x, y: TRUE if x <= y else 0.0,
-            ">=": lambda x, y: TRUE if x >= y else 0.0,
-        }
         if op in ("/", "mod"):
             if b == 0:
                 raise AsError("", "division by zero")
             return a / b if op == "/" else math.fmod(a, b)
-        return ops[op](a, b)
+        return ARITHMETIC[op](a, b)
 
     def _function(self, frame: Frame, e: Call) -> Value:
         name, args = e.name, e.args

@@ -9,8 +9,10 @@ out, -34025 the connection failed or is gone; a peer that closed makes ``TCP_REC
 return 0 with no element. (Codes and limits: deploy/kawasaki/REFERENCES.md.)
 
 Nothing blocks: an instruction that has to wait returns None and is asked again on the
-next tick. A port of the program is reached on the host at ``port_map[port]`` (the
-stand-in's ``--port``), any other at its own number. ``latency_s`` holds what arrives
+next tick. Time is the controller's clock (server.py), which never runs ahead of
+``time.monotonic()``: data that arrived after it is not there yet. A port of the program
+is reached on the host at ``port_map[port]`` (the stand-in's ``--port``), any other at its
+own number. ``latency_s`` holds what arrives
 back that long (a slow controller network, the fault ``slow_ack``).
 """
 
@@ -62,8 +64,8 @@ class TcpOption:
         return host, bound
 
     # ---- the instructions --------------------------------------------------------
-    def op(self, name: str, args: list[Value], started: float) -> tuple[Value, ...] | None:
-        now = time.monotonic()
+    def op(self, name: str, args: list[Value], started: float, now: float) -> tuple[Value, ...] | None:
+        """The instruction ``name`` begun at ``started``: its results, or None while it waits."""
         if name == "tcp_listen":
             port = _port(args[0])
             if port not in self.listeners:
@@ -124,7 +126,7 @@ class TcpOption:
                 return (TIMEOUT,) if now - started >= timeout else None
             raw = payload.encode("latin-1")
             client.outbound += raw
-            self._on_sent(client, raw, now)
+            self._on_sent(client, raw, time.monotonic())
             self._flush(client)
             return (0.0,)
         raise AsError("", f"unknown instruction {name.upper()}")

@@ -2,7 +2,11 @@
 
 At start the operator's commands (``PCEXECUTE 1: rob6_pc``, ``EXECUTE rob6_motion``) run
 the program; the controller is ready once the program listens on its port. Then every
-``TICK_S`` the network is read, the arm moves on and the tasks step. The switches the
+``TICK_S`` the network is read, the arm moves on and the tasks step. The controller's
+clock advances by at most ``TICK_S`` between two steps of the tasks: when this process was
+held up (a loaded machine), the ticks missed are run one after the other to catch up, so
+the arm never runs ahead of its program as a real-time controller's would not (up to
+``MAX_CATCH_UP_S``; beyond that the time is skipped). The switches the
 program reads are the controller's state: ``POWER`` (motor power on), ``REPEAT`` (repeat
 mode, not teach); ``ERROR`` is the current error code. A stop (E-stop, motor power off,
 teach mode, an error, a program's run-time error) brakes the arm and stops the robot
@@ -35,6 +39,7 @@ from .astcp import Conn, TcpOption
 from .convention import to_rob6
 
 TICK_S = 0.004
+MAX_CATCH_UP_S = 0.5
 LATENCY_WINDOW = 10000
 BOOT_TIMEOUT_S = 5.0
 #: the operator's commands at start, as deploy/kawasaki/README.md has them
@@ -95,7 +100,8 @@ class Controller:
         self.cfg = cfg
         self.source = cfg.program.read_text(encoding="latin-1")
         self.programs = aslang.load(self.source)  # AsSyntaxError: the controller refuses the file
-        self.arm = Arm(cfg.start_pose_ctrl, time.monotonic())
+        self.clock = time.monotonic()  # the controller's time: the arm's and the programs'
+        self.arm = Arm(cfg.start_pose_ctrl, self.clock)
         self.estop = False
         self.motor = True
         self.teach = False
@@ -108,7 +114,7 @@ class Controller:
 
     # ---- the Machine the programs see ----------------------------------------------
     def now(self) -> float:
-        return time.monotonic()
+        return self.clock
 
     def switch(self, name: str) -> bool:
         return {"power": self.motor, "repeat": not self.teach}[name]
@@ -117,7 +123,7 @@ class Controller:
         return self.error
 
     def here(self) -> tuple[float, ...]:
-        self.arm.advance(time.monotonic())
+        self.arm.advance(self.clock)
         return tuple(round(x, 6) + 0.0 for x in self.arm.q)
 
     def motion_room(self) -> bool:
@@ -131,14 +137,14 @@ class Controller:
         self.arm.move(Segment(q, seconds))
 
     def settled(self) -> bool:
-        self.arm.advance(time.monotonic())
+        self.arm.advance(self.clock)
         return not self.arm.moving
 
     def print_line(self, task: str, text: str) -> None:
         event(f"{task}: PRINT {text}")
 
     def tcp(self, op: str, args: list[Value], started: float) -> tuple[Value, ...] | None:
-        return self.net.op(op, args, started)
+        return self.net.op(op, args, started, self.clock)
 
     def program_error(self, task: str, error: AsError) -> None:
         digits = re.sub(r"\D", "", error.code)
@@ -166,7 +172,7 @@ class Controller:
         return self.interp.start("robot", self.robot_program)
 
     def halt(self, why: str) -> None:
-        self.arm.advance(time.monotonic())
+        self.arm.advance(self.clock)
         moving = self.arm.moving
         self.arm.stop()
         self.interp.abort("robot", why)
@@ -178,9 +184,16 @@ class Controller:
 
     # ---- time ----------------------------------------------------------------------
     def tick(self) -> None:
+        """The controller's time up to now, a step of the tasks every ``TICK_S`` of it at most."""
         self.net.poll()
-        self.arm.advance(time.monotonic())
-        self.interp.tick()
+        now = time.monotonic()
+        self.clock = max(self.clock, now - MAX_CATCH_UP_S)
+        while True:
+            self.clock = min(self.clock + TICK_S, now)
+            self.arm.advance(self.clock)
+            self.interp.tick()
+            if self.clock >= now:
+                break
         self.net.poll()
 
     def boot(self) -> tuple[str, int]:
@@ -203,7 +216,7 @@ class Controller:
 
     # ---- the control channel -------------------------------------------------------
     def status(self) -> dict[str, Any]:
-        self.arm.advance(time.monotonic())
+        self.arm.advance(self.clock)
         lat = sorted(self.tap.latencies_ms)
         return {
             "ok": True,
@@ -269,7 +282,7 @@ class Controller:
             pct = req.get("percent")
             if not isinstance(pct, int | float) or isinstance(pct, bool) or not 1 <= pct <= 100:
                 return {"ok": False, "error": "monitor_speed: 'percent' must be 1..100"}
-            self.arm.advance(time.monotonic())
+            self.arm.advance(self.clock)
             self.arm.monitor_speed = float(pct)
         else:
             return {"ok": False, "error": f"unknown command {cmd!r}"}
