@@ -12,8 +12,8 @@ Nothing blocks: an instruction that has to wait returns None and is asked again 
 next tick. Time is the controller's clock (server.py), which never runs ahead of
 ``time.monotonic()``: data that arrived after it is not there yet. A port of the program
 is reached on the host at ``port_map[port]`` (the stand-in's ``--port``), any other at its
-own number. ``latency_s`` holds what arrives
-back that long (a slow controller network, the fault ``slow_ack``).
+own number. ``latency_s`` holds what arrives back that long (a slow controller network,
+the fault ``slow_ack``).
 """
 
 from __future__ import annotations
