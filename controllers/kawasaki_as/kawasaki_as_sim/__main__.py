@@ -13,7 +13,7 @@ from .aslang import AsSyntaxError
 from .convention import to_controller
 from .server import START, Config, Controller, event, run
 
-#: the file a lab loads: inside the wheel, or deploy/kawasaki in the repository
+#: the file a lab loads: inside the wheel (pyproject.toml's force-include), or deploy/kawasaki in the repository
 PACKAGED = Path(__file__).resolve().parent / "rob6.as"
 REPOSITORY = Path(__file__).resolve().parents[3] / "deploy" / "kawasaki" / "rob6.as"
 
@@ -59,6 +59,8 @@ def main(program: Path | None, start: tuple[str, ...], host: str, port: int, as_
     testing rob6's kawasaki link."""
     control_host, control_port = _host_port(control)
     path = program or (PACKAGED if PACKAGED.exists() else REPOSITORY)
+    if not path.exists():
+        raise click.UsageError(f"no AS program at {PACKAGED} or {REPOSITORY}: give --program")
     cfg = Config(program=path, host=host, port=port, as_port=as_port, control_host=control_host,
                  control_port=control_port, start_pose_ctrl=_pose(start_pose), start=start or START)
 
