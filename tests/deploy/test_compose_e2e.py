@@ -544,9 +544,14 @@ def test_kawasaki_profile_drives_the_kawasaki_container(built: None, entry_point
         assert before["position_rob6_deg"] == start and not before["moving"], before
         target = [30.0, -20.0, 50.0, 10.0, 20.0, -20.0]
         moved_s, status = follow_then_move(stack.port, target, kawasaki)
-        # the controller's own arm is at the target and at rest: true means the robot arrived
+        # the controller's own arm is at the target: true means the robot arrived (the program
+        # reports it at rest within the wire's 1e-3 deg); its servos then settle there
         assert all(abs(a - b) < 1.5e-3 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
-        assert not status["moving"], status
+        deadline = time.monotonic() + 10
+        while (status := kawasaki())["moving"]:
+            assert time.monotonic() < deadline, f"the arm never came to rest at the target: {status}"
+            time.sleep(0.1)
+        assert all(abs(a - b) < 1.5e-3 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
         # the program executed in the container (not a stand-in's stand-in) answered every
         # line of the motion with code 0: none refused or malformed
         assert set(status["answers"]) == {"0"} and status["answers"]["0"] > before["answers"].get("0", 0), status
