@@ -53,6 +53,7 @@ class TcpOption:
         self.conns: dict[int, Conn] = {}
         self.latency_s = 0.0
         self.accepted = 0
+        self._polled = time.monotonic()  # when the network was last read
         self._next = 1
         self._on_accept, self._on_data, self._on_sent = on_accept, on_data, on_sent
 
@@ -147,8 +148,12 @@ class TcpOption:
         return [c.sock for c in self.conns.values() if not c.failed and not c.closed_by_peer]
 
     def poll(self) -> None:
-        """Read what arrived and send what waits, on every connection."""
-        now = time.monotonic()
+        """Read what arrived and send what waits, on every connection. What is read now
+        arrived at the latest now, at the earliest when the network was last read: it is
+        stamped with the earliest, so that the ticks a held-up controller catches up on
+        (server.py) see it, as a controller that was not held up would have."""
+        now, since = time.monotonic(), self._polled
+        self._polled = now
         for conn in list(self.conns.values()):
             if conn.failed:
                 continue
@@ -163,7 +168,7 @@ class TcpOption:
                 if not data:
                     conn.closed_by_peer = True
                     break
-                conn.inbound.append((now, data))
+                conn.inbound.append((since, data))
                 self._on_data(conn, data, now)
             self._flush(conn)
 
