@@ -5,10 +5,10 @@ the program; the controller is ready once the program listens on its port. Then 
 ``TICK_S`` the network is read, the arm moves on and the tasks step. The controller's
 clock advances by at most ``TICK_S`` between two steps of the tasks: when this process was
 held up (a loaded machine), the ticks missed are run one after the other to catch up, so
-the arm never runs ahead of its program as a real-time controller's would not (up to
-``MAX_CATCH_UP_S``; beyond that the time is skipped). The switches the
-program reads are the controller's state: ``POWER`` (motor power on), ``REPEAT`` (repeat
-mode, not teach); ``ERROR`` is the current error code. A stop (E-stop, motor power off,
+the arm never runs ahead of its program, as on a real controller, which is never held up
+(up to ``MAX_CATCH_UP_S``; beyond that the time is skipped). The switches the program
+reads are the controller's state: ``POWER`` (motor power on), ``REPEAT`` (repeat mode, not
+teach); ``ERROR`` is the current error code. A stop (E-stop, motor power off,
 teach mode, an error, a program's run-time error) brakes the arm and stops the robot
 program; the operator starts it again (``execute``, the terminal's ``EXECUTE``).
 
