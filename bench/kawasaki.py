@@ -1,6 +1,6 @@
 """Benchmark of point streaming on the Kawasaki link (kaw_fs against kawasaki-as-sim).
 
-``--link kawasaki`` against the stand-in of rob6's AS program pair (TCP): three PTP moves, a LIN move, then MoveRTJoints every
+``--link kawasaki`` against kawasaki-as-sim executing deploy/kawasaki/rob6.as (TCP): three PTP moves, a LIN move, then MoveRTJoints every
 16 ms (Alter); points acknowledged, the acknowledgement's latency (driver: point sent ->
 answered; controller: line in -> answer out), points merged for a late answer, and underruns
 of the controller's queue (it ran dry before a final point: the arm stopped mid-motion).
@@ -28,11 +28,12 @@ def kawasaki_stream(seconds: float) -> dict[str, Any]:
     before, after, link, moves = streamed_points_run("kaw_fs", {"ROB6_LINK": "kawasaki", "ROB6_KAS_PORT": str(port)},
                                                      sim, "the Kawasaki link", START, PTP, "EnableAlter", seconds,
                                                      lin_y_mm=60.0)
-    refused_before = sum(before["refused"].values())
-    return {"received": after["points_received"] - before["points_received"],
-            "accepted": after["points_accepted"] - before["points_accepted"],
-            "refused": sum(after["refused"].values()) - refused_before,
-            "underruns": after["underruns"] - before["underruns"], "merged": link.late,
+    def refused(st: dict[str, Any]) -> int:
+        return sum(n for code, n in st["answers"].items() if code != "0")
+    return {"received": after["lines_received"] - before["lines_received"],
+            "accepted": after["answers"].get("0", 0) - before["answers"].get("0", 0),
+            "refused": refused(after) - refused(before),
+            "underruns": after["underruns_reported"] - before["underruns_reported"], "merged": link.late,
             "link_latency_us": link.latency_us or [float("nan")] * 3, "controller_ack_ms": after["ack_ms"],
             "packets": link.packets, "moves": moves, "max_speed_ratio": after["max_speed_ratio"]}
 
@@ -40,7 +41,7 @@ def kawasaki_stream(seconds: float) -> dict[str, Any]:
 def kawasaki_table(seconds: float, table: Table) -> dict[str, Any]:
     r = kawasaki_stream(seconds)
     lat = r["link_latency_us"]
-    table(f"The Kawasaki over rob6's AS program: 3 PTP moves, a LIN move, then MoveRTJoints every 16 ms for "
+    table(f"The Kawasaki over rob6's AS program (executed by kawasaki-as-sim): 3 PTP moves, a LIN move, then MoveRTJoints every 16 ms for "
           f"{seconds:.0f} s on kaw_fs against kawasaki-as-sim (TCP, state every 50 ms)",
           ("measure", "--link kawasaki", "goal"), [
               ("points sent / acknowledged (controller)", f"{r['received']} / {r['accepted']}", "all"),

@@ -1,34 +1,31 @@
-; rob6.as -- rob6's AS program pair for a Kawasaki FS03N (E/F controller with the TCP/IP option).
-; Written from the AS language reference for deploy/kawasaki/PROTOCOL.md (rob6-kas 1).
-; Tested against rob6's simulator (controllers/kawasaki_as), NOT yet on a real controller:
-; read deploy/kawasaki/README.md before loading it.
+; rob6.as -- rob6's AS program for a Kawasaki FS03N (E/F controller with the TCP/IP option),
+; the server side of deploy/kawasaki/PROTOCOL.md (rob6-kas 2). Every construct it uses and
+; its source: deploy/kawasaki/REFERENCES.md. Tested against controllers/kawasaki_as, which
+; executes this file; NOT yet on a real controller: read deploy/kawasaki/README.md first.
 ;
-;   rob6_pc     PC program (PCEXECUTE 1: rob6_pc): serves one rob6 driver on TCP port
-;               kport, parses point lines into the queue, answers every line.
-;   rob6_state  PC program (PCEXECUTE 2: rob6_state): sends the state line every 50 ms
-;               while a driver is connected.
-;   rob6_motion robot program (EXECUTE rob6_motion): executes the queue with JMOVE #PPOINT,
-;               blending (CP ON, coarse ACCURACY) all but the final point of a motion.
+;   rob6_pc     PC program 1 (PCEXECUTE 1: rob6_pc): sets the globals, starts rob6_state,
+;               serves one rob6 driver on TCP port kport: checks each line, queues its
+;               point, answers every line.
+;   rob6_state  PC program 2: the state line every 50 ms while a driver is connected.
+;   rob6_motion robot program (EXECUTE rob6_motion): JMOVEs the queued points.
 ;
-; The queue lives in global variables: one ring of kcap points (kq1[]..kq6[] joints in
-; degrees, kms[] time in ms, kfin[] final flag, kseq[] sequence number). rob6_pc only
-; writes kin (points written), rob6_motion only writes kout (points taken); a cancel
-; sets kflush, from which rob6_motion drops the points not yet taken.
+; Shared globals, each written by one program only (kflush, kend: see below): the
+; queue ring kq1[]..kq6[] (joints, deg), kms[] (ms), kfin[] (final 0/1), kseq[] of kcap
+; points; kin points written (rob6_pc), kout points taken (rob6_motion), kflush the points
+; dropped by a cancel or a stop; ksock the driver's socket (-1 none); kdone, kunder, ke[]
+; and kend what rob6_motion did. Everything else is local (.name) to one program.
 
-.PROGRAM rob6_init()
-  ; the globals both sides use; run once before the others (the PC program calls it)
+.PROGRAM rob6_pc()
   kcap = 64
   kport = 49200
-  kacc = 50            ; ACCURACY (mm) of blended points: large, so CP blends them
-  kstart = 3           ; a motion starts at this many points (or a final one): two periods of lead
+  kstart = 3
   kin = 0
   kout = 0
   kflush = 0
-  kunder = 0
   kdone = 0
+  kunder = 0
+  kend = 0
   ksock = -1
-  kstates = 0
-  ; rated axis speeds of the FS03N, deg/s, and the motion range (data sheet)
   krated[1] = 360
   krated[2] = 250
   krated[3] = 225
@@ -47,225 +44,308 @@
   kmax[5] = 135
   kmin[6] = -360
   kmax[6] = 360
-.END
-
-.PROGRAM rob6_pc()
-  ; serves one client; a second connection waits until the first is gone
-  CALL rob6_init
-  TCP_LISTEN ret, kport
-  IF ret < 0 THEN
-    PRINT "rob6_pc: TCP_LISTEN on port ", kport, " failed: ", ret
+  PCEXECUTE 2: rob6_state
+  TCP_LISTEN .ret, kport
+  IF .ret < 0 THEN
+    PRINT "rob6_pc: TCP_LISTEN on port ", kport, " failed: ", .ret
     HALT
   END
 10
-  TCP_ACCEPT ksock, kport, 60, kip[1]
-  IF ksock < 0 THEN
-    GOTO 10                       ; no client within 60 s (or an error): listen on
-  END
-  klast = 0
-  $kbuf = ""
-  $kout[1] = "H rob6-kas 1 " + $ENCODE(/I2, kcap) + $CHR(10)
-  TCP_SEND ret, ksock, $kout[1], 1, 2
-  IF ret < 0 THEN
-    GOTO 90
-  END
+  TCP_ACCEPT .sock, kport, 60, .ip[1]
+  IF .sock < 0 GOTO 10
+  .last = 0
+  .$buf = ""
+  .$out[1] = "H rob6-kas 2 " + $ENCODE(/I2, kcap) + $CHR(10)
+  TCP_SEND .ret, .sock, .$out[1], 1, 1
+  IF .ret < 0 GOTO 90
+  ksock = .sock
 20
-  TCP_RECV ret, ksock, $kin[1], kn, 1, 255
-  IF ret < 0 THEN
-    IF ret == -34 THEN            ; the receive timed out: nothing came, listen again
-      GOTO 20
-    END
-    GOTO 90                       ; the client closed the connection or it failed
-  END
-  FOR ki = 1 TO kn
-    $kbuf = $kbuf + $kin[ki]
-  END
+  TCP_RECV .ret, .sock, .$in[1], .n, 1, 120
+  IF .ret == -34024 GOTO 20
+  IF .ret < 0 GOTO 90
+  IF .n == 0 GOTO 90
+  .i = 1
+25
+  .$buf = .$buf + .$in[.i]
 30
-  kp = INSTR(1, $kbuf, $CHR(10))
-  IF kp == 0 THEN
-    IF LEN($kbuf) > 120 THEN      ; no line end within a message's length: not rob6
-      GOTO 90
-    END
+  .p = INSTR(1, .$buf, $CHR(10))
+  IF .p == 0 THEN
+    IF LEN(.$buf) > 120 GOTO 90
+    .i = .i + 1
+    IF .i <= .n GOTO 25
     GOTO 20
   END
-  $kline = $MID($kbuf, 1, kp - 1)
-  $kbuf = $MID($kbuf, kp + 1, LEN($kbuf) - kp)
-  CALL rob6_line
-  $kout[1] = "A " + $ENCODE(/I6, kaseq) + " " + $ENCODE(/I1, kcode) + " " + $ENCODE(/I3, kin - kout) + $CHR(10)
-  TCP_SEND ret, ksock, $kout[1], 1, 2
-  IF ret < 0 THEN
-    GOTO 90
-  END
+  .$line = $MID(.$buf, 1, .p - 1)
+  .$buf = $MID(.$buf, .p + 1, 255)
+  CALL rob6_line(.$line, .last, .seq, .code)
+  .$out[1] = "A " + $ENCODE(/I6, .seq) + " " + $ENCODE(/I1, .code) + " " + $ENCODE(/I3, kin - MAXVAL(kout, kflush)) + $CHR(10)
+  TCP_SEND .ret, .sock, .$out[1], 1, 1
+  IF .ret < 0 GOTO 90
   GOTO 30
 90
-  ; the client is gone: drop the queue (the motion under way runs out) and wait for the next
-  kflush = kin
-  TCP_CLOSE ret, ksock
+  ; the driver is gone (closed, failed, or not rob6): drop the queue, the motion under way runs out
   ksock = -1
+  kflush = kin
+  TCP_CLOSE .ret, .sock
   GOTO 10
 .END
 
-.PROGRAM rob6_line()
-  ; one line in $kline -> kaseq (its sequence number) and kcode (the answer code)
-  kaseq = 0
-  kcode = 1
-  $kt = $DECODE($kline, " ", 0)
-  $kd = $DECODE($kline, " ", 1)
-  $ks = $DECODE($kline, " ", 0)
-  $kd = $DECODE($kline, " ", 1)
-  kaseq = VAL($ks)
-  IF (kaseq < 1) OR (kaseq > 999999) THEN
-    kaseq = 0
-    RETURN
-  END
-  IF kaseq <= klast THEN
-    kcode = 6
-    RETURN
-  END
-  klast = kaseq
-  IF $kt == "C" THEN
-    kflush = kin                  ; rob6_motion drops what it has not taken
-    kcode = 0
-    RETURN
-  END
-  IF $kt <> "P" THEN
-    RETURN
-  END
-  FOR kj = 1 TO 8
-    $kf = $DECODE($kline, " ", 0)
-    $kd = $DECODE($kline, " ", 1)
-    IF $kf == "" THEN
-      RETURN                      ; a field short
+.PROGRAM rob6_line(.$line, .last, .seq, .code)
+  ; one line -> .seq (its sequence number, 0 when unreadable) and .code (the answer)
+  .seq = 0
+  .code = 1
+  IF LEN(.$line) > 0 THEN
+    IF $MID(.$line, LEN(.$line), 1) == $CHR(13) THEN
+      .$line = $MID(.$line, 1, LEN(.$line) - 1)
     END
-    kv[kj] = VAL($kf)
   END
-  $kf = $DECODE($kline, " ", 0)
-  IF ($kf <> "0") AND ($kf <> "1") THEN
+  IF LEN(.$line) > 119 THEN
     RETURN
   END
-  kfinal = VAL($kf)
-  IF (kv[7] < 1) OR (kv[7] > 99999) THEN
-    RETURN
-  END
-  ; ready? E-stop, motor power, repeat mode, no error
-  IF SWITCH(EMERGENCY) OR NOT SWITCH(POWER) OR NOT SWITCH(REPEAT) OR (ERROR <> 0) THEN
-    kcode = 4
-    RETURN
-  END
-  ; range, and speed from the point before (the last queued, or where the arm is)
-  IF kin > MAXVAL(kout, kflush) THEN
-    kprev = (kin - 1) MOD kcap
-    kfrom[1] = kq1[kprev]
-    kfrom[2] = kq2[kprev]
-    kfrom[3] = kq3[kprev]
-    kfrom[4] = kq4[kprev]
-    kfrom[5] = kq5[kprev]
-    kfrom[6] = kq6[kprev]
-  ELSE
-    HERE #khere
-    DECOMPOSE kfrom[1] = #khere
-  END
-  FOR kj = 1 TO 6
-    IF (kv[kj] < kmin[kj]) OR (kv[kj] > kmax[kj]) THEN
-      kcode = 2
+  .nf = 0
+10
+  .$w = $DECODE(.$line, " ", 0)
+  .$s = $DECODE(.$line, " ", 1)
+  IF .$w <> "" THEN
+    IF .nf == 10 THEN
       RETURN
     END
-    IF ABS(kv[kj] - kfrom[kj]) * 1000 / kv[7] > krated[kj] * 1.05 THEN
-      kcode = 3
+    .nf = .nf + 1
+    .$f[.nf] = .$w
+  END
+  IF .$line <> "" GOTO 10
+  IF .nf < 2 THEN
+    RETURN
+  END
+  CALL rob6_num(.$f[2], .v, .kind)
+  IF (.kind <> 1) OR (.v < 1) OR (.v > 999999) THEN
+    RETURN
+  END
+  .seq = .v
+  IF .$f[1] == "C" THEN
+    IF .nf <> 2 THEN
+      RETURN
+    END
+  ELSE
+    IF (.$f[1] <> "P") OR (.nf <> 10) THEN
+      RETURN
+    END
+    FOR .j = 1 TO 6
+      CALL rob6_num(.$f[.j + 2], .v, .kind)
+      IF .kind == 0 THEN
+        RETURN
+      END
+      .q[.j] = .v
+    END
+    CALL rob6_num(.$f[9], .ms, .kind)
+    IF (.kind <> 1) OR (.ms < 1) OR (.ms > 99999) THEN
+      RETURN
+    END
+    IF (.$f[10] <> "0") AND (.$f[10] <> "1") THEN
+      RETURN
+    END
+    .final = VAL(.$f[10])
+  END
+  IF .seq <= .last THEN
+    .code = 6
+    RETURN
+  END
+  .last = .seq
+  IF .$f[1] == "C" THEN
+    kflush = kin
+    .code = 0
+    RETURN
+  END
+  IF (NOT SWITCH(POWER)) OR (NOT SWITCH(REPEAT)) OR (ERROR <> 0) THEN
+    .code = 4
+    RETURN
+  END
+  ; where the point starts: the last point queued, else the last one JMOVEd, else the arm
+  IF kin > MAXVAL(kout, kflush) THEN
+    .w = (kin - 1) MOD kcap
+    .from[1] = kq1[.w]
+    .from[2] = kq2[.w]
+    .from[3] = kq3[.w]
+    .from[4] = kq4[.w]
+    .from[5] = kq5[.w]
+    .from[6] = kq6[.w]
+  ELSE
+    IF kend == 1 THEN
+      FOR .j = 1 TO 6
+        .from[.j] = ke[.j]
+      END
+    ELSE
+      HERE .#here
+      DECOMPOSE .from[1] = .#here
+    END
+  END
+  FOR .j = 1 TO 6
+    IF (.q[.j] < kmin[.j]) OR (.q[.j] > kmax[.j]) THEN
+      .code = 2
+      RETURN
+    END
+    IF ABS(.q[.j] - .from[.j]) * 1000 / .ms > krated[.j] * 1.05 THEN
+      .code = 3
       RETURN
     END
   END
   IF kin - MAXVAL(kout, kflush) >= kcap THEN
-    kcode = 5
+    .code = 5
     RETURN
   END
-  kw = kin MOD kcap
-  kq1[kw] = kv[1]
-  kq2[kw] = kv[2]
-  kq3[kw] = kv[3]
-  kq4[kw] = kv[4]
-  kq5[kw] = kv[5]
-  kq6[kw] = kv[6]
-  kms[kw] = kv[7]
-  kfin[kw] = kfinal
-  kseq[kw] = kaseq
-  kin = kin + 1                   ; last: rob6_motion sees the point only when it is complete
-  kcode = 0
+  .w = kin MOD kcap
+  kq1[.w] = .q[1]
+  kq2[.w] = .q[2]
+  kq3[.w] = .q[3]
+  kq4[.w] = .q[4]
+  kq5[.w] = .q[5]
+  kq6[.w] = .q[6]
+  kms[.w] = .ms
+  kfin[.w] = .final
+  kseq[.w] = .seq
+  kin = kin + 1
+  .code = 0
+.END
+
+.PROGRAM rob6_num(.$t, .v, .kind)
+  ; .$t -> .kind 1 (an unsigned integer), 2 (another plain decimal number) or 0 (not a number), .v its value
+  .kind = 0
+  .v = 0
+  .start = 1
+  IF $MID(.$t, 1, 1) == "-" THEN
+    .start = 2
+  END
+  .digits = 0
+  .dots = 0
+  FOR .k = .start TO LEN(.$t)
+    .$c = $MID(.$t, .k, 1)
+    IF .$c == "." THEN
+      .dots = .dots + 1
+    ELSE
+      IF INSTR(1, "0123456789", .$c) == 0 THEN
+        RETURN
+      END
+      .digits = .digits + 1
+    END
+  END
+  IF (.digits == 0) OR (.dots > 1) OR (LEN(.$t) > 12) THEN
+    RETURN
+  END
+  .v = VAL(.$t)
+  .kind = 2
+  IF (.start == 1) AND (.dots == 0) THEN
+    .kind = 1
+  END
 .END
 
 .PROGRAM rob6_state()
-  ; the state line every 50 ms while a client is connected
+  ; every 50 ms: a stop drops the queue and the last target (the arm braked short of it);
+  ; while a driver is connected, the state line
+  .n = 0
+  HERE .#was
+  DECOMPOSE .was[1] = .#was
 10
-  IF ksock < 0 THEN
-    TWAIT 0.05
-    GOTO 10
+  .power = 0
+  IF SWITCH(POWER) THEN
+    .power = 1
   END
-  IF SWITCH(EMERGENCY) OR NOT SWITCH(POWER) OR NOT SWITCH(REPEAT) OR (ERROR <> 0) THEN
-    kflush = kin                  ; a stop drops the queue: nothing old runs after it
+  .teach = 1
+  IF SWITCH(REPEAT) THEN
+    .teach = 0
   END
-  kq = kin - MAXVAL(kout, kflush)
-  HERE #kst
-  DECOMPOSE kj[1] = #kst
-  kstates = (kstates + 1) MOD 1000000
-  $kso[1] = "S " + $ENCODE(/I6, kstates)
-  FOR kk = 1 TO 6
-    $kso[1] = $kso[1] + " " + $ENCODE(/F9.3, kj[kk])
+  IF (.power == 0) OR (.teach == 1) OR (ERROR <> 0) THEN
+    kflush = kin
+    kend = 0
   END
-  kmoving = (kq > 0)              ; points waiting, or a joint moved since the last state
-  FOR kk = 1 TO 6
-    IF ABS(kj[kk] - kjlast[kk]) > 0.0005 THEN
-      kmoving = TRUE
+  HERE .#now
+  DECOMPOSE .j[1] = .#now
+  .q = kin - MAXVAL(kout, kflush)
+  .moving = 0
+  IF .q > 0 THEN
+    .moving = 1
+  END
+  FOR .k = 1 TO 6
+    IF ABS(.j[.k] - .was[.k]) > 0.0005 THEN
+      .moving = 1
     END
-    kjlast[kk] = kj[kk]
+    .was[.k] = .j[.k]
   END
-  $kso[1] = $kso[1] + " " + $ENCODE(/I1, SWITCH(POWER) AND 1) + " " + $ENCODE(/I1, SWITCH(EMERGENCY) AND 1)
-  $kso[1] = $kso[1] + " " + $ENCODE(/I1, NOT SWITCH(REPEAT) AND 1) + " " + $ENCODE(/I1, kmoving AND 1)
-  $kso[1] = $kso[1] + " " + $ENCODE(/I3, kq) + " " + $ENCODE(/I6, kdone) + " " + $ENCODE(/I5, ERROR)
-  $kso[1] = $kso[1] + " " + $ENCODE(/I6, kunder) + $CHR(10)
-  TCP_SEND ret, ksock, $kso[1], 1, 1
+  IF ksock >= 0 THEN
+    .n = (.n + 1) MOD 1000000
+    .$s[1] = "S " + $ENCODE(/I6, .n)
+    FOR .k = 1 TO 6
+      .$s[1] = .$s[1] + " " + $ENCODE(/F9.3, .j[.k])
+    END
+    .$s[1] = .$s[1] + " " + $ENCODE(/I1, .power) + " " + $ENCODE(/I1, .teach) + " " + $ENCODE(/I1, .moving)
+    .$s[1] = .$s[1] + " " + $ENCODE(/I3, .q) + " " + $ENCODE(/I6, kdone) + " " + $ENCODE(/I8, ERROR)
+    .$s[1] = .$s[1] + " " + $ENCODE(/I6, kunder) + $CHR(10)
+    TCP_SEND .ret, ksock, .$s[1], 1, 1
+  END
   TWAIT 0.05
   GOTO 10
 .END
 
 .PROGRAM rob6_motion()
-  ; executes the queue: starts a motion at kstart points or a final one, blends all but the final
-  kout = kin                      ; (re)started after a stop: points from before it never run
-  ACCURACY kacc ALWAYS
+  ; starts a motion at kstart points or a final one; every point one JMOVE, the final one exact.
+  ; A JMOVE waits until the motion before it has begun, so the program runs one point ahead of
+  ; the arm; .ahead is how long the motions planned still run (at 100 %), as the program counts
+  ; it: the next point is late (an underrun) only when that time has run out
+  kout = kin
+  kend = 0
+  ACCURACY 50 ALWAYS
 10
   IF kflush > kout THEN
-    kout = kflush                 ; cancelled (or the client went): drop what was not taken
+    kout = kflush
   END
-  IF (kin - kout >= kstart) OR ((kin > kout) AND (kfin[(kin - 1) MOD kcap] == 1)) THEN
-    GOTO 20
+  IF kin - kout >= kstart GOTO 20
+  IF kin > kout THEN
+    IF kfin[(kin - 1) MOD kcap] == 1 GOTO 20
   END
   TWAIT 0.008
   GOTO 10
 20
+  .ahead = 0
+  .prev = 0
+30
   IF kflush > kout THEN
     kout = kflush
-    BREAK                         ; the motion under way runs out; nothing more is issued
-    GOTO 10
-  END
-  IF kin - kout < 1 THEN          ; ran dry before a final point: an underrun
-    kunder = kunder + 1
     BREAK
     GOTO 10
   END
-  kr = kout MOD kcap
-  SPEED kms[kr] / 1000 S
-  IF kfin[kr] == 1 THEN
-    ACCURACY 1 FINE
-    CP OFF
-  ELSE
-    ACCURACY kacc
-    CP ON
+  IF kin <= kout THEN
+    IF .ahead <= 0 THEN
+      ; the arm has run out of motions: it stands at the last point until kstart points come
+      kunder = (kunder + 1) MOD 1000000
+      GOTO 10
+    END
+    TWAIT 0.008
+    .ahead = .ahead - 0.008
+    GOTO 30
   END
-  JMOVE #PPOINT(kq1[kr], kq2[kr], kq3[kr], kq4[kr], kq5[kr], kq6[kr])
-  kdone = kseq[kr]
+  .r = kout MOD kcap
+  SPEED kms[.r] / 1000 S
+  IF kfin[.r] == 1 THEN
+    ACCURACY 1 FINE
+  END
+  ke[1] = kq1[.r]
+  ke[2] = kq2[.r]
+  ke[3] = kq3[.r]
+  ke[4] = kq4[.r]
+  ke[5] = kq5[.r]
+  ke[6] = kq6[.r]
+  kend = 1
+  kdone = kseq[.r]
+  JMOVE #PPOINT(ke[1], ke[2], ke[3], ke[4], ke[5], ke[6])
   kout = kout + 1
-  IF kfin[kr] == 1 THEN
-    BREAK                         ; wait until the arm is at the final point
+  ; the motion before this one has begun (now, or already while the program waited)
+  IF .ahead > .prev THEN
+    .ahead = .prev
+  END
+  .prev = kms[.r] / 1000
+  .ahead = .ahead + .prev
+  IF kfin[.r] == 1 THEN
+    BREAK
     GOTO 10
   END
-  GOTO 20
+  GOTO 30
 .END

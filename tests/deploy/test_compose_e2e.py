@@ -530,8 +530,9 @@ def test_adept_profile_drives_the_adept_container(built: None, entry_points: Non
 def test_kawasaki_profile_drives_the_kawasaki_container(built: None, entry_points: None) -> None:
     """`ROB6_ROBOT=kaw_fs ROB6_LINK=kawasaki compose --profile kawasaki up`: the driver connects
     to the stand-in Kawasaki controller (its own container on the robot network, found by the
-    compose default ROB6_KAS_HOST=kawasaki-as-sim) and streams a PTP motion to it as
-    acknowledged points; the move answers true only once the controller's arm is at the target."""
+    compose default ROB6_KAS_HOST=kawasaki-as-sim), whose image executes the rob6.as its wheel
+    carries, and streams a PTP motion to it as acknowledged points; the move answers true only
+    once the controller's arm is at the target."""
     with controller_stack("kawasaki", "kawasaki-as-sim", robot="kaw_fs", link="kawasaki",
                           control_port_setting="ROB6_KAWASAKI_SIM_CONTROL_PORT") as (stack, kawasaki):
         # the driver is the client of the program's port and retries until it answers
@@ -543,16 +544,22 @@ def test_kawasaki_profile_drives_the_kawasaki_container(built: None, entry_point
         assert before["position_rob6_deg"] == start and not before["moving"], before
         target = [30.0, -20.0, 50.0, 10.0, 20.0, -20.0]
         moved_s, status = follow_then_move(stack.port, target, kawasaki)
-        # the controller's own arm is at the target and at rest: true means the robot arrived
+        # the controller's own arm is at the target: true means the robot arrived (the program
+        # reports it at rest within the wire's 1e-3 deg); its servos then settle there
         assert all(abs(a - b) < 1.5e-3 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
-        assert not status["moving"] and status["queued"] == 0, status
-        # the motion went over the wire as acknowledged points, none refused or malformed
-        assert status["points_accepted"] > before["points_accepted"], status
-        assert status["refused"] == before["refused"] == {} and status["malformed"] == 0, status
+        deadline = time.monotonic() + 10
+        while (status := kawasaki())["moving"]:
+            assert time.monotonic() < deadline, f"the arm never came to rest at the target: {status}"
+            time.sleep(0.1)
+        assert all(abs(a - b) < 1.5e-3 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
+        # the program executed in the container (not a stand-in's stand-in) answered every
+        # line of the motion with code 0: none refused or malformed
+        assert set(status["answers"]) == {"0"} and status["answers"]["0"] > before["answers"].get("0", 0), status
+        assert status["tasks"] == {"pc1": "waiting", "pc2": "waiting", "robot": "waiting"}, status
         assert not status["estop"] and status["motor"] and status["client"], status
         REPORT["kawasaki: controller after the move"] = {
             "move_s": round(moved_s, 2), **{k: status[k] for k in (
-                "points_received", "points_accepted", "points_executed", "underruns", "ack_ms")}}
+                "lines_received", "answers", "segments", "underruns_reported", "ack_ms")}}
 
 
 # ---------------------------------------------------------------------- tests: secure profile

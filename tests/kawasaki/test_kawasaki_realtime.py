@@ -1,8 +1,9 @@
 """The whole system (``rob6 run --robot kaw_fs --link kawasaki``) driving the Kawasaki controller
-simulator (kawasaki-as-sim, a separate process speaking rob6's AS protocol over real TCP) in
-real time: PTP, LIN and Alter within every limit, final positions equal; and the faults: E-stop,
-motor power off, teach mode and a controller error mid-motion, the connection dropped, slow
-and missing acknowledgements. Each ends the motion with a clear ``ERROR: driver: ...`` and
+simulator (kawasaki-as-sim, a separate process executing deploy/kawasaki/rob6.as, over real
+TCP) in PTP, LIN and Alter within every limit, final positions equal; a long PTP at a monitor speed
+of 10 %; and the faults: E-stop (which the program reports as motor power off), motor power
+off, teach mode and a controller error mid-motion, each followed by the operator's EXECUTE
+of the robot program, the connection dropped, slow and missing acknowledgements. Each ends the motion with a clear ``ERROR: driver: ...`` and
 ``false``, refuses motion meanwhile, and rob6 continues from where the robot really is.
 Assertions are about positions, limits, texts and recovery, never about how fast this
 (shared) machine is; bench/kawasaki.py measures the timing."""
@@ -30,6 +31,9 @@ ROBOT = get_robot("kaw_fs")
 START = [0.0, -30.0, 40.0, 0.0, 30.0, 0.0]
 #: the wire carries 1e-3 deg
 POSITION_TOL = 1.5e-3
+#: how long a point may come late before the arm runs dry: rob6.as starts at three points,
+#: two periods (48 ms, the link's default) ahead of the arm
+LEAD_US = 2 * 48_000
 
 
 def kawasaki_system(port: int, **kwargs: Any) -> AbstractContextManager[System]:
@@ -62,12 +66,17 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> N
             assert np.array_equal(connected(client, ctl, system), np.zeros(6))
             session(client, ctl)
             status = ctl.status()
-            assert status["refused"] == {} and status["malformed"] == 0
-            assert status["points_accepted"] > 100
+            assert set(status["answers"]) == {"0"}  # every line accepted
+            assert status["answers"]["0"] > 100
             assert status["max_speed_ratio"] <= 1.0  # no axis above its rated speed, ever
             link = link_status(system)
+            # the arm never ran out of points mid-path, unless this loaded machine held rob6 up
+            # longer than the program's lead (two 48 ms periods): an answer that late, or
+            # driver cycles missed (the link counts them with the controller's underruns)
+            kunder = ctl.type("kunder")
+            assert kunder == 0 or link.latency_us[2] > LEAD_US or link.missed > kunder, (kunder, link)
             assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
-            assert link.packets == status["points_accepted"]
+            assert link.packets == status["answers"]["0"]
             assert client.ask("Quit") == "bye!\n"
     RIG.assert_recorded(tmp_path, "kawasaki")  # complete: the launcher stops the recorder last
 
@@ -92,25 +101,32 @@ def rig(kawasaki: tuple[System, int]) -> Iterator[Rig]:
         yield system, ctl, client
 
 
-def test_estop_mid_motion_then_released_and_motor_on(rig: Rig) -> None:
+def refused(ctl: KawasakiController) -> int:
+    """Lines the program answered with a code other than 0."""
+    return sum(n for code, n in ctl.status()["answers"].items() if code != "0")
+
+
+def test_estop_mid_motion_then_released_motor_on_and_the_program_started(rig: Rig) -> None:
     system, ctl, client = rig
-    interrupted(client, ctl, ctl.estop, "robot reports an E-stop")
-    assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports an E-stop\nfalse\n"
-    assert reply(client, "EnableAlter") == "ERROR: driver: robot reports an E-stop\nfalse\n"
+    off = "ERROR: driver: robot reports motor power off\nfalse\n"  # AS cannot tell an E-stop apart
+    interrupted(client, ctl, ctl.estop, "robot reports motor power off")
+    assert reply(client, "MovePTPJoints " + fmt(START)) == off
+    assert reply(client, "EnableAlter") == off
     ctl.release()  # the motor power stays off
-    wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START))
-               == "ERROR: driver: robot reports motor power off\nfalse\n", what="motor power off")
-    refused = sum(ctl.status()["refused"].values())
-    assert refused <= 1  # at most the point that was on its way when the E-stop hit
+    assert reply(client, "MovePTPJoints " + fmt(START)) == off
+    before = refused(ctl)
+    assert before <= 1  # at most the point that was on its way when the E-stop hit
     ctl.motor(True)
+    ctl.execute()
     back_home(client, ctl, system)
-    assert sum(ctl.status()["refused"].values()) == refused  # nothing sent while it could not move
+    assert refused(ctl) == before  # nothing sent while it could not move
 
 
 def test_motor_power_off_mid_motion(rig: Rig) -> None:
     system, ctl, client = rig
     interrupted(client, ctl, lambda: ctl.motor(False), "robot reports motor power off")
     ctl.motor(True)
+    ctl.execute()
     back_home(client, ctl, system)
 
 
@@ -119,9 +135,11 @@ def test_teach_mode_and_a_controller_error_mid_motion(rig: Rig) -> None:
     interrupted(client, ctl, lambda: ctl.teach(True), "robot reports teach mode")
     assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports teach mode\nfalse\n"
     ctl.teach(False)
+    ctl.execute()
     back_home(client, ctl, system)
     interrupted(client, ctl, lambda: ctl.error(1502), "robot reports controller error 1502")
     ctl.clear_error()
+    ctl.execute()
     back_home(client, ctl, system)
 
 
@@ -156,8 +174,26 @@ def test_a_point_outside_the_controllers_range_is_never_sent(rig: Rig) -> None:
     here = connected(client, ctl, system)
     assert -120.0 <= here[2] < 40.0  # stopped on the way, inside the controller's range
     status = ctl.status()
-    assert status["refused"] == {} and status["position_ctrl_deg"][2] <= 120.0
+    assert refused(ctl) == 0 and status["position_ctrl_deg"][2] <= 120.0
     assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+
+
+@pytest.mark.xfail(strict=True, reason="needs the link's pacing by acknowledgement (issue 51: "
+                   "streamed_points.py/motion.py slow rob6's core when the controller falls behind); "
+                   "without it the core's motion ends at full speed and the link gives up waiting for "
+                   "the arm at 10 % ('robot stopped short of the target')")
+def test_a_long_ptp_at_a_monitor_speed_of_ten_percent(rig: Rig) -> None:
+    """At 10 % every SPEED ... S segment runs ten times longer: the link must pace itself by
+    the controller's queue, never have a point refused and never let the queue run dry
+    mid-path; the motion arrives, slower."""
+    system, ctl, client = rig
+    assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
+    ctl.monitor_speed(10)
+    target = list(START)
+    target[0] = 60.0
+    assert reply(client, "MovePTPJoints " + fmt(target), timeout=120) == "true\n"
+    assert np.allclose(robot_at(ctl), target, atol=POSITION_TOL)
+    assert refused(ctl) == 0 and ctl.type("kunder") == 0
 
 
 def test_the_kawasaki_link_on_another_robot_is_refused_in_one_line() -> None:

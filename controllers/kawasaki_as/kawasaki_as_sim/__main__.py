@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
-import asyncio
 import signal
 import sys
+from pathlib import Path
 
 import click
 
 from .arm import outside_range
+from .aslang import AsSyntaxError
 from .convention import to_controller
-from .server import Config, Controller, event, run
+from .server import START, Config, Controller, event, run
+
+#: the file a lab loads: inside the wheel (pyproject.toml's force-include), or deploy/kawasaki in the repository
+PACKAGED = Path(__file__).resolve().parent / "rob6.as"
+REPOSITORY = Path(__file__).resolve().parents[3] / "deploy" / "kawasaki" / "rob6.as"
 
 
 def _host_port(value: str) -> tuple[str, int]:
@@ -35,39 +40,51 @@ def _pose(value: str) -> tuple[float, ...]:
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
-@click.option("--host", default="127.0.0.1", show_default=True, help="Address of the PC program's port.")
+@click.option("--program", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="The AS file the controller loads (default: rob6's deploy/kawasaki/rob6.as).")
+@click.option("--start", "start", multiple=True,
+              help="An operator command run at start, in order (default: " + "; ".join(START) + ").")
+@click.option("--host", default="127.0.0.1", show_default=True, help="Address of the program's port.")
 @click.option("--port", default=49200, show_default=True, type=click.IntRange(0, 65535),
-              help="The PC program's TCP port (0: any free port).")
+              help="Where the program's port appears on this host (0: any free port).")
+@click.option("--as-port", default=49200, show_default=True, type=click.IntRange(8192, 65535),
+              help="The port the program listens on (its kport).")
 @click.option("--control", default="127.0.0.1:0", show_default=True,
               help="HOST:PORT of the JSON fault-injection channel.")
 @click.option("--start-pose", default="0 0 0 0 0 0", show_default=True,
               help="Initial joints, rob6 convention, degrees (six numbers).")
-@click.option("--state-period", default=0.05, show_default=True, type=click.FloatRange(0.01, 0.1),
-              help="Seconds between state messages (the protocol asks for 10 Hz or more).")
-@click.option("--capacity", default=64, show_default=True, type=click.IntRange(3, 1000),
-              help="Points the program's queue holds (at least the three a motion starts with).")
-def main(host: str, port: int, control: str, start_pose: str, state_period: float, capacity: int) -> None:
-    """A simulated Kawasaki FS03N controller running rob6's AS program pair (the rob6-kas
-    protocol over TCP), for testing rob6's kawasaki link."""
+def main(program: Path | None, start: tuple[str, ...], host: str, port: int, as_port: int, control: str,
+         start_pose: str) -> None:
+    """A simulated Kawasaki FS03N controller executing an AS program (rob6's rob6.as), for
+    testing rob6's kawasaki link."""
     control_host, control_port = _host_port(control)
-    cfg = Config(host=host, port=port, control_host=control_host, control_port=control_port,
-                 start_pose_ctrl=_pose(start_pose), state_period=state_period, capacity=capacity)
+    path = program or (PACKAGED if PACKAGED.exists() else REPOSITORY)
+    if not path.exists():
+        raise click.UsageError(f"no AS program at {PACKAGED} or {REPOSITORY}: give --program")
+    cfg = Config(program=path, host=host, port=port, as_port=as_port, control_host=control_host,
+                 control_port=control_port, start_pose_ctrl=_pose(start_pose), start=start or START)
+
+    def ready(addr: tuple[str, int], ctl_addr: tuple[str, int]) -> None:
+        print(f"kawasaki-as-sim ready: port {addr[0]}:{addr[1]}, control {ctl_addr[0]}:{ctl_addr[1]}", flush=True)
+
+    def on_signals(ctl: Controller) -> None:
+        def done(*_: object) -> None:
+            ctl.done = True
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, done)
+
     try:
-        asyncio.run(_main(cfg))
+        run(cfg, ready, on_signals)
         event("stopped")
+    except AsSyntaxError as exc:
+        click.echo(f"kawasaki-as-sim: {path}: STEP syntax error: {exc}", err=True)
+        sys.exit(3)
+    except RuntimeError as exc:
+        click.echo(f"kawasaki-as-sim: the program did not start: {exc}", err=True)
+        sys.exit(3)
     except OSError as exc:
         click.echo(f"kawasaki-as-sim: cannot listen: {exc}", err=True)
         sys.exit(1)
-
-
-async def _main(cfg: Config) -> None:
-    def ready(addr: tuple[str, int], ctl_addr: tuple[str, int], ctl: Controller) -> None:
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            loop.add_signal_handler(sig, ctl.done.set)
-        print(f"kawasaki-as-sim ready: port {addr[0]}:{addr[1]}, control {ctl_addr[0]}:{ctl_addr[1]}", flush=True)
-
-    await run(cfg, ready)
 
 
 if __name__ == "__main__":

@@ -1,29 +1,49 @@
-"""The controller: the PC program's TCP port, the robot program's arm and the fault switches.
+"""The controller: the loaded AS program run by the interpreter, its arm, its TCP/IP option and the fault switches.
 
-One client at a time, as the PC program serves one (a second connection is closed at
-once). On accept the program says hello; it then answers every line in order (``A``) and
-sends the state every ``state_period`` seconds. When the client goes, the program drops
-the queue (the segment under way runs out) and waits for the next client.
+At start the operator's commands (``PCEXECUTE 1: rob6_pc``, ``EXECUTE rob6_motion``) run
+the program; the controller is ready once the program listens on its port. Then every
+``TICK_S`` the network is read, the arm moves on and the tasks step. The controller's
+clock advances by at most ``TICK_S`` between two steps of the tasks: when this process was
+held up (a loaded machine), the ticks missed are run one after the other to catch up, so
+the arm never runs ahead of its program, as on a real controller, which is never held up
+(up to ``MAX_CATCH_UP_S``; beyond that the time is skipped). The switches the program
+reads are the controller's state: ``POWER`` (motor power on), ``REPEAT`` (repeat mode, not
+teach); ``ERROR`` is the current error code. A stop (E-stop, motor power off,
+teach mode, an error, a program's run-time error) brakes the arm and stops the robot
+program; the operator starts it again (``execute``, the terminal's ``EXECUTE``).
+
+A tap on the connections counts what crosses them for the status: lines received, the
+answers (``A seq code ...``) the program sent by code, the time from a line's arrival to
+its answer, and the underruns the last state line reported. It only watches; the program alone decides what is sent.
 """
 
 from __future__ import annotations
 
-import asyncio
 import json
 import math
+import re
+import selectors
+import socket
 import sys
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
-from . import wire
-from .arm import Arm, Target, outside_range, too_fast
+from . import aslang
+from .arm import Arm, Segment, outside_range
+from .asrun import AsError, Interpreter, Value
+from .astcp import Conn, TcpOption
 from .convention import to_rob6
 
 TICK_S = 0.004
+MAX_CATCH_UP_S = 0.5
 LATENCY_WINDOW = 10000
+BOOT_TIMEOUT_S = 5.0
+#: the operator's commands at start, as deploy/kawasaki/README.md has them
+START = ("PCEXECUTE 1: rob6_pc", "EXECUTE rob6_motion")
 
 
 def event(msg: str) -> None:
@@ -32,194 +52,194 @@ def event(msg: str) -> None:
 
 @dataclass(frozen=True)
 class Config:
+    program: Path
     host: str = "127.0.0.1"
-    port: int = 49200
+    port: int = 49200  # where the program's port appears on this host (0: any free port)
+    as_port: int = 49200  # the program's port (its kport)
     control_host: str = "127.0.0.1"
     control_port: int = 0
     start_pose_ctrl: tuple[float, ...] = (0.0, 90.0, 0.0, 0.0, 0.0, 0.0)
-    state_period: float = 0.05
-    capacity: int = 64
+    start: tuple[str, ...] = START
+
+
+@dataclass
+class Tap:
+    """What crosses a connection: lines in, answers out by code, arrival -> answer times."""
+
+    lines: int = 0
+    answers: dict[str, int] = field(default_factory=dict)
+    underruns: int = 0  # as the last state line sent said
+    latencies_ms: deque[float] = field(default_factory=lambda: deque(maxlen=LATENCY_WINDOW))
+    _arrivals: dict[int, deque[float]] = field(default_factory=dict)
+    _partial: dict[int, bytes] = field(default_factory=dict)
+
+    def received(self, conn: Conn, data: bytes, now: float) -> None:
+        for _ in range(data.count(b"\n")):
+            self.lines += 1
+            self._arrivals.setdefault(id(conn), deque()).append(now)
+
+    def sent(self, conn: Conn, data: bytes, now: float) -> None:
+        text = self._partial.pop(id(conn), b"") + data
+        *lines, rest = text.split(b"\n")
+        if rest:
+            self._partial[id(conn)] = rest
+        for line in lines:
+            fields = line.split()
+            if fields[:1] == [b"S"] and fields[-1].isdigit():
+                self.underruns = int(fields[-1])
+            if fields[:1] == [b"A"] and len(fields) > 2:
+                code = fields[2].decode("ascii", "replace")
+                self.answers[code] = self.answers.get(code, 0) + 1
+                arrivals = self._arrivals.get(id(conn))
+                if arrivals:
+                    self.latencies_ms.append((now - arrivals.popleft()) * 1000.0)
 
 
 class Controller:
     def __init__(self, cfg: Config):
         self.cfg = cfg
-        self.arm = Arm(cfg.start_pose_ctrl, time.monotonic(), cfg.capacity)
+        self.source = cfg.program.read_text(encoding="latin-1")
+        self.programs = aslang.load(self.source)  # AsSyntaxError: the controller refuses the file
+        self.clock = time.monotonic()  # the controller's time: the arm's and the programs'
+        self.arm = Arm(cfg.start_pose_ctrl, self.clock)
         self.estop = False
         self.motor = True
         self.teach = False
         self.error = 0
-        self.slow_ack_ms = 0.0
-        self.last_sequence = 0
-        self.received = self.accepted = self.malformed = 0
-        self.refused: dict[int, int] = {}
-        self.connections = 0
-        self.states_sent = 0
-        self.latencies_ms: deque[float] = deque(maxlen=LATENCY_WINDOW)
-        self.client: asyncio.StreamWriter | None = None
-        self.done = asyncio.Event()
+        self.tap = Tap()
+        self.net = TcpOption(cfg.host, {cfg.as_port: cfg.port}, self._accepted, self.tap.received, self.tap.sent)
+        self.interp = Interpreter(self.programs, self)
+        self.robot_program = ""
+        self.done = False
 
-    # ---- time and faults ---------------------------------------------------------
-    def advance(self) -> None:
-        self.arm.advance(time.monotonic())
+    # ---- the Machine the programs see ----------------------------------------------
+    def now(self) -> float:
+        return self.clock
 
-    def not_ready(self) -> str:
-        if self.estop:
-            return "E-stop"
-        if not self.motor:
-            return "motor power off"
-        if self.teach:
-            return "teach mode"
+    def switch(self, name: str) -> bool:
+        return {"power": self.motor, "repeat": not self.teach}[name]
+
+    def error_code(self) -> int:
+        return self.error
+
+    def here(self) -> tuple[float, ...]:
+        self.arm.advance(self.clock)
+        return tuple(round(x, 6) + 0.0 for x in self.arm.q)
+
+    def motion_room(self) -> bool:
+        return self.arm.room()
+
+    def move(self, q: tuple[float, ...], seconds: float) -> None:
+        why = outside_range(q)
+        if why:
+            # AS refuses a destination outside the motion range: "(E1088) Destination is out of motion range."
+            raise AsError("E1088", f"Destination is out of motion range: {why}")
+        self.arm.move(Segment(q, seconds))
+
+    def settled(self) -> bool:
+        self.arm.advance(self.clock)
+        return not self.arm.moving
+
+    def print_line(self, task: str, text: str) -> None:
+        event(f"{task}: PRINT {text}")
+
+    def tcp(self, op: str, args: list[Value], started: float) -> tuple[Value, ...] | None:
+        return self.net.op(op, args, started, self.clock)
+
+    def program_error(self, task: str, error: AsError) -> None:
+        digits = re.sub(r"\D", "", error.code)
+        self.halt(f"{task}: {self.interp.tasks[task].message}")
+        self.error = int(digits) if digits else 1
+
+    # ---- the operator --------------------------------------------------------------
+    def command(self, line: str) -> str:
+        """A terminal command: ``PCEXECUTE n: name`` or ``EXECUTE name``; "" or the refusal."""
+        if m := re.fullmatch(r"PCEXECUTE\s+([1-5])\s*:\s*(\w+)", line.strip(), re.IGNORECASE):
+            return self.interp.start(f"pc{m.group(1)}", m.group(2))
+        if m := re.fullmatch(r"EXECUTE\s+(\w+)", line.strip(), re.IGNORECASE):
+            self.robot_program = m.group(1)
+            return self.execute()
+        return f"unknown command {line!r}"
+
+    def execute(self) -> str:
+        """``EXECUTE`` the robot program: refused as the controller refuses it (khi_robot_py's texts)."""
         if self.error:
-            return f"error {self.error}"
-        return ""
+            return "(P1013)Cannot execute because in error now. Reset error."
+        if self.teach:
+            return "program in TEACH mode."
+        if not self.motor:
+            return "motor power is OFF."
+        return self.interp.start("robot", self.robot_program)
 
     def halt(self, why: str) -> None:
-        self.advance()
+        self.arm.advance(self.clock)
         moving = self.arm.moving
         self.arm.stop()
-        event(f"{why}: the arm {'brakes' if moving else 'stands'} at {_joints(self.arm.q)}")
+        self.interp.abort("robot", why)
+        event(f"{why}: the robot program stops, the arm {'brakes' if moving else 'stands'} at "
+              f"{' '.join(f'{x:.3f}' for x in self.arm.q)}")
 
-    # ---- the PC program ------------------------------------------------------------
-    def take(self, text: str) -> tuple[int, int]:
-        """One line from the client -> (sequence, answer code)."""
-        self.received += 1
-        try:
-            msg = wire.read(text)
-        except wire.Malformed as exc:
-            self.malformed += 1
-            event(f"malformed line {text[:60]!r}: {exc}")
-            return wire.sequence_of(text), wire.MALFORMED
-        self.advance()
-        if msg.sequence <= self.last_sequence:
-            return msg.sequence, self._refuse(wire.SEQUENCE, f"sequence {msg.sequence} after {self.last_sequence}")
-        self.last_sequence = msg.sequence
-        if isinstance(msg, wire.CancelMsg):
-            self.arm.cancel()
-            return msg.sequence, wire.OK
-        why = self.not_ready()
-        if why:
-            return msg.sequence, self._refuse(wire.NOT_READY, f"point {msg.sequence} while {why}")
-        why = outside_range(msg.joints)
-        if why:
-            return msg.sequence, self._refuse(wire.RANGE, f"point {msg.sequence}: {why}")
-        seconds = msg.ms / 1000.0
-        why = too_fast(self.arm.last_queued(), msg.joints, seconds)
-        if why:
-            return msg.sequence, self._refuse(wire.TOO_FAST, f"point {msg.sequence}: {why}")
-        if len(self.arm.queue) >= self.arm.capacity:
-            return msg.sequence, self._refuse(wire.QUEUE_FULL, f"point {msg.sequence}: queue full")
-        self.arm.enqueue(Target(msg.joints, seconds, msg.final, msg.sequence))
-        self.accepted += 1
-        return msg.sequence, wire.OK
+    def _accepted(self, conn: Conn) -> None:
+        event(f"client {conn.peer[0]}:{conn.peer[1]} accepted")
 
-    def _refuse(self, code: int, why: str) -> int:
-        self.refused[code] = self.refused.get(code, 0) + 1
-        event(f"refused (code {code}): {why}")
-        return code
-
-    def state_line(self) -> bytes:
-        self.advance()
-        self.states_sent += 1
-        arm = self.arm
-        return wire.state(self.states_sent, arm.q, self.motor, self.estop, self.teach, arm.moving,
-                          len(arm.queue), arm.done, self.error, arm.underruns)
-
-    async def serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        if self.client is not None:  # the program serves one client
-            event(f"refused a second client {_peer(writer)}")
-            writer.close()
-            return
-        self.client = writer
-        self.connections += 1
-        self.last_sequence = 0
-        event(f"client {_peer(writer)} connected")
-        sender = asyncio.create_task(self._send_states(writer))
-        try:
-            writer.write(wire.hello(self.arm.capacity))
-            await writer.drain()
-            while True:
-                try:
-                    raw = await reader.readuntil(b"\n")
-                except asyncio.LimitOverrunError:
-                    self.malformed += 1
-                    event("a line without its end: the client is dropped")
-                    break
-                except asyncio.IncompleteReadError:
-                    break
-                t_in = time.perf_counter()
-                text = raw[:-1].decode("ascii", "replace").rstrip("\r")
-                if len(raw) > wire.MAX_LINE:
-                    self.malformed += 1
-                    writer.write(wire.answer(wire.sequence_of(text), wire.MALFORMED, len(self.arm.queue)))
-                    await writer.drain()
-                    continue
-                if self.slow_ack_ms:
-                    await asyncio.sleep(self.slow_ack_ms / 1000.0)
-                sequence, code = self.take(text)
-                writer.write(wire.answer(sequence, code, len(self.arm.queue)))
-                await writer.drain()
-                self.latencies_ms.append((time.perf_counter() - t_in) * 1000.0)
-        except (ConnectionError, OSError):
-            pass
-        finally:
-            sender.cancel()
-            if self.client is writer:
-                self.client = None
-                self.arm.cancel()
-                event(f"client {_peer(writer)} gone: queue dropped, the segment under way runs out")
-            writer.close()
-
-    async def _send_states(self, writer: asyncio.StreamWriter) -> None:
-        try:
-            while True:
-                writer.write(self.state_line())
-                await writer.drain()
-                await asyncio.sleep(self.cfg.state_period)
-        except (ConnectionError, OSError):
-            return
-
-    def drop(self) -> bool:
-        writer = self.client
-        if writer is None:
-            return False
-        transport = writer.transport
-        if transport is not None:
-            transport.abort()
-        self.client = None
-        self.arm.cancel()
-        event("connection dropped (fault injection)")
-        return True
-
-    async def tick(self) -> None:
+    # ---- time ----------------------------------------------------------------------
+    def tick(self) -> None:
+        """The controller's time up to now, a step of the tasks every ``TICK_S`` of it at most."""
+        self.net.poll()
+        now = time.monotonic()
+        self.clock = max(self.clock, now - MAX_CATCH_UP_S)
         while True:
-            self.advance()
-            await asyncio.sleep(TICK_S)
+            self.clock = min(self.clock + TICK_S, now)
+            self.arm.advance(self.clock)
+            self.interp.tick()
+            if self.clock >= now:
+                break
+        self.net.poll()
+
+    def boot(self) -> tuple[str, int]:
+        """The operator's start commands; the program's port once it listens."""
+        for line in self.cfg.start:
+            why = self.command(line)
+            if why:
+                raise RuntimeError(f"{line}: {why}")
+            self.tick()
+        deadline = time.monotonic() + BOOT_TIMEOUT_S
+        while (addr := self.net.address(self.cfg.as_port)) is None:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the program never listened on its port {self.cfg.as_port}; tasks: {self.tasks()}")
+            self.tick()
+            time.sleep(TICK_S)
+        return addr
+
+    def tasks(self) -> dict[str, str]:
+        return {name: t.state + (f": {t.message}" if t.message else "") for name, t in self.interp.tasks.items()}
 
     # ---- the control channel -------------------------------------------------------
     def status(self) -> dict[str, Any]:
-        self.advance()
-        lat = sorted(self.latencies_ms)
+        self.arm.advance(self.clock)
+        lat = sorted(self.tap.latencies_ms)
         return {
             "ok": True,
             "position_ctrl_deg": [round(x, 6) for x in self.arm.q],
             "position_rob6_deg": [round(x, 6) for x in to_rob6(self.arm.q)],
-            "moving": self.arm.moving, "queued": len(self.arm.queue), "done": self.arm.done,
-            "estop": self.estop, "motor": self.motor, "teach": self.teach, "error": self.error,
-            "client": self.client is not None, "connections": self.connections,
-            "points_received": self.received, "points_accepted": self.accepted,
-            "points_executed": self.arm.executed, "malformed": self.malformed,
-            "refused": {str(k): v for k, v in sorted(self.refused.items())},
-            "underruns": self.arm.underruns, "max_speed_ratio": round(self.arm.max_speed_ratio, 4),
+            "moving": self.arm.moving, "estop": self.estop, "motor": self.motor, "teach": self.teach,
+            "error": self.error, "monitor_speed": self.arm.monitor_speed,
+            "client": self.net.connected(), "connections": self.net.accepted,
+            "lines_received": self.tap.lines, "answers": dict(sorted(self.tap.answers.items())),
+            "underruns_reported": self.tap.underruns,
+            "segments": self.arm.executed, "max_speed_ratio": round(self.arm.max_speed_ratio, 4),
             "ack_ms": [_pct(lat, 0.5), _pct(lat, 0.99), lat[-1] if lat else 0.0],
+            "tasks": self.tasks(),
         }
 
-    def command(self, req: Any) -> dict[str, Any]:
+    def control(self, req: Any) -> dict[str, Any]:
         if not isinstance(req, dict) or not isinstance(req.get("cmd"), str):
             return {"ok": False, "error": "expected a JSON object with a string 'cmd'"}
         cmd = req["cmd"]
         if cmd == "status":
             return self.status()
+        if cmd == "type":
+            return self._type(req.get("expr"))
         if cmd == "estop":
             self.estop, self.motor = True, False
             self.halt("E-stop")
@@ -247,36 +267,39 @@ class Controller:
             self.halt(f"error {code}")
         elif cmd == "clear_error":
             self.error = 0
+        elif cmd == "execute":
+            why = self.execute()
+            if why:
+                return {"ok": False, "error": why}
         elif cmd == "drop_connection":
-            return {"ok": True, "dropped": self.drop()}
+            return {"ok": True, "dropped": self.net.drop()}
         elif cmd == "slow_ack":
             ms = req.get("ms")
             if not isinstance(ms, int | float) or isinstance(ms, bool) or not math.isfinite(ms) or ms < 0:
                 return {"ok": False, "error": "slow_ack: 'ms' must be a number >= 0"}
-            self.slow_ack_ms = float(ms)
+            self.net.latency_s = float(ms) / 1000.0
+        elif cmd == "monitor_speed":
+            pct = req.get("percent")
+            if not isinstance(pct, int | float) or isinstance(pct, bool) or not 1 <= pct <= 100:
+                return {"ok": False, "error": "monitor_speed: 'percent' must be 1..100"}
+            self.arm.advance(self.clock)
+            self.arm.monitor_speed = float(pct)
         else:
             return {"ok": False, "error": f"unknown command {cmd!r}"}
         event(f"control: {json.dumps(req)}")
         return {"ok": True}
 
-    async def serve_control(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    def _type(self, text: Any) -> dict[str, Any]:
+        if not isinstance(text, str):
+            return {"ok": False, "error": "type: 'expr' must be a string"}
         try:
-            while line := await reader.readline():
-                try:
-                    reply = self.command(json.loads(line))
-                except json.JSONDecodeError as exc:
-                    reply = {"ok": False, "error": f"not JSON: {exc}"}
-                writer.write(json.dumps(reply).encode() + b"\n")
-                await writer.drain()
-        except (ConnectionError, OSError):
-            pass
-        finally:
-            writer.close()
-
-
-def _peer(writer: asyncio.StreamWriter) -> str:
-    peer = writer.get_extra_info("peername")
-    return f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+            p = aslang._Parser(aslang.tokenize(text))
+            expr = p.expr()
+            p.done()
+            value = self.interp.type_expr(expr)
+        except (aslang.AsSyntaxError, AsError) as exc:
+            return {"ok": False, "error": str(exc)}
+        return {"ok": True, "value": value if not isinstance(value, tuple) else list(value)}
 
 
 def _pct(values: list[float], p: float) -> float:
@@ -285,23 +308,57 @@ def _pct(values: list[float], p: float) -> float:
     return round(values[min(len(values) - 1, max(0, math.ceil(p * len(values)) - 1))], 3)
 
 
-def _joints(q: list[float]) -> str:
-    return " ".join(f"{x:.3f}" for x in q)
-
-
-async def run(cfg: Config, ready: Callable[[tuple[str, int], tuple[str, int], Controller], None]) -> None:
+def run(cfg: Config, ready: Callable[[tuple[str, int], tuple[str, int]], None],
+        stop: Callable[[Controller], None]) -> None:
+    """Boot the controller, say ``ready``, and run until ``ctl.done``."""
     ctl = Controller(cfg)
-    server = await asyncio.start_server(ctl.serve, cfg.host, cfg.port, limit=wire.MAX_LINE * 4)
-    control = await asyncio.start_server(ctl.serve_control, cfg.control_host, cfg.control_port)
-    ticker = asyncio.create_task(ctl.tick())
-    addr = server.sockets[0].getsockname()[:2]
-    caddr = control.sockets[0].getsockname()[:2]
-    ready((addr[0], addr[1]), (caddr[0], caddr[1]), ctl)
+    stop(ctl)
+    control = socket.create_server((cfg.control_host, cfg.control_port))
+    control.setblocking(False)
+    sel = selectors.DefaultSelector()
+    sel.register(control, selectors.EVENT_READ, None)
+    clients: dict[socket.socket, bytearray] = {}
     try:
-        await ctl.done.wait()
+        addr = ctl.boot()
+        ready(addr, control.getsockname()[:2])
+        next_tick = time.monotonic()
+        while not ctl.done:
+            timeout = max(0.0, next_tick - time.monotonic())
+            for key, _ in sel.select(timeout):
+                sock = key.fileobj
+                assert isinstance(sock, socket.socket)
+                if sock is control:
+                    client, _ = control.accept()
+                    client.setblocking(False)
+                    clients[client] = bytearray()
+                    sel.register(client, selectors.EVENT_READ, None)
+                    continue
+                try:
+                    data = sock.recv(65536)
+                except OSError:
+                    data = b""
+                if not data:
+                    sel.unregister(sock)
+                    sock.close()
+                    clients.pop(sock, None)
+                    continue
+                buffer = clients[sock]
+                buffer += data
+                while (end := buffer.find(b"\n")) >= 0:
+                    line = bytes(buffer[:end])
+                    del buffer[:end + 1]
+                    try:
+                        reply = ctl.control(json.loads(line))
+                    except json.JSONDecodeError as exc:
+                        reply = {"ok": False, "error": f"not JSON: {exc}"}
+                    sock.setblocking(True)
+                    sock.sendall(json.dumps(reply).encode() + b"\n")
+                    sock.setblocking(False)
+            if time.monotonic() >= next_tick:
+                ctl.tick()
+                next_tick = max(next_tick + TICK_S, time.monotonic() - TICK_S)
     finally:
-        ticker.cancel()
-        server.close()
+        for client in clients:
+            client.close()
         control.close()
-        if ctl.client is not None:
-            ctl.client.close()
+        ctl.net.close_all()

@@ -24,8 +24,8 @@ error the gateway shows as ``ERROR: driver: ...``:
 * no connection yet: ``robot not connected (waiting for the Kawasaki AS program at HOST:PORT)``;
 * the connection lost (closed, no state for ``state_timeout_s``, no answer for
   ``ack_timeout_s``): ``kawasaki link lost: ...``; rob6 reconnects every ``retry_s``;
-* the state: ``robot reports an E-stop``, ``robot reports motor power off``,
-  ``robot reports teach mode``, ``robot reports controller error N``;
+* the state: ``robot reports motor power off`` (also what an E-stop shows: AS has no switch
+  that tells an E-stop apart), ``robot reports teach mode``, ``robot reports controller error N``;
 * a point refused: ``robot refused a point (code N: ...)``; the robot not at the target
   when it stopped: ``robot stopped short of the target ...``.
 
@@ -112,6 +112,10 @@ class KawasakiLink(StreamedPointsLink):
         self._sequence = 0  # the wire's number of the last message sent
         self.cancels = 0
         self.underruns = 0  # as the controller last reported them
+        #: points waiting in the controller's queue, as its last answer or state said (-1: not
+        #: connected): how far rob6 is ahead of the arm, for pacing by acknowledgement
+        self.controller_queued = -1
+        self.controller_capacity = 0  # the queue's size, from the hello
         waiting = f"robot not connected (waiting for the Kawasaki AS program at {self.name})"
         super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
 
@@ -140,8 +144,6 @@ class KawasakiLink(StreamedPointsLink):
         st = self._robot
         if st is None:
             return None
-        if st.estop:
-            return "robot reports an E-stop"
         if st.teach:
             return "robot reports teach mode"
         if not st.motor:
@@ -171,6 +173,7 @@ class KawasakiLink(StreamedPointsLink):
             self._inflight = False
             self._stop_pending = False
             self._robot = None
+            self.controller_queued = -1
             self._lost = detail
             self._evaluate()
 
@@ -185,6 +188,8 @@ class KawasakiLink(StreamedPointsLink):
             self._stop_pending = False
             self._sequence = 0
             self._robot = self._position = self._previous_position = None
+            self.controller_capacity = hello.capacity
+            self.controller_queued = 0
             self.runs += 1
             self._evaluate()
         heard = time.monotonic()
@@ -285,12 +290,14 @@ class KawasakiLink(StreamedPointsLink):
             self._robot = st
             self._state_count += 1
             self.underruns = st.underruns
+            self.controller_queued = st.queued
             self._evaluate()
 
     def _on_ack(self, sock: socket.socket, buffer: bytearray, ack: Ack, q: Joints | None, is_cancel: bool,
                 latency: float) -> None:
         with self._cond:
             self._answered(latency)
+            self.controller_queued = ack.queued
             if ack.code == 0:
                 self._acked_mark = self._state_count
                 if is_cancel:

@@ -22,7 +22,7 @@ from rob6.errors import LinkError
 from .wire_numbers import finite_float
 
 PROTOCOL = "rob6-kas"
-VERSION = 1
+VERSION = 2
 #: one message, LF included; AS strings hold 255 characters, the program keeps below that
 MAX_LINE = 120
 MAX_SEQUENCE = 999_999
@@ -33,7 +33,7 @@ ACK_CODES = {
     1: "malformed message",
     2: "a joint outside the controller's range",
     3: "faster than an axis can move",
-    4: "not ready (E-stop, motor power off, teach mode or an error)",
+    4: "not ready (motor power off, teach mode or an error)",
     5: "queue full",
     6: "sequence number not above the last one",
 }
@@ -97,8 +97,7 @@ class Ack:
 class State:
     count: int
     joints: tuple[float, ...]  # controller's convention, deg
-    motor: bool
-    estop: bool
+    motor: bool  # motor power on (an E-stop switches it off: AS has no E-stop switch to report)
     teach: bool
     moving: bool
     queued: int
@@ -149,14 +148,14 @@ def parse(line: bytes) -> Hello | Ack | State:
             raise KasError(f"an answer with {len(args)} fields (3 expected): {text!r}")
         return Ack(_int(args[0], "sequence"), _int(args[1], "code"), _int(args[2], "queued"))
     if kind == "S":
-        if len(args) != 15:
-            raise KasError(f"a state with {len(args)} fields (15 expected): {text!r}")
+        if len(args) != 14:
+            raise KasError(f"a state with {len(args)} fields (14 expected): {text!r}")
         joints = tuple(_float(x) for x in args[1:7])
-        motor, estop, teach, moving = (_flag(x) for x in args[7:11])
-        return State(_int(args[0], "count"), joints, motor=motor, estop=estop, teach=teach, moving=moving,
-                     queued=_int(args[11], "queued"),
-                     done=_int(args[12], "done"), error=_int(args[13], "error"),
-                     underruns=_int(args[14], "underruns"))
+        motor, teach, moving = (_flag(x) for x in args[7:10])
+        return State(_int(args[0], "count"), joints, motor=motor, teach=teach, moving=moving,
+                     queued=_int(args[10], "queued"),
+                     done=_int(args[11], "done"), error=_int(args[12], "error"),
+                     underruns=_int(args[13], "underruns"))
     raise KasError(f"an unknown message type {kind!r}")
 
 
