@@ -108,13 +108,20 @@ def end_threads(timeout: float = THREADS_END_S) -> None:
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, signal.SIG_IGN)
     deadline = time.monotonic() + timeout
-    for thread in threading.enumerate():
-        if thread not in (threading.main_thread(), threading.current_thread()):
-            thread.join(max(0.0, deadline - time.monotonic()))
-    left = [t.name for t in threading.enumerate() if t not in (threading.main_thread(), threading.current_thread())]
+    for thread in _threads():
+        thread.join(max(0.0, deadline - time.monotonic()))
+    left = [t.name for t in _threads()]
     if left:
         log.warning("still running after %.0f s of stopping: %s", timeout, ", ".join(left))
     gc.collect()
+
+
+def _threads() -> list[threading.Thread]:
+    """The threads of the process a stop waits for: not this one, and not the stand-ins Python
+    makes for a native thread that called into it (Zenoh's, foxglove's: ``_DummyThread``,
+    which cannot be joined and which their library ends)."""
+    return [t for t in threading.enumerate() if t is not threading.current_thread()
+            and t is not threading.main_thread() and not isinstance(t, threading._DummyThread)]
 
 
 def fail(name: str, message: str, code: int) -> None:
