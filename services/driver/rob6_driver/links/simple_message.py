@@ -122,6 +122,13 @@ ARRIVAL_TOL_DEG = 0.05
 #: kinematics against the ROS-Industrial Viper URDF (tests/driver/test_adept_convention.py).
 TO_CONTROLLER_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
 TO_CONTROLLER_OFFSET_DEG = np.array([0.0, 0.0, 90.0, 0.0, 0.0, 0.0])
+#: the Viper's joint ranges in the controller's own angles, deg: ``MOVE`` to a point
+#: outside them is a V+ error that ends the program's motion task, so none is ever sent.
+#: The ROS-Industrial Viper URDF (adept_experimental, ``viper_s650_macro.xacro``, the
+#: joints' ``<limit lower upper>`` in rad): J3 reaches 256 deg, not the 259 rob6's own
+#: table maps to (deploy/adept/README.md section 5)
+CONTROLLER_RANGE_DEG = np.array([(-170.0, 170.0), (-190.0, 45.0), (-29.0, 256.0), (-190.0, 190.0),
+                                 (-120.0, 120.0), (-360.0, 360.0)])
 #: rated joint speeds of the Viper s850, deg/s (Adept's data sheet): the maximum the
 #: points' velocity fraction refers to
 RATED_SPEED_DEG_S = np.array([250.0, 250.0, 250.0, 375.0, 375.0, 600.0])
@@ -184,8 +191,9 @@ class AdeptLink(StreamedPointsLink):
         settings.check()
         self.settings = settings
         self.codec = Codec(settings.byte_order)
-        self.hw_min = np.array(robot.hw_min, float)
-        self.hw_max = np.array(robot.hw_max, float)
+        # the controller's range in rob6's joints (a sign flips a joint's ends)
+        ends = np.sort(from_controller_deg(CONTROLLER_RANGE_DEG.T), axis=0)
+        self.range_min, self.range_max = ends[0], ends[1]
         host = settings.host
         self.motion_addr = (host, int(settings.motion_port))
         self.state_addr = (host, int(settings.state_port))
@@ -204,6 +212,7 @@ class AdeptLink(StreamedPointsLink):
         waiting = f"robot not connected (waiting for simple_message at {host}:{settings.motion_port}/{settings.state_port})"
         super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
         self.lead_s = LEAD_PERIODS * self.period_s
+        core.restrict(self.range_min, self.range_max)  # motions beyond the arm's range are refused up front
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
@@ -270,11 +279,11 @@ class AdeptLink(StreamedPointsLink):
         return self._robot_status.in_motion == TS_TRUE
 
     def _outside_range(self, q: Joints) -> str:
-        outside = np.flatnonzero(~((q >= self.hw_min) & (q <= self.hw_max)))
+        outside = np.flatnonzero(~((q >= self.range_min) & (q <= self.range_max)))
         if not outside.size:
             return ""
         j = int(outside[0])
-        return f"joint {j + 1} at {q[j]:.3f}, range {self.hw_min[j]:g} .. {self.hw_max[j]:g}"
+        return f"joint {j + 1} at {q[j]:.3f}, range {self.range_min[j]:g} .. {self.range_max[j]:g}"
 
     # ------------------------------------------------------------------ the stream's extras
     def _on_open(self) -> None:
@@ -369,7 +378,7 @@ class AdeptLink(StreamedPointsLink):
     # ------------------------------------------------------------------ the motion port
     def _motion_loop(self) -> None:
         self._keep_connected(self.motion_addr, "the controller's motion port {}", self._serve_motion,
-                             self._motion_down, self._motion_connected)
+                             self._motion_down)
 
     def _motion_connected(self) -> None:
         with self._cond:
@@ -393,6 +402,9 @@ class AdeptLink(StreamedPointsLink):
         connected = time.monotonic()
         self._talked = False
         sock.setblocking(False)
+        if not self._open_motion(sock, buffer, connected):
+            return "closing"
+        self._motion_connected()
         while not self._closing.is_set():
             with self._cond:
                 request = self._next_request()
@@ -407,15 +419,44 @@ class AdeptLink(StreamedPointsLink):
             frame, ctrl, stop = request
             sent = time.perf_counter()
             self._talked = True
-            try:
-                _send_all(sock, frame, self.ack_timeout_s)
-            except OSError as exc:
-                raise LinkDown(f"sending to the controller at {self.motion_name} failed: "
-                               f"{exc.strerror or exc}") from None
-            code = self._await_reply(sock, buffer, connected)
+            self._send(sock, frame)
+            code, _sequence = self._await_reply(sock, buffer, connected)
             latency = time.perf_counter() - sent
             self._on_reply(code, ctrl, stop, latency)
         return "closing"
+
+    def _open_motion(self, sock: socket.socket, buffer: bytearray, connected: float) -> bool:
+        """Begin a motion connection with the opening (``Codec.opening``) once the arm can
+        take it (its position known, drives on, no E-stop: the opening may be a MOVE to
+        where it stands), and its rest when it was read from its first byte; False when the
+        link closes meanwhile. ``LinkDown`` when the controller closes or does not answer."""
+        while True:
+            with self._cond:
+                ready = self._state_up and self._position is not None and self._controller_fault() == ""
+                here = self._position
+            if self._closing.is_set():
+                return False
+            if ready and here is not None:
+                break
+            if select.select([sock], [], [], 0.1)[0]:
+                self._receive_motion(sock, buffer, connected)
+                self._skip_unasked(buffer)
+        self._talked = True
+        self._send(sock, self.codec.opening(to_wire(here)))
+        _code, sequence = self._await_reply(sock, buffer, connected)
+        if sequence == STOP_TRAJECTORY:  # read from its first byte: the second stop completes it
+            self._send(sock, self.codec.opening_rest())
+            self._await_reply(sock, buffer, connected)
+        log.info("driver: the controller at %s read the opening from byte %d", self.motion_name,
+                 0 if sequence == STOP_TRAJECTORY else 4)
+        return True
+
+    def _send(self, sock: socket.socket, data: bytes) -> None:
+        try:
+            _send_all(sock, data, self.ack_timeout_s)
+        except OSError as exc:
+            raise LinkDown(f"sending to the controller at {self.motion_name} failed: "
+                           f"{exc.strerror or exc}") from None
 
     def _next_request(self) -> tuple[bytes, Joints | None, bool] | None:
         """(frame, controller joints, is_stop) of the next request, or None (lock held).
@@ -434,14 +475,15 @@ class AdeptLink(StreamedPointsLink):
             velocity = float(min(1.0, np.max(np.abs(ctrl - self._sent) / duration / RATED_SPEED_DEG_S)))
         return self.codec.traj_pt(last.sequence, np.radians(ctrl).tolist(), velocity, duration), ctrl, False
 
-    def _await_reply(self, sock: socket.socket, buffer: bytearray, connected: float) -> int:
-        """The reply code of the request just sent (``LinkDown`` when none comes in time)."""
+    def _await_reply(self, sock: socket.socket, buffer: bytearray, connected: float) -> tuple[int, int | None]:
+        """The reply code of the request just sent and the sequence its body carries
+        (``LinkDown`` when none comes in time)."""
         deadline = time.monotonic() + self.ack_timeout_s
         while True:
             for payload in self._frames(buffer):
                 message = self.codec.decode(payload)
                 if message.header.comm_type == SERVICE_REPLY and message.header.msg_type == JOINT_TRAJ_PT:
-                    return message.header.reply_code
+                    return message.header.reply_code, self.codec.reply_sequence(message.body)
                 self._garbage(f"driver: ignored a message of type {message.header.msg_type} "
                               f"(comm type {message.header.comm_type}) on the motion port")
             remaining = deadline - time.monotonic()
