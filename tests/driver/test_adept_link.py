@@ -266,6 +266,7 @@ def test_the_opening_reads_right_whether_the_first_four_bytes_are_discarded_or_n
             assert [p.sequence for p in fake.openings] == [-4, -4]
         motion, _ = ptp(core, [0.0] * 6)
         assert motion.wait(20) and motion.ok
+        assert motion.final is not None and link.settle(motion.final.q) == ""
         assert fake.points[0].sequence == 0 and fake.points[-1].sequence == -3
         assert [p.sequence for p in fake.points[1:-1]] == list(range(1, len(fake.points) - 1))
     finally:
