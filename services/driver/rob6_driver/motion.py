@@ -91,6 +91,8 @@ START_TOL_DEG = 1e-6
 REST_EPS = 1e-9
 #: a change of the feed may add acceleration up to this share of the limit, less the path's own
 FEED_ACCEL_SHARE = 0.95
+#: a change of the feed that does not fit is halved this often before the feed stays
+FEED_HALVINGS = 12
 #: Alter plans with its speed limits times the feed, never less than this share of them
 ALTER_FEED_MIN = 0.02
 #: Alter replans the motion under way when the feed has changed this much since its plan
@@ -779,11 +781,11 @@ class MotionCore:
     def _step_trajectory(self) -> None:
         samples = self._samples
         assert samples is not None  # following a trajectory
-        feed = self._next_feed(samples)
-        bad = self._command(*self._sample_at(samples, self._pos + feed, feed))
-        if bad is not None and feed != self._feed:  # the new pace did not fit: keep the old one
-            feed = self._feed
+        wanted = self._next_feed(samples)
+        for feed in dict.fromkeys((wanted, (wanted + self._feed) / 2, self._feed)):  # the monitor decides
             bad = self._command(*self._sample_at(samples, self._pos + feed, feed))
+            if bad is None:
+                break
         if bad is not None:
             kind, j, value, limit = bad
             at = min(self._pos + feed, len(samples) - 1.0)
@@ -819,28 +821,29 @@ class MotionCore:
 
     def _next_feed(self, samples: np.ndarray) -> float:
         """The feed of this cycle: towards the target, by as much as the acceleration limits
-        leave room for (the path's own acceleration, at the new pace, plus the change's)."""
+        leave room for. Along the path (velocity ``v``, acceleration ``a`` in plan time) the
+        commanded acceleration at the new feed ``f = feed + df`` is ``df v / dt`` plus the
+        path's own, between ``f**2 a`` (a smooth path) and ``f a`` (its samples joined by
+        straight lines): each joint's stays within ``FEED_ACCEL_SHARE`` of its limit (or no
+        further beyond it than the path alone already is); ``df`` is halved until it does."""
         feed, target = self._feed, self._feed_target
         if target == feed:
             return feed
-        last = len(samples) - 1
-        k = min(int(self._pos), last - 1)
-        if k < 0:
-            return target
+        k = min(int(self._pos), len(samples) - 2)
+        if k < 1:
+            return target  # at the start the path is at rest: any pace fits
         dt = self.dt
-        v = np.abs(samples[k + 1] - samples[k]) / dt  # the path's speed here (plan time)
-        lo, hi = max(k - 1, 0), min(k + 3, last)
-        around = samples[lo:hi + 1]
-        a = np.abs(np.diff(around, 2, axis=0)).max(axis=0) / dt**2 if len(around) > 2 else np.zeros(N_JOINTS)
-        pace = max(feed, target)
-        room = self._monitor.enforced.amax * FEED_ACCEL_SHARE - pace * a
-        moving = v > REST_EPS
-        if not moving.any():
-            return target
-        if (room[moving] <= 0).any():
-            return feed
-        step = float(np.min(room[moving] * dt / v[moving]))
-        return feed + max(-step, min(step, target - feed))
+        v = (samples[k + 1] - samples[k]) / dt
+        a = (samples[k + 1] - 2.0 * samples[k] + samples[k - 1]) / dt**2
+        room = np.maximum(self._monitor.enforced.amax * FEED_ACCEL_SHARE, np.abs(feed * a))
+        df = target - feed
+        for _ in range(FEED_HALVINGS):
+            f = feed + df
+            push = df * v / dt
+            if (np.abs(f * a + push) <= room).all() and (np.abs(f * f * a + push) <= room).all():
+                return f
+            df /= 2
+        return feed
 
     def _step_generator(self) -> None:
         if self._alter and self._mode == "alter":

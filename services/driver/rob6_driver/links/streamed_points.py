@@ -3,8 +3,9 @@
 What the simple_message (Adept) and kawasaki links share; their wire is left to subclasses.
 
 The clock is the driver's own: every ``core.dt`` the motion core steps, and while the
-robot moves every ``period_s`` (whole cycles) its setpoint becomes one point with the
-time since the previous point as its duration; the last point of a motion is final.
+robot moves its setpoint becomes one point each time the plan has run ``period_s`` (whole
+cycles; longer when the core is slowed), with the time since the previous point as its
+duration; the last point of a motion is final.
 Each point waits for its answer before the next goes out; points made meanwhile are
 merged into one (the newest position, durations summed; ``late`` counts them), but never
 into a segment spanning more than ``MAX_SEGMENT_PERIODS`` periods of the plan (at most
@@ -13,9 +14,9 @@ even after a stop, so no segment may be long.
 
 Pacing: a controller that answers only when its arm is ready for more (the Adept's V+
 program reads the next point when its previous MOVE was issued) holds rob6 back by its
-answers. The link measures how far its stream is ahead of what the controller has taken
-(``ahead_s``: the age of the newest point it answered, plus what it says it still holds,
-``_held_s``) and slows the motion core (``core.set_feed``, time scaling along the same
+answers. The link measures how long its stream has been waiting for the controller
+(``ahead_s``: the age of the oldest point not yet answered, plus what the controller says
+it still holds, ``_held_s``) and slows the motion core (``core.set_feed``, time scaling along the same
 path) from full pace at ``PACE_FULL_PERIODS`` ahead to a halt at ``PACE_HALT_PERIODS``:
 the arm and rob6's setpoints stay together, whatever speed the arm runs at.
 
@@ -176,8 +177,7 @@ class StreamedPointsLink(Link):
         self._stop_pending = False
         self._sent: Joints | None = None  # the last point the controller took (the subclass's joints)
         self._acked_mark = 0  # state count at the last acknowledgement
-        self._taken_t = 0.0  # the core's clock when the newest point the controller took was made
-        self._inflight_made_t = 0.0  # ... and when the point in flight was
+        self._inflight_made_t = 0.0  # the core's clock when the (oldest) point in flight was made
         # statistics
         self.packets = 0  # points acknowledged
         self.late = 0  # points merged into a later one (their answer came late)
@@ -351,12 +351,10 @@ class StreamedPointsLink(Link):
                 self._open = True
                 self._since = 0
                 self._span = 0.0
-                if not (self._outbox or self._inflight):  # nothing of the last stream outstanding
-                    self._taken_t = self.core.t
                 self._on_open()
             self._since += 1
             self._span += self.core.feed * self.core.dt
-            if self._since >= self.decimation:
+            if self._span >= self.period_s - 1e-9:  # a period of the plan: slowed, the points come less often
                 self._push(state.q, self._since * self.core.dt)
                 self._since = 0
         else:
@@ -389,16 +387,20 @@ class StreamedPointsLink(Link):
         self.late += len(merged) - 1
         self.longest_segment_s = max(self.longest_segment_s, span)
         self._inflight = True
-        self._inflight_made_t = merged[-1].made_t
+        self._inflight_made_t = merged[0].made_t
         return merged[-1], sum(p.duration for p in merged)
 
     def ahead_s(self) -> float:
-        """How far rob6's stream runs ahead of what the controller has taken, seconds of the
-        core's clock (lock held): the age of the newest point taken, plus what the controller
-        holds beyond its design lead. 0 while nothing streams."""
-        if not (self._open or self._outbox or self._inflight):
-            return 0.0
-        return max(0.0, self.core.t - self._taken_t) + max(0.0, self._held_s() - self.pace_lead_s)
+        """How long rob6's stream has been waiting for the controller, seconds of the core's
+        clock (lock held): the age of the oldest point it has not taken, plus what it says it
+        holds beyond its design lead."""
+        if self._inflight:
+            oldest = self._inflight_made_t
+        elif self._outbox:
+            oldest = self._outbox[0].made_t
+        else:
+            oldest = self.core.t
+        return max(0.0, self.core.t - oldest) + max(0.0, self._held_s() - self.pace_lead_s)
 
     def _pace(self) -> float:
         """The feed for the core (lock held): 1 up to ``PACE_FULL_PERIODS`` ahead, 0 at
@@ -472,10 +474,8 @@ class StreamedPointsLink(Link):
             self._wake()
 
     def _answered(self, latency: float) -> None:
-        """The request in flight got its answer after ``latency`` seconds (lock held): the
-        controller has taken it, and the stream's pace follows."""
+        """The request in flight got its answer after ``latency`` seconds (lock held)."""
         self._inflight = False
-        self._taken_t = max(self._taken_t, self._inflight_made_t)
         self._latencies.append(latency)
         self._cond.notify_all()
 
