@@ -54,6 +54,8 @@ class Arm:
         self.longest_segment_deg = 0.0  # ... and its largest joint travel
         self.ran_on_s = 0.0  # from the arrival of the last point (or stop) to rest, the last time
         self.max_ran_on_s = 0.0
+        self.peak_speed = [0.0] * N_JOINTS  # the largest |velocity| each joint reached, deg/s
+        self.peak_accel = [0.0] * N_JOINTS  # ... and |acceleration| outside a controller stop, deg/s²
         self.t = now
         self._seg: tuple[list[float], Move, float, float] | None = None  # (from, move, t0, T)
         self._ran_dry = False  # the path reached its last point with nothing issued after it
@@ -186,9 +188,11 @@ class Arm:
                 math.sqrt(2.0 * BRAKE_MARGIN * a * abs(e)),  # can still stop at the path
                 (abs(rdot[i]) if rdot else 0.0) + KP * abs(e),
             )
-            dv = math.copysign(speed, e) - self.v[i]
-            self.v[i] += max(-a * dt, min(a * dt, dv))
+            dv = max(-a * dt, min(a * dt, math.copysign(speed, e) - self.v[i]))
+            self.v[i] += dv
             self.q[i] += self.v[i] * dt
+            self.peak_speed[i] = max(self.peak_speed[i], abs(self.v[i]))
+            self.peak_accel[i] = max(self.peak_accel[i], abs(dv) / dt)
         if rdot is None and self._stopped_at_point():  # the servo's last bit: at the point
             self.q = list(self.ref)
             self.v = [0.0] * N_JOINTS

@@ -445,6 +445,8 @@ class Controller:
             "longest_segment_deg": round(arm.longest_segment_deg, 4),
             "ran_on_s": round(arm.ran_on_s, 4),
             "max_ran_on_s": round(arm.max_ran_on_s, 4),
+            "peak_speed_deg_s": [round(x, 4) for x in arm.peak_speed],
+            "peak_accel_deg_s2": [round(x, 3) for x in arm.peak_accel],
             "in_motion": arm.in_motion,
             "e_stopped": self.e_stopped,
             "drives_powered": self.drives_powered,
