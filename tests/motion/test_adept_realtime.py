@@ -1,12 +1,14 @@
 """The whole system (``rob6 run --robot ad850 --link simple_message``) driving the Adept
-controller simulator (adept-sm-sim, a separate process speaking simple_message over real
-TCP) in real time: PTP, LIN and Alter sessions within every limit, in both byte orders and
-both of the simulator's timings; and the faults: E-stop, drives off and a controller
-error mid-motion, the motion or state connection dropped, slow and missing
-acknowledgements. Each ends the motion with a clear ``ERROR: driver: ...`` and
-``false``, refuses motion meanwhile, and rob6 continues from where the robot really is.
-Assertions are about positions, limits, texts and recovery, never about how fast this
-(shared) machine is; bench/links.py measures the timing."""
+controller simulator (adept-sm-sim, a separate process playing adept_ros.v2 over real
+TCP) in real time: PTP, LIN and Alter sessions within every limit, in both byte orders; a
+long PTP at monitor speeds 3, 10 and 100 % arriving without a lost link or a false
+timeout; a stop (a client that vanishes, an old client's DisableAlter) bringing the arm
+to rest within the stated bound at each of them; and the faults: E-stop and drives off
+mid-motion, the motion or state connection dropped, slow and missing acknowledgements.
+Each fault ends the motion with a clear ``ERROR: driver: ...`` and ``false``, refuses
+motion meanwhile, and rob6 continues from where the robot really is. Assertions are
+about positions, limits, texts, recovery and the arm's own clock (the stand-in's), never
+about how fast this (shared) machine is; bench/links.py measures the timing."""
 
 from __future__ import annotations
 
@@ -53,23 +55,24 @@ def session(client: Client, ctl: AdeptController) -> None:
     RIG.session(client, ctl, via=[30.0, -50.0, 50.0, 10.0, 20.0, -20.0], lin_y_mm=100.0, alter="EnableAdeptAlter")
 
 
-@pytest.mark.parametrize("order, timing", [("big", "vplus"), ("little", "duration")])
-def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path: Path, order: str, timing: str) -> None:
+@pytest.mark.parametrize("order, monitor", [("big", "100"), ("little", "10")])
+def test_ptp_lin_alter_over_simple_message_within_limits(tmp_path: Path, order: str, monitor: str) -> None:
     motion, state = free_tcp_ports(2)
     with adept_system(motion, state, order, log_dir=str(tmp_path)) as system, system.client() as client:
         waiting = f"ERROR: driver: robot not connected (waiting for simple_message at 127.0.0.1:{motion}/{state})\n"
         assert reply(client, "MovePTPJoints 10 -60 40 0 30 0") == waiting + "false\n"
         assert reply(client, "EnableAdeptAlter") == waiting + "false\n"
         assert reply(client, "MovePTPJoints 999 0 0 0 0 0") == "false\n"  # refused before the driver
-        with controller(motion, state, "--timing", timing, order=order) as ctl:
-            assert np.array_equal(connected(client, ctl, system), np.zeros(6))
+        with controller(motion, state, "--monitor-speed", monitor, order=order) as ctl:
+            # the opening may be a MOVE to where the arm stands, as float32 radians carry it
+            assert np.allclose(connected(client, ctl, system), np.zeros(6), atol=POSITION_TOL)
             session(client, ctl)
             status = ctl.status()
-            assert status["points_refused"] == 0 and status["malformed_frames"] == 0
+            assert status["task_errors"] == 0
             assert status["points_acknowledged"] > 100
             link = link_status(system)
             assert (link.state, link.runs, link.garbage) == ("connected", 1, 0)
-            assert link.packets == status["points_acknowledged"]
+            assert link.packets == status["points_acknowledged"] - 1  # the opening is no point
             assert client.ask("Quit") == "bye!\n"
     RIG.assert_recorded(tmp_path, "simple_message")  # complete: the launcher stops the recorder last
 
@@ -97,10 +100,9 @@ def rig(adept: tuple[System, int, int]) -> Iterator[Rig]:
 def test_estop_mid_motion_then_released_and_drives_on(rig: Rig) -> None:
     system, ctl, client = rig
     interrupted(client, ctl, ctl.estop, "robot reports an E-stop")
-    # a point already waiting for room in the controller's queue when the E-stop hit
-    # is refused by it (a real V+ server does the same); count from when rob6 knew
-    refused_at_fault = ctl.status()["points_refused"]
-    assert refused_at_fault <= 1
+    # a MOVE waiting for the arm when the E-stop hit fails: the program's motion task ends
+    errors_at_fault = ctl.status()["task_errors"]
+    assert errors_at_fault <= 1
     assert reply(client, "MovePTPJoints " + fmt(START)) == "ERROR: driver: robot reports an E-stop\nfalse\n"
     assert reply(client, "EnableAdeptAlter") == "ERROR: driver: robot reports an E-stop\nfalse\n"
     ctl.release()  # the drives stay off
@@ -108,22 +110,13 @@ def test_estop_mid_motion_then_released_and_drives_on(rig: Rig) -> None:
                == "ERROR: driver: robot reports drives off\nfalse\n", what="drives off")
     ctl.drives(True)
     back_home(client, ctl, system)
-    assert ctl.status()["points_refused"] == refused_at_fault  # nothing sent while it could not move
+    assert ctl.status()["task_errors"] == errors_at_fault  # nothing sent while it could not move
 
 
 def test_drives_off_mid_motion(rig: Rig) -> None:
     system, ctl, client = rig
     interrupted(client, ctl, lambda: ctl.drives(False), "robot reports drives off")
     ctl.drives(True)
-    back_home(client, ctl, system)
-
-
-def test_controller_error_mid_motion(rig: Rig) -> None:
-    system, ctl, client = rig
-    interrupted(client, ctl, lambda: ctl.error(1107), "robot reports controller error 1107")
-    assert reply(client, "MovePTPJoints " + fmt(START)) == (
-        "ERROR: driver: robot reports controller error 1107\nfalse\n")
-    ctl.clear_error()
     back_home(client, ctl, system)
 
 

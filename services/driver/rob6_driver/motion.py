@@ -56,8 +56,9 @@ trajectory then advances ``f`` samples per cycle along the same path (positions
 interpolated between its samples, so a LIN move stays on the line the monitor checked),
 and the feed changes only as fast as the acceleration limits leave room for: the
 acceleration a change of pace adds to the path's own stays within them. Alter plans its
-generated motion with its speed limits times the feed. A stop is never slowed: it
-brakes from the speed the arm is commanded at. ``held_back_s`` says how much longer the
+generated motion with its speed limits times the feed, and its watchdog counts the plan's
+time (a target missing for ``alter_timeout_s`` of it stops the motion). A stop is never
+slowed: it brakes from the speed the arm is commanded at. ``held_back_s`` says how much longer the
 current trajectory takes than planned (the driver extends its deadline by it).
 """
 
@@ -212,6 +213,7 @@ class MotionCore:
         self._feed_target = 1.0
         self._held_back = 0.0  # controller seconds the running trajectory has lost to the feed
         self._alter_feed = 1.0  # the feed the current Alter plan was made with
+        self._plan_t = 0.0  # the plan's clock: controller seconds times the feed (the Alter watchdog's)
         # internal generator (Alter, stops)
         self._otg = ruckig.Ruckig(N_JOINTS, self.dt)
         self._inp = ruckig.InputParameter(N_JOINTS)
@@ -552,7 +554,7 @@ class MotionCore:
             self._mode = "alter"
             self._target = self._q.copy()
             self._target_pending = False
-            self._last_heard = self.t
+            self._last_heard = self._plan_t
             self._watchdog_fired = False
             return True, ""
 
@@ -579,7 +581,7 @@ class MotionCore:
                 raise Offline(self._offline)
             if not self._alter:
                 return False, "alter mode is not enabled"
-            self._last_heard = self.t
+            self._last_heard = self._plan_t
             checked, reason = _check_target(q, self._q.tolist(), relative, self._lim)
             if checked is None:
                 return False, reason
@@ -598,7 +600,7 @@ class MotionCore:
     def heartbeat(self) -> None:
         """The client is alive (keeps the Alter watchdog quiet without a new target)."""
         with self._lock:
-            self._last_heard = self.t
+            self._last_heard = self._plan_t
 
     # ------------------------------------------------------------------ stop
     def stop(self, reason: str = "stopped") -> Motion:
@@ -746,6 +748,7 @@ class MotionCore:
         """Advance one controller cycle; returns the new state."""
         with self._lock:
             self._cycle += 1
+            self._plan_t += self.feed * self.dt
             if self._mode == "trajectory":
                 self._step_trajectory()
             else:
@@ -848,7 +851,7 @@ class MotionCore:
     def _step_generator(self) -> None:
         if self._alter and self._mode == "alter":
             # watchdog
-            if (not self._watchdog_fired and self.t - self._last_heard > self.alter_timeout_s
+            if (not self._watchdog_fired and self._plan_t - self._last_heard > self.alter_timeout_s
                     and (self._gen is not None or self._target_pending)):
                 self._watchdog_fired = True
                 self._event(type="watchdog", timeout_s=self.alter_timeout_s)

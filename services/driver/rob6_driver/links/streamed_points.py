@@ -411,8 +411,10 @@ class StreamedPointsLink(Link):
     # ------------------------------------------------------------------ health
     def _fault(self) -> str:
         """Why the robot cannot move right now ("" when it can), lock held."""
-        fault = self._controller_fault() if self._link_up() and self._position is not None else None
-        if fault is None:
+        fault = self._controller_fault() if self._position is not None else None
+        if fault:  # the controller's own word first: a connection it closed may be its consequence
+            return fault
+        if fault is None or not self._link_up():
             if not self._ready_once:
                 return self.waiting_reason
             return f"{self.kind} link lost: {self._lost or 'reconnecting'}"
