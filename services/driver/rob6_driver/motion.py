@@ -294,6 +294,12 @@ class MotionCore:
             return self._alter_feed
         return 1.0
 
+    def speed_share(self) -> float:
+        """How fast the setpoint moved in the last cycle, as a share of the speed limits
+        (the largest joint's)."""
+        with self._lock:
+            return float(np.max(np.abs(self._v_fd) / np.maximum(self._monitor.enforced.vmax, MIN_LIMIT)))
+
     @property
     def held_back_s(self) -> float:
         """Controller seconds the running (or last) trajectory has taken beyond its plan."""

@@ -8,9 +8,8 @@ cycles; longer when the core is slowed), with the time since the previous point 
 duration; the last point of a motion is final.
 Each point waits for its answer before the next goes out; points made meanwhile are
 merged into one (the newest position, durations summed; ``late`` counts them), but never
-into a segment spanning more than ``MAX_SEGMENT_PERIODS`` periods of the plan (at most
-what the core moves at full speed in that time): what a controller has taken runs out
-even after a stop, so no segment may be long.
+into a segment longer than what the core moves at its full speed in ``MAX_SEGMENT_PERIODS``
+periods: what a controller has taken runs out even after a stop, so no segment may be long.
 
 Pacing: a controller that answers only when its arm is ready for more (the Adept's V+
 program reads the next point when its previous MOVE was issued) holds rob6 back by its
@@ -130,7 +129,7 @@ class StreamedPoint:
     final: bool = False
     sequence: int = 0  # the wire's number, when the link numbers points as they are made
     made_t: float = 0.0  # the core's clock when it was made (s)
-    span: float = 0.0  # how much of the plan it covers, plan seconds (its duration, slowed by the feed)
+    span: float = 0.0  # how far it goes: seconds of the core's full speed (its duration, less when slowed)
 
 
 class LinkDown(Exception):
@@ -171,7 +170,8 @@ class StreamedPointsLink(Link):
         # the stream (guarded by _cond)
         self._open = False
         self._since = 0
-        self._span = 0.0  # plan seconds the core has run since the last point (its feed, summed)
+        self._paced = 0.0  # plan seconds the core has run since the last point (its feed, summed)
+        self._span = 0.0  # ... and what it moved meanwhile, in seconds of its full speed
         self._outbox: deque[StreamedPoint] = deque()
         self._inflight = False
         self._stop_pending = False
@@ -181,7 +181,7 @@ class StreamedPointsLink(Link):
         # statistics
         self.packets = 0  # points acknowledged
         self.late = 0  # points merged into a later one (their answer came late)
-        self.longest_segment_s = 0.0  # the longest span of the plan a point was sent with (s)
+        self.longest_segment_s = 0.0  # the longest segment sent, in seconds of the core's full speed
         self.refused = 0
         self.garbage = 0
         self.runs = 0  # (motion) connections made
@@ -350,17 +350,19 @@ class StreamedPointsLink(Link):
             if not self._open:
                 self._open = True
                 self._since = 0
-                self._span = 0.0
+                self._paced = self._span = 0.0
                 self._on_open()
             self._since += 1
-            self._span += self.core.feed * self.core.dt
-            if self._span >= self.period_s - 1e-9:  # a period of the plan: slowed, the points come less often
+            self._paced += self.core.feed * self.core.dt
+            self._span += self.core.speed_share() * self.core.dt
+            # a period of the plan (slowed, the points come less often), or as far as it goes in one
+            if max(self._paced, self._span) >= self.period_s - 1e-9:
                 self._push(state.q, self._since * self.core.dt)
                 self._since = 0
         else:
             if self._open:
                 self._open = False
-                self._span += self.core.feed * self.core.dt
+                self._span += self.core.speed_share() * self.core.dt
                 self._push(state.q, max(self._since, 1) * self.core.dt, final=True)
             self._resting(state.q)
 
@@ -371,13 +373,13 @@ class StreamedPointsLink(Link):
             return
         self._outbox.append(StreamedPoint(np.array(q, float), float(duration), final, self._number(final),
                                           self.core.t, self._span))
-        self._span = 0.0
+        self._paced = self._span = 0.0
         self._wake()
 
     def _merge(self) -> tuple[StreamedPoint, float]:
-        """The points waiting since the last answer, up to a final one, as one, never
-        spanning more than ``max_segment_s`` of the plan: the last of them and their summed
-        duration (lock held, the outbox not empty). It is in flight from now on."""
+        """The points waiting since the last answer, up to a final one, as one, never going
+        further than the core's full speed in ``max_segment_s``: the last of them and their
+        summed duration (lock held, the outbox not empty). It is in flight from now on."""
         merged = [self._outbox.popleft()]
         span = merged[0].span
         while self._outbox and not merged[-1].final and span + self._outbox[0].span <= self.max_segment_s + 1e-9:
