@@ -142,6 +142,7 @@ class Motion:
         self.ok: bool | None = None
         self.reason = ""
         self.error = ""
+        self.started = False  # it ran (a refused one never does)
         self.final: CoreState | None = None
         self._callbacks: list[Callable[[Motion], None]] = []
         self._lock = threading.Lock()
@@ -501,6 +502,7 @@ class MotionCore:
                 self._pos = 0.0
                 self._held_back = 0.0
                 self._motion = motion
+                motion.started = True
                 self._mode = "trajectory"
                 if len(arr) <= 1:
                     self._finish_trajectory(True, "")
