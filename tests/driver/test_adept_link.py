@@ -444,6 +444,8 @@ def test_only_the_adept_and_sensible_settings() -> None:
     for settings, text in ((AdeptSettings(motion_port=0), "ROB6_SM_MOTION_PORT=0"),
                            (AdeptSettings(byte_order="middle"), "ROB6_SM_BYTE_ORDER='middle'"),
                            (AdeptSettings(period_s=0.0), "ROB6_SM_PERIOD=0.0"),
-                           (AdeptSettings(host=" "), "ROB6_SM_HOST is empty")):
+                           (AdeptSettings(host=" "), "ROB6_SM_HOST is empty"),
+                           (AdeptSettings(outputs="1-600"), "ROB6_SM_OUTPUTS='1-600': 1-600 is not a range of V"),
+                           (AdeptSettings(outputs="5,x"), "ROB6_SM_OUTPUTS='5,x': expected ranges")):
         with pytest.raises(ValueError, match=text):
             settings.check()

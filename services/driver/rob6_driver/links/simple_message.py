@@ -75,7 +75,7 @@ from rob6.robots import RobotModel
 
 from ..motion import MotionCore
 from . import Outputs, Publish
-from .adept_io import AdeptIoPort, IoPortError
+from .adept_io import DEFAULT_OUTPUTS, AdeptIoPort, IoPortError, parse_outputs
 from .simple_message_codec import (
     BYTE_ORDERS,
     END_TRAJECTORY,
@@ -170,6 +170,7 @@ class AdeptSettings:
     io_port: int = DEFAULT_IO_PORT
     byte_order: str = DEFAULT_BYTE_ORDER
     period_s: float = DEFAULT_PERIOD_S
+    outputs: str = DEFAULT_OUTPUTS  # the digital outputs the controller has installed
 
     def check(self) -> None:
         """ValueError (one line, naming the setting) when a value cannot work."""
@@ -178,6 +179,7 @@ class AdeptSettings:
         if self.byte_order not in BYTE_ORDERS:
             raise ValueError(f"ROB6_SM_BYTE_ORDER={self.byte_order!r}: expected big or little")
         check_period("ROB6_SM", self.period_s)
+        parse_outputs(self.outputs)
 
 
 class AdeptLink(StreamedPointsLink):
@@ -200,6 +202,7 @@ class AdeptLink(StreamedPointsLink):
         self.motion_name = _name(self.motion_addr)
         self.state_name = _name(self.state_addr)
         self.io = AdeptIoPort(host, int(settings.io_port))
+        self.installed = parse_outputs(settings.outputs)
         self._outputs = Outputs()
         # the connections (guarded by _cond)
         self._motion_up = False
@@ -234,7 +237,12 @@ class AdeptLink(StreamedPointsLink):
     # ------------------------------------------------------------------ digital outputs
     def signal(self, signals: list[int]) -> str:
         """SIGNAL each number through the program's I/O port, in order; stops at the first
-        the controller does not confirm (the ones before it stay switched)."""
+        the controller does not confirm (the ones before it stay switched). Nothing is sent
+        when one is not installed (its SIGNAL would end the program's I/O task)."""
+        missing = [n for n in signals if not any(abs(n) in r for r in self.installed)]
+        if missing:
+            return (f"signal {missing[0]} is not installed on the controller (ROB6_SM_OUTPUTS="
+                    f"{self.settings.outputs}): SIGNAL of it would end the V+ program's I/O task; nothing was switched")
         done: list[int] = []
         for signal in signals:
             try:
