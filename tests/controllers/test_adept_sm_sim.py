@@ -292,21 +292,22 @@ def test_a_stop_is_answered_and_halts_nothing() -> None:
         ctl.wait_for(lambda s: s["points_executed"] == 3 and not s["in_motion"])
 
 
-def test_one_move_waits_beyond_the_running_one_and_the_next_point_after_it() -> None:
-    """V+ runs a program one motion instruction ahead: the MOVE after the one waiting holds
-    the program (line 599), which reads the next point only then, so the point after that
-    is answered only when the arm has moved on."""
+def test_a_move_returns_when_its_motion_begins_and_the_next_point_is_read_only_then() -> None:
+    """V+'s forward processing (V+ Language User's Guide, Motion Control Instructions): a MOVE
+    is planned behind the running motion and returns when that one is done; the program
+    reads its next point only after MOVE returned (lines 551-602), so that point is answered
+    only when the arm has moved on."""
     with moving_sim() as ctl:
         motion = Motion(ctl.motion, ">")
-        for seq, j1 in enumerate((20, 40, 60)):  # running, waiting, and the MOVE that holds the program
-            assert motion.point(seq, (j1, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-        motion.send(traj_pt(">", -3, (80, 0, 0, 0, 0, 0)))
+        assert motion.point(0, (20, 0, 0, 0, 0, 0)) == (SUCCESS, 0)  # runs at once
+        assert motion.point(1, (40, 0, 0, 0, 0, 0)) == (SUCCESS, 0)  # planned behind it: its MOVE holds the program
+        motion.send(traj_pt(">", -3, (60, 0, 0, 0, 0, 0)))
         st = ctl.status()
-        assert st["queue_length"] == 1 and st["moves_issued"] == 2 and st["points_acknowledged"] == 3
-        assert motion.reply() == (SUCCESS, 0)  # once the first MOVE is done and the third issued
-        st = ctl.status()
-        assert st["points_executed"] >= 1 and st["moves_issued"] >= 3
-        assert ctl.wait_for(lambda s: s["points_executed"] == 4 and not s["in_motion"])["underruns"] == 0
+        assert st["queue_length"] == 1 and st["moves_issued"] == 2 and st["points_acknowledged"] == 2
+        assert st["points_executed"] == 0
+        assert motion.reply() == (SUCCESS, 0)  # once the first motion is done and the second began
+        assert ctl.status()["points_executed"] >= 1
+        assert ctl.wait_for(lambda s: s["points_executed"] == 3 and not s["in_motion"])["underruns"] == 0
 
 
 def test_a_late_move_stops_the_arm_at_its_point_then_goes() -> None:
@@ -402,7 +403,7 @@ def test_drives_cannot_come_on_during_an_estop(sim: AdeptController) -> None:
 def test_drives_off_while_a_move_waits_ends_the_task() -> None:
     with moving_sim() as ctl:
         motion = Motion(ctl.motion, ">")
-        for seq, j1 in enumerate((-150, -140, -130)):  # the third holds the program in its MOVE
+        for seq, j1 in enumerate((-150, -140)):  # the second holds the program in its MOVE
             assert motion.point(seq, (j1, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
         ctl.wait_for(lambda s: s["position_rob6_deg"][0] < -5, what="J1 under way")
         ctl.drives(False)

@@ -4,8 +4,8 @@ Each ``MOVE`` (``adept_ros.v2`` line 599) is a joint-interpolated segment from t
 previous point, at the speed ``SPEED 100 ALWAYS`` and ``ACCEL 100, 100`` give (lines
 546-547) times the pendant's monitor speed: the joints together along a straight line in
 joint space, the slowest joint at its rated speed; the point's velocity and duration play
-no part. V+ runs a program one motion instruction ahead of the robot, so at most one
-MOVE waits beyond the one running (``room``). The joints follow the segments like servos:
+no part. V+ plans a MOVE behind the running motion and returns from it when it begins
+(forward processing), so at most one MOVE waits beyond the one running (``room``). The joints follow the segments like servos:
 they accelerate and brake at their limits (both scaled by the monitor speed), never run
 past a point they have to stop at, and round the corner to the next segment when it was
 issued before the running one ended (continuous path). When it came later, the arm stops
@@ -28,7 +28,7 @@ BRAKE_MARGIN = 0.9  # brake planning uses 90 % of the deceleration, the rest abs
 #: stopped at a point, for a MOVE that came late: this close (deg) and (nearly) at rest
 STOPPED_DEG = 1e-3
 MAX_CATCH_UP_S = 1.0  # a stalled process does not replay more than this
-#: MOVEs issued beyond the one running (V+ processes one motion instruction ahead)
+#: MOVEs issued beyond the one running (V+'s forward processing: the next one is planned)
 AHEAD = 1
 
 
@@ -65,7 +65,7 @@ class Arm:
     # ---- commands --------------------------------------------------------
     @property
     def room(self) -> bool:
-        """A MOVE may be issued now (V+ lets the program run one motion ahead)."""
+        """A MOVE may be issued now (none waits behind the running one)."""
         return len(self.queue) < AHEAD
 
     def issue(self, move: Move) -> None:

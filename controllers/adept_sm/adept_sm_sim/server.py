@@ -7,7 +7,8 @@ section 4 and controllers/adept_sm/README.md give the program's lines):
   fixed 68-byte records read one by one, whatever their length word or message type says;
   a service request (comm type 2) answered at once (body 0, or -4 for a stop), a stop (-4)
   answered also as a topic and otherwise ignored (nothing halts), every other record a
-  ``MOVE`` to its joints, which waits while the arm has one MOVE running and one waiting.
+  ``MOVE`` to its joints, planned behind the running motion and returning when it begins
+  (V+'s forward processing): the next record is read only then.
   A MOVE that cannot run (outside a joint range, not a number, drives off, E-stop) is a V+
   error: the task ends and its connection closes; the supervisor (``task.controll``)
   restarts it after ``restart_s``, and the port refuses connections meanwhile;
@@ -283,19 +284,25 @@ class Controller:
             await self._move(tuple(math.degrees(x) for x in record.joints_rad[:6]), seq, arrived)
 
     async def _move(self, q: tuple[float, ...], seq: int, arrived: float) -> None:
-        """``MOVE #PPOINT(...)`` (lines 597-599): once the arm has room for it; TaskEnds
+        """``MOVE #PPOINT(...)`` (lines 597-599), with V+'s forward processing: the motion is
+        planned behind the running one and the instruction returns when it begins; TaskEnds
         when the controller cannot move there."""
+        move = Move(q, arrived)
+        issued = False
         while True:
-            why = self.refusal() or limit_violation(q)
+            why = self.refusal() or limit_violation(q)  # also for a motion a brake dropped
             if why:
                 raise TaskEnds(f"MOVE to point {seq} failed: {why}")
             self.advance()
-            if self.arm.room:
+            if not issued and self.arm.room:
+                self.arm.issue(move)
+                self.moves += 1
+                issued = True
+                continue
+            if issued and not any(m is move for m in self.arm.queue):
                 break
             self.room.clear()
             await self.room.wait()
-        self.arm.issue(Move(q, arrived))
-        self.moves += 1
         if seq == sm.END_TRAJECTORY:
             self.arm.close_stream()  # for the statistics only: the program treats -3 as a point
 

@@ -12,25 +12,32 @@ The controller is the TCP server, rob6 the client on its ports (``ROB6_SM_HOST``
   ``signal`` (DirectAdeptCmd signal 5, -6), which switches digital outputs.
 
 The clock is the driver's own (like the simulation): every ``robot.cycle_s`` (16 ms) the
-motion core steps, and while the robot moves every ``period_s`` (default 48 ms, three
-cycles) its setpoint becomes one point, with the time since the previous point as its
-``duration`` and the speed that implies as ``velocity`` (fraction of the rated joint
-speeds). Every setpoint has passed the core's limit monitor; the link also refuses to
-send one outside the controller's joint ranges. A motion's stream
+motion core steps, and while the robot moves each time the plan has run ``period_s``
+(default 48 ms, three cycles) its setpoint becomes one point, with the time since the
+previous point as its ``duration`` and the speed that implies as ``velocity`` (fraction of
+the rated joint speeds). Every setpoint has passed the core's limit monitor; the
+controller's own joint ranges (``CONTROLLER_RANGE_DEG``) bound the core's turn limits, so
+a motion leaving them is refused before it starts, and the link never sends such a point.
+A motion's stream
 
 * starts with a *hold point*: the position the robot rests at, lasting one period plus
-  a lead (one more period). A controller that honours durations thus runs one lead
-  behind rob6, so the next point is always there before the previous one is played out
-  (no underrun, however the machine's timing jitters up to a lead);
+  a lead (one more period), for a controller that honours durations;
 * ends with the final setpoint as sequence -3 (END_TRAJECTORY) once the core is at rest.
 
-When an acknowledgement comes late the points produced meanwhile are merged into one
-(the newest position, the durations summed: the timing is kept; ``late`` counts them).
+Each point waits for its acknowledgement. The Adept's V+ program reads a point only when
+its previous MOVE was issued (one MOVE runs, one waits), so its acknowledgements come at
+the arm's pace: the base (``streamed_points.py``) merges what was made meanwhile, never
+beyond two periods of the core's full speed, and slows the core (time scaling) when the
+answers fall behind, so the arm and rob6's setpoints stay together at any monitor speed.
 
-The Adept's V+ program ignores velocity and duration (``SPEED 100 ALWAYS``): the arm
-runs each point at the pendant's monitor speed, one point ahead of the program. It
-acknowledges every point at once with code 1 and reports no errors in STATUS (only
-drives, E-stop and motion); the simulator ``adept-sm-sim`` can do both ways.
+A motion connection begins with the *opening* (``Codec.opening``): the program discards
+the first four bytes of a connection, and the opening reads right whether they are rob6's
+or not (deploy/adept/README.md section 4).
+
+The V+ program ignores velocity and duration (``SPEED 100 ALWAYS``): the arm runs each
+point at the pendant's monitor speed. It acknowledges every point at once with code 1 and
+reports no errors in STATUS (only drives, E-stop and motion); a MOVE it cannot make ends
+its motion task, which closes the connection.
 
 A motion returns ``true`` only when the robot has arrived: all points acknowledged,
 the controller reports it at rest, and its JOINT_POSITION is the final setpoint within
@@ -50,8 +57,8 @@ Motion commands meanwhile are refused with the same error. The link resumes once
 connections are up, STATUS is clear and the robot is at rest (two state messages after
 the fault, the same position in both): the core continues from the robot's actual
 position, never from where an interrupted motion would have been. When the stream was
-cut mid-motion the link sends a stop (sequence -4) as soon as it can; the simulator
-brakes on it, the V+ program does not (its issued motions, at most two points, run out).
+cut mid-motion the link sends a stop (sequence -4) as soon as it can; the V+ program
+answers it and halts nothing: the MOVEs it has issued (at most three short segments) run out.
 
 Joints: rob6 (rob6server's convention, degrees) versus the controller's (radians on the
 wire), see ``to_controller_deg`` and deploy/adept/README.md.
