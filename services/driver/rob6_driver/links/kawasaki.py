@@ -114,8 +114,6 @@ class KawasakiLink(StreamedPointsLink):
         self.underruns = 0  # as the controller last reported them
         waiting = f"robot not connected (waiting for the Kawasaki AS program at {self.name})"
         super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
-        self._queued = 0  # points the controller holds, as its last A or S line said
-        self.pace_lead_s = 3 * self.period_s  # its robot program starts a motion at three points
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
@@ -162,9 +160,6 @@ class KawasakiLink(StreamedPointsLink):
 
     def _controller_missed(self) -> int:
         return self.underruns
-
-    def _held_s(self) -> float:
-        return self._queued * self.period_s
 
     # ------------------------------------------------------------------ the connection
     def _connection_loop(self) -> None:
@@ -290,13 +285,11 @@ class KawasakiLink(StreamedPointsLink):
             self._robot = st
             self._state_count += 1
             self.underruns = st.underruns
-            self._queued = st.queued
             self._evaluate()
 
     def _on_ack(self, sock: socket.socket, buffer: bytearray, ack: Ack, q: Joints | None, is_cancel: bool,
                 latency: float) -> None:
         with self._cond:
-            self._queued = ack.queued
             self._answered(latency)
             if ack.code == 0:
                 self._acked_mark = self._state_count
