@@ -58,8 +58,8 @@ and the feed changes only as fast as the acceleration limits leave room for: the
 acceleration a change of pace adds to the path's own stays within them. Alter plans its
 generated motion with its speed limits times the feed, and its watchdog counts the plan's
 time (a target missing for ``alter_timeout_s`` of it stops the motion). A stop is never
-slowed: it brakes from the speed the arm is commanded at. ``held_back_s`` says how much longer the
-current trajectory takes than planned (the driver extends its deadline by it).
+slowed: it brakes from the speed the arm is commanded at. ``held_back_s`` says how much
+longer the current trajectory takes than planned (the driver extends its deadline by it).
 """
 
 from __future__ import annotations

@@ -25,8 +25,8 @@ A motion's stream
 * ends with the final setpoint as sequence -3 (END_TRAJECTORY) once the core is at rest.
 
 Each point waits for its acknowledgement. The Adept's V+ program reads a point only when
-its previous MOVE was issued (one MOVE runs, one waits), so its acknowledgements come at
-the arm's pace: the base (``streamed_points.py``) merges what was made meanwhile, never
+its previous MOVE has begun (one motion runs, the next is planned behind it), so its
+acknowledgements come at the arm's pace: the base (``streamed_points.py``) merges what was made meanwhile, never
 beyond two periods of the core's full speed, and slows the core (time scaling) when the
 answers fall behind, so the arm and rob6's setpoints stay together at any monitor speed.
 

@@ -12,12 +12,13 @@ into a segment longer than what the core moves at its full speed in ``MAX_SEGMEN
 periods: what a controller has taken runs out even after a stop, so no segment may be long.
 
 Pacing: a controller that answers only when its arm is ready for more (the Adept's V+
-program reads the next point when its previous MOVE was issued) holds rob6 back by its
+program reads the next point when its previous MOVE has begun) holds rob6 back by its
 answers. The link measures how long its stream has been waiting for the controller
 (``ahead_s``: the age of the oldest point not yet answered, plus what the controller says
-it still holds, ``_held_s``) and slows the motion core (``core.set_feed``, time scaling along the same
-path) from full pace at ``PACE_FULL_PERIODS`` ahead to a halt at ``PACE_HALT_PERIODS``:
-the arm and rob6's setpoints stay together, whatever speed the arm runs at.
+it still holds beyond its design lead, ``_held_s`` and ``pace_lead_s``) and slows the
+motion core (``core.set_feed``, time scaling along the same path) from full pace at
+``PACE_FULL_PERIODS`` to a halt at ``PACE_HALT_PERIODS``: the arm and rob6's setpoints
+stay together, whatever speed the arm runs at.
 
 The base keeps the controller's health: offline (``core.offline``) while a connection
 is down or the controller reports a fault, back online (``core.online`` at the robot's
@@ -78,10 +79,11 @@ SETTLE_MAX_S = 4.0
 REST_TOL_DEG = 1e-3
 STOP_WAIT_S = 0.5
 LATENCY_WINDOW = 10000
-#: the longest segment one point may span, in periods (points merged while answers are late)
+#: the longest segment one point may span: what the core moves at its full speed in this
+#: many periods (points merged while answers are late)
 MAX_SEGMENT_PERIODS = 2
-#: pacing: full pace while the stream is at most this many periods ahead of what the
-#: controller has taken, then slower, to a halt at the second
+#: pacing: full pace while the stream has waited for the controller at most this many
+#: periods, then slower, to a halt at the second
 PACE_FULL_PERIODS = 1.5
 PACE_HALT_PERIODS = 4.0
 
