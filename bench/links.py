@@ -1,14 +1,11 @@
-"""Benchmark of Alter streaming through the whole system on each robot link (sim, RSI, simple_message).
+"""Benchmark of Alter streaming through the whole system on each robot link (sim, RSI).
 
 Alter streaming through the whole system on each robot link: MoveRTJoints at 250 Hz on
 kr16rt (4 ms cycle) with the recorder on, once on the simulation (``--link sim``) and
 once on RSI against the KR C4 simulator (kuka-rsi-sim, a separate process speaking
 RSI over real UDP), so the RSI figures stand beside the simulation's in the same run.
-Then the Adept over simple_message against adept-sm-sim (TCP): PTP moves and Alter
-streaming on ad850 at its 16 ms cycle, once with the simulator honouring the points'
-durations and once ignoring them as the V+ program does: points acknowledged, their
-acknowledgement latency, points merged, and underruns of the controller's queue (the
-Kawasaki's table, bench/kawasaki.py, uses the same run)."""
+The links that stream points share ``streamed_points_run`` and ``ControllerSim`` from
+here: the Kawasaki's table (bench/kawasaki.py); the Adept's pacing has bench/adept.py."""
 
 from __future__ import annotations
 
@@ -18,7 +15,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +30,7 @@ from rob6.robots import get_robot
 from tests.controllers.rsi_controller import SYSTEM_TIMEOUT, install
 
 from .latency import REACH_S, bare_relay, percentiles
-from .tables import Row, Table
+from .tables import Table
 from .viewer import Viewer
 
 START = "0 -80 100 0 30 0"
@@ -176,10 +173,6 @@ def stream(link: str, seconds: float, live: bool = False, ros: bool = True) -> d
     return result
 
 
-ADEPT_START = [0.0, -60.0, 40.0, 0.0, 30.0, 0.0]
-ADEPT_PTP = ([30.0, -50.0, 50.0, 10.0, 20.0, -20.0], [-20.0, -70.0, 60.0, -10.0, 40.0, 20.0], ADEPT_START)
-
-
 def streamed_points_run(robot: str, extra_env: dict[str, str], sim: ControllerSim, what: str,
                         start: list[float], ptp: Sequence[list[float]], alter: str, seconds: float,
                         lin_y_mm: float | None = None) -> tuple[dict[str, Any], dict[str, Any], LinkStatus, list[float]]:
@@ -238,48 +231,6 @@ def streamed_points_run(robot: str, extra_env: dict[str, str], sim: ControllerSi
     finally:
         sim.close()
     return before, after, link, moves
-
-
-def adept_stream(timing: str, seconds: float) -> dict[str, Any]:
-    """PTP moves, then MoveRTJoints every 16 ms for ``seconds``, on ad850 over simple_message."""
-    motion, state = free_port(), free_port()
-    extra = {"ROB6_LINK": "simple_message", "ROB6_SM_MOTION_PORT": str(motion), "ROB6_SM_STATE_PORT": str(state)}
-    sim = ControllerSim("adept_sm_sim", "--motion-port", str(motion), "--state-port", str(state),
-                        "--timing", timing)
-    before, after, link, moves = streamed_points_run("ad850", extra, sim, "the Adept link", ADEPT_START, ADEPT_PTP,
-                                                     "EnableAdeptAlter", seconds)
-    return {"received": after["points_received"] - before["points_received"],
-            "acked": after["points_acknowledged"] - before["points_acknowledged"],
-            "refused": after["points_refused"] - before["points_refused"],
-            "underruns": after["underruns"] - before["underruns"], "merged": link.late,
-            "link_latency_us": link.latency_us or [float("nan")] * 3, "controller_latency": after["ack_latency_ms"],
-            "packets": link.packets, "moves": moves}
-
-
-def adept_table(seconds: float, table: Table) -> None:
-    runs = {timing: adept_stream(timing, seconds) for timing in ("duration", "vplus")}
-
-    def each(fmt: Callable[[dict[str, Any]], object]) -> Row:
-        return tuple(fmt(runs[t]) for t in ("duration", "vplus"))
-
-    table(f"The Adept over simple_message: 3 PTP moves, then MoveRTJoints every 16 ms for {seconds:.0f} s "
-          "on ad850 against adept-sm-sim (TCP, state every 0.1 s)",
-          ("measure", "--timing duration (durations honoured)", "--timing vplus (as adept_ros.v2)", "goal"), [
-              ("points sent / acknowledged (controller)", *each(lambda r: f"{r['received']} / {r['acked']}"),
-               "all"),
-              ("points refused / merged (a late acknowledgement)",
-               *each(lambda r: f"{r['refused']} / {r['merged']}"), "0 / 0"),
-              ("underruns of the controller's queue", *each(lambda r: str(r["underruns"])),
-               "0 when durations are honoured"),
-              ("point sent -> acknowledged (driver) p50 / p99 / max, ms",
-               *each(lambda r: " / ".join(f"{x / 1000:.1f}" for x in r["link_latency_us"])),
-               "p99 < 48 (one period)"),
-              ("request in -> reply out (controller, queue wait included) p50 / p99, ms",
-               *each(lambda r: f"{r['controller_latency']['p50']:.1f} / {r['controller_latency']['p99']:.1f}"),
-               ""),
-              ("PTP MovePTPJoints -> true (3 moves), s",
-               *each(lambda r: " / ".join(f"{m:.2f}" for m in r["moves"])), ""),
-          ])
 
 
 #: how long the Alter floor is measured (3,750 lines)

@@ -1,9 +1,12 @@
 """adept-sm-sim against a tiny simple_message client written here from the protocol.
 
 The client packs and unpacks frames by hand (struct, no code of the simulator), so
-these tests check the wire format as well as the behaviour. Assertions are about
+these tests check the wire format as well as the behaviour. Each behaviour of the
+published V+ program the stand-in plays has a test here, named after it, with the
+program's lines (``adept_ros.v2`` in BenjaminSchellenbeck/adept_experimental,
+``adept_driver/V+/``) as controllers/adept_sm/README.md cites them. Assertions are about
 behaviour, never about how fast the (shared, slow) machine is; the only time figures
-are lower bounds the simulator must respect whatever the load.
+are lower bounds the simulator must respect whatever the load, and the arm's own clock.
 """
 
 from __future__ import annotations
@@ -78,11 +81,14 @@ def closed_by_peer(sock: socket.socket, timeout: float = 10.0) -> bool:
 
 
 class Motion:
-    """The motion port: send a point, read its reply."""
+    """The motion port: send a point, read its reply. The four bytes the program discards
+    on a new connection (line 539) go first, unless ``discarded`` is False."""
 
-    def __init__(self, addr: tuple[str, int], e: str) -> None:
+    def __init__(self, addr: tuple[str, int], e: str, discarded: bool = True) -> None:
         self.e = e
         self.sock = socket.create_connection(addr, timeout=20)
+        if discarded:
+            self.sock.sendall(b"\xde\xad\xbe\xef")
 
     def send(self, data: bytes) -> None:
         self.sock.sendall(data)
@@ -170,6 +176,10 @@ def moving_sim(*extra: str) -> AdeptController:
     return AdeptController("--state-period", "0.02", "--monitor-speed", "10", *extra)
 
 
+def task_ended(ctl: AdeptController, task: str) -> dict[str, Any]:
+    return ctl.wait_for(lambda s: not s["tasks"][task], what=f"the {task} task ended")
+
+
 # ---------------------------------------------------------------------------------
 
 
@@ -192,6 +202,9 @@ def test_ready_line_and_clean_exit_on_sigterm_and_sigint() -> None:
 
 @pytest.mark.parametrize("byte_order", ["big", "little"])
 def test_streamed_points_are_acknowledged_and_executed(byte_order: str) -> None:
+    """Lines 576-588: a service request answered at once (JOINT_TRAJ_PT, reply, code 1, one
+    int32 0); lines 597-599: then a MOVE to its joints. State port (lines 136-164):
+    JOINT_POSITION then STATUS."""
     e = ORDER[byte_order]
     targets = [(10, -10, 20, 5, 10, -15), (20, -20, 30, 10, 20, -30), (25, -15, 35, 0, 30, -45)]
     with AdeptController("--state-period", "0.02", byte_order=byte_order) as ctl:
@@ -208,8 +221,8 @@ def test_streamed_points_are_acknowledged_and_executed(byte_order: str) -> None:
         state.wait("status", lambda s: s["in_motion"] == 1, since=mark)
         st = ctl.wait_for(lambda s: s["points_executed"] == 3 and not s["in_motion"],
                           what="three points executed")
-        assert st["points_received"] == 3 and st["points_acknowledged"] == 3
-        assert st["underruns"] == 0 and st["queue_length"] == 0
+        assert st["points_received"] == 3 and st["points_acknowledged"] == 3 and st["moves_issued"] == 3
+        assert st["queue_length"] == 0
         assert close_to(st["position_rob6_deg"], targets[-1], 1e-4)
         assert st["ack_latency_ms"]["count"] == 3
         mark = state.count()
@@ -232,70 +245,152 @@ def test_start_pose_follows_the_documented_joint_convention() -> None:
 
 
 def test_start_pose_outside_the_limits_is_refused() -> None:
-    ctl = AdeptController("--start-pose", "0 0 200 0 0 0")
+    ctl = AdeptController("--start-pose", "0 0 167 0 0 0")  # the controller's J3 at 257 (URDF: 256)
     with pytest.raises(RuntimeError, match="exited with code 2.*outside the controller range"):
         ctl.start()
     assert ctl.proc is not None and ctl.proc.returncode == 2
 
 
-def test_stop_decelerates_and_clears_the_queue() -> None:
+@pytest.mark.parametrize("connect_read", ["client", "notice"])
+def test_the_first_four_bytes_of_a_connection_are_discarded(connect_read: str) -> None:
+    """Line 539: ``ros.read.4bytes`` once before the server loop, its value unused. As the
+    client's first bytes (``--connect-read client``, the default) a client must send four
+    bytes first, or its first frame is read four bytes off: its reply code taken as the
+    comm type, so nothing is answered. As V+'s own (``notice``) nothing of the client's is lost."""
+    with AdeptController("--connect-read", connect_read) as ctl:
+        if connect_read == "client":
+            motion = Motion(ctl.motion, ">")  # four bytes first
+            assert motion.point(0, (3, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+            motion.close()
+            ctl.wait_for(lambda s: s["tasks"]["motion"] and not s["clients"]["motion"], what="the port free")
+            bare = Motion(ctl.motion, ">", discarded=False)
+            bare.send(traj_pt(">", 1, (0, 0, 0, 0, 0, 0)))
+            bare.sock.settimeout(1.0)
+            with pytest.raises(TimeoutError):
+                bare.reply()
+        else:
+            bare = Motion(ctl.motion, ">", discarded=False)
+            assert bare.point(0, (3, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        assert ctl.status()["points_acknowledged"] == 1
+
+
+def test_a_stop_is_answered_and_halts_nothing() -> None:
+    """Lines 577-581 and 590-595: a -4 is answered (body -4) and issues no MOVE, but
+    nothing halts the arm: the MOVEs already issued run to their end."""
     with moving_sim() as ctl:
         motion = Motion(ctl.motion, ">")
-        assert motion.point(0, (150, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-        assert motion.point(1, (0, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        assert motion.point(0, (30, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        assert motion.point(1, (40, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
         ctl.wait_for(lambda s: s["position_rob6_deg"][0] > 5, what="J1 under way")
-        assert ctl.status()["queue_length"] == 1
         assert motion.point(-4) == (SUCCESS, -4)
         st = ctl.wait_for(lambda s: not s["in_motion"], what="standstill")
-        assert 5 < st["position_rob6_deg"][0] < 140
-        assert st["queue_length"] == 0 and st["points_executed"] == 0
-        time.sleep(0.3)  # and it stays where it stopped
-        assert ctl.status()["position_rob6_deg"] == st["position_rob6_deg"]
-        # the next trajectory is accepted as usual
+        assert close_to(st["position_rob6_deg"], (40, 0, 0, 0, 0, 0), 1e-4)  # both ran out
+        assert st["points_executed"] == 2 and st["moves_issued"] == 2
+        assert 0 < st["ran_on_s"]  # on the arm's clock, from the stop's arrival to rest
+        # the program goes on reading points
         assert motion.point(2, (0, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        ctl.wait_for(lambda s: s["points_executed"] == 3 and not s["in_motion"])
+
+
+def test_a_move_returns_when_its_motion_begins_and_the_next_point_is_read_only_then() -> None:
+    """V+'s forward processing (V+ Language User's Guide, Motion Control Instructions): a MOVE
+    is planned behind the running motion and returns when that one is done; the program
+    reads its next point only after MOVE returned (lines 551-602), so that point is answered
+    only when the arm has moved on."""
+    with moving_sim() as ctl:
+        motion = Motion(ctl.motion, ">")
+        assert motion.point(0, (20, 0, 0, 0, 0, 0)) == (SUCCESS, 0)  # runs at once
+        assert motion.point(1, (40, 0, 0, 0, 0, 0)) == (SUCCESS, 0)  # planned behind it: its MOVE holds the program
+        motion.send(traj_pt(">", -3, (60, 0, 0, 0, 0, 0)))
+        st = ctl.status()
+        assert st["queue_length"] == 1 and st["moves_issued"] == 2 and st["points_acknowledged"] == 2
+        assert st["points_executed"] == 0
+        assert motion.reply() == (SUCCESS, 0)  # once the first motion is done and the second began
+        assert ctl.status()["points_executed"] >= 1
+        assert ctl.wait_for(lambda s: s["points_executed"] == 3 and not s["in_motion"])["underruns"] == 0
+
+
+def test_a_late_move_stops_the_arm_at_its_point_then_goes() -> None:
+    """Continuous path only while the next MOVE is issued in time: issued after the path
+    has ended, the arm comes to rest at the point first (an underrun), then goes."""
+    with moving_sim("--state-period", "0.01") as ctl:
+        state = State(ctl.state, ">")
+        motion = Motion(ctl.motion, ">")
+        assert motion.point(0, (10, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        assert motion.point(1, (20, 0, 0, 0, 0, 0)) == (SUCCESS, 0)  # in time: blended
+        st = ctl.wait_for(lambda s: s["points_executed"] == 2 and not s["in_motion"])
+        assert st["underruns"] == 1  # the stream ran dry after point 1 (nothing followed)
+        mark = state.count()
+        assert motion.point(2, (30, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        state.wait("status", lambda s: s["in_motion"] == 1, since=mark)
+        time.sleep(0.05)
+        assert motion.point(3, (40, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        st = ctl.wait_for(lambda s: s["points_executed"] == 4 and not s["in_motion"])
+        assert close_to(st["position_rob6_deg"], (40, 0, 0, 0, 0, 0), 1e-4)
+
+
+def test_monitor_speed_scales_speed_and_acceleration() -> None:
+    """SPEED 100 ALWAYS and ACCEL 100, 100 (lines 546-547): every MOVE at the monitor speed's
+    share of the rated speeds and accelerations (250 deg/s and 1000 deg/s² for J1 at 100)."""
+    for monitor in (10.0, 100.0):
+        with AdeptController("--monitor-speed", str(monitor)) as ctl:
+            motion = Motion(ctl.motion, ">")
+            t0 = time.monotonic()
+            assert motion.point(0, (90, 0, 0, 0, 0, 0), dur=0.01, vel=1.0) == (SUCCESS, 0)  # both ignored
+            st = ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"], timeout=30)
+            share = monitor / 100.0
+            assert time.monotonic() - t0 >= 90 / (250 * share)  # never faster than its speed
+            assert 0.95 * 250 * share <= st["peak_speed_deg_s"][0] <= 250 * share + 1e-6
+            assert 0.9 * 1000 * share <= st["peak_accel_deg_s2"][0] <= 1000 * share + 1e-3
+            assert st["longest_segment_s"] == pytest.approx(90 / (250 * share), rel=1e-3)
+
+
+def test_a_point_the_arm_cannot_reach_is_answered_then_its_move_ends_the_task() -> None:
+    """The program has no failure reply (lines 584-586: code 1 for every point) and no error
+    handler: MOVE to a point outside a joint range, or to no number, is a V+ error that ends
+    the motion task and closes its connection; task.controll (lines 192-201) starts it again."""
+    with AdeptController("--restart-s", "0.3") as ctl:
+        for seq, q, rad in ((0, (0, 0, 167, 0, 0, 0), None),  # the controller's J3 at 257 (URDF: 256)
+                            (1, (0, 0, 0, 0, 0, 0), [0, math.radians(50), math.radians(90), 0, 0, 0]),
+                            (2, (0, 0, 0, 0, 0, 0), [float("nan"), 0, math.radians(90), 0, 0, 0])):
+            ctl.wait_for(lambda s: s["tasks"]["motion"], what="the motion task running")
+            motion = Motion(ctl.motion, ">")
+            assert motion.point(seq, q, rad=rad) == (SUCCESS, 0)
+            assert closed_by_peer(motion.sock)
+            st = task_ended(ctl, "motion")
+            assert st["position_rob6_deg"] == [0.0] * 6 and not st["in_motion"]
+            refused = socket.create_connection(ctl.motion, timeout=10)  # nobody serves the port meanwhile
+            assert closed_by_peer(refused)
+        st = ctl.wait_for(lambda s: s["tasks"]["motion"], what="the motion task restarted")
+        assert st["task_errors"] == 3 and st["points_acknowledged"] == 3 and st["moves_issued"] == 0
+        motion = Motion(ctl.motion, ">")  # just inside the range is fine
+        assert motion.point(3, (0, 45, 166, 0, 0, 0)) == (SUCCESS, 0)
         ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
 
 
-def test_point_outside_a_joint_limit_is_refused_and_does_not_move(sim: AdeptController) -> None:
-    motion = Motion(sim.motion, ">")
-    # rob6 q3 = 180 is 270 deg on the controller's J3 (range -29..259)
-    assert motion.point(0, (0, 0, 180, 0, 0, 0)) == (FAILURE, 0)
-    # a controller J2 of 50 deg (range -190..45), given straight in radians
-    assert motion.point(1, rad=[0, math.radians(50), math.radians(90), 0, 0, 0]) == (FAILURE, 0)
-    assert motion.point(2, rad=[float("nan"), 0, math.radians(90), 0, 0, 0]) == (FAILURE, 0)
-    st = sim.status()
-    assert st["points_refused"] == 3 and st["points_acknowledged"] == 0
-    assert st["position_rob6_deg"] == [0.0] * 6 and not st["in_motion"]
-    assert st["queue_length"] == 0 and st["points_executed"] == 0
-    # just inside the limits is fine
-    assert motion.point(3, (0, 45, 169, 0, 0, 0)) == (SUCCESS, 0)
-    sim.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
-
-
-def test_estop_mid_motion_stops_the_arm_and_refuses_points_until_released() -> None:
+def test_estop_mid_motion_brakes_the_arm_and_the_next_move_ends_the_task() -> None:
     with moving_sim() as ctl:
         state = State(ctl.state, ">")
         motion = Motion(ctl.motion, ">")
         assert motion.point(0, (150, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-        assert motion.point(1, (150, -30, 0, 0, 0, 0)) == (SUCCESS, 0)
         ctl.wait_for(lambda s: s["position_rob6_deg"][0] > 5, what="J1 under way")
         mark = state.count()
         ctl.estop()
         st = state.wait("status", lambda s: s["e_stopped"] == 1, since=mark)
-        assert st["drives_powered"] == 0 and st["motion_possible"] == 0
-        state.wait("status", lambda s: s["in_motion"] == 0, since=mark)
-        st = ctl.status()
+        assert st["drives_powered"] == 0
+        st = ctl.wait_for(lambda s: not s["in_motion"], what="standstill")
         assert st["e_stopped"] and not st["drives_powered"] and st["queue_length"] == 0
         stopped_at = st["position_rob6_deg"]
         assert 5 < stopped_at[0] < 140
-        assert motion.point(2, (0, 0, 0, 0, 0, 0)) == (FAILURE, 0)
+        assert motion.point(1, (0, 0, 0, 0, 0, 0)) == (SUCCESS, 0)  # answered, then MOVE fails
+        assert closed_by_peer(motion.sock)
+        task_ended(ctl, "motion")
         ctl.release()
-        assert motion.point(3, (0, 0, 0, 0, 0, 0)) == (FAILURE, 0)  # drives still off
         assert ctl.request({"cmd": "drives", "on": True})["ok"]
         assert ctl.status()["position_rob6_deg"] == stopped_at
-        state.wait("status", lambda s: s["e_stopped"] == 0 and s["drives_powered"] == 1,
-                   since=mark)
-        assert motion.point(4, (0, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        ctl.wait_for(lambda s: s["tasks"]["motion"], what="the motion task restarted")
+        motion = Motion(ctl.motion, ">")
+        assert motion.point(2, (0, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
         ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
 
 
@@ -305,77 +400,59 @@ def test_drives_cannot_come_on_during_an_estop(sim: AdeptController) -> None:
     assert not reply["ok"] and "e-stop" in reply["error"]
 
 
-def test_drives_off_mid_motion() -> None:
+def test_drives_off_while_a_move_waits_ends_the_task() -> None:
     with moving_sim() as ctl:
-        state = State(ctl.state, ">")
         motion = Motion(ctl.motion, ">")
-        assert motion.point(0, (-150, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        for seq, j1 in enumerate((-150, -140)):  # the second holds the program in its MOVE
+            assert motion.point(seq, (j1, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
         ctl.wait_for(lambda s: s["position_rob6_deg"][0] < -5, what="J1 under way")
-        mark = state.count()
         ctl.drives(False)
-        st = state.wait("status", lambda s: s["drives_powered"] == 0, since=mark)
-        assert st["e_stopped"] == 0 and st["motion_possible"] == 0
+        assert closed_by_peer(motion.sock)
         st = ctl.wait_for(lambda s: not s["in_motion"], what="standstill")
-        assert -140 < st["position_rob6_deg"][0] < -5
-        assert motion.point(1, (0, 0, 0, 0, 0, 0)) == (FAILURE, 0)
-        ctl.drives(True)
-        assert motion.point(2, (0, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        assert -140 < st["position_rob6_deg"][0] < -5 and st["task_errors"] == 1
 
 
-def test_status_is_sent_at_once_on_a_fault_not_only_every_period() -> None:
-    with AdeptController("--state-period", "60") as ctl:
+def test_status_every_period_only_with_the_fields_the_program_fills() -> None:
+    """Lines 136-164 and 327-371: a STATUS after each JOINT_POSITION, then WAIT.EVENT 0.1 s;
+    nothing between (a fault shows with the next one). error_code and in_error are never
+    set, motion_possible is "not in motion", mode 2 (AUTO)."""
+    with AdeptController() as ctl:
         state = State(ctl.state, ">")
-        state.wait("status", lambda s: True)  # the one sent on connection
-        mark = state.count()
-        ctl.estop()
-        # the next periodic STATUS is 60 s away
-        state.wait("status", lambda s: s["e_stopped"] == 1, since=mark, timeout=10)
-
-
-def test_injected_error_is_reported_and_refuses_points(sim: AdeptController) -> None:
-    state = State(sim.state, ">")
-    motion = Motion(sim.motion, ">")
-    sim.error(-1021)
-    st = state.wait("status", lambda s: s["in_error"] == 1)
-    assert st["error_code"] == -1021 and st["motion_possible"] == 0
-    assert sim.status()["error_code"] == -1021
-    assert motion.point(0, (10, 0, 0, 0, 0, 0)) == (FAILURE, 0)
-    sim.clear_error()
-    mark = state.count()
-    state.wait("status", lambda s: s["in_error"] == 0 and s["error_code"] == 0, since=mark)
-    assert motion.point(1, (10, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-
-
-def test_vplus_status_fields_send_what_the_v_plus_program_sends() -> None:
-    with AdeptController("--state-period", "0.02", "--status-fields", "vplus") as ctl:
-        state = State(ctl.state, ">")
-        ctl.error(-1021)
+        state.wait("status", lambda s: True)
         ctl.drives(False)
         mark = state.count()
         st = state.wait("status", lambda s: s["drives_powered"] == 0, since=mark)
-        # no error reporting, motion_possible is just "not in motion"
-        assert st["error_code"] == 0 and st["in_error"] == 0 and st["motion_possible"] == 1
-        assert ctl.status()["error_code"] == -1021
+        assert (st["error_code"], st["in_error"], st["motion_possible"], st["mode"]) == (0, 0, 1, 2)
+        state.wait("status", lambda s: True, since=state.count())
+        with state.lock:
+            times = [t for t, kind, _ in state.frames if kind == "status"]
+        assert all(b - a >= 0.09 for a, b in zip(times, times[1:], strict=False))
+        assert len(times) >= 3
 
 
-def test_a_dropped_connection_is_accepted_again(sim: AdeptController) -> None:
+def test_a_dropped_connection_ends_the_task_which_is_restarted(sim: AdeptController) -> None:
     motion = Motion(sim.motion, ">")
     state = State(sim.state, ">")
     state.wait("joints", lambda j: True)
     sim.wait_for(lambda s: s["clients"]["motion"], what="the motion client taken")
     assert sim.drop_connection("motion") is True
     assert closed_by_peer(motion.sock)
+    task_ended(sim, "motion")
     assert sim.drop_connection("motion") is False  # nobody connected now
+    sim.wait_for(lambda s: s["tasks"]["motion"], what="the motion task restarted")
     motion = Motion(sim.motion, ">")
     assert motion.point(0, (5, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
     assert sim.drop_connection("state") is True
     assert closed_by_peer(state.sock)
+    task_ended(sim, "state")
+    sim.wait_for(lambda s: s["tasks"]["state"], what="the state task restarted")
     state = State(sim.state, ">")
     state.wait("joints", lambda j: True)
     assert sim.status()["clients"] == {"motion": True, "state": True, "io": 0}
 
 
 def test_a_second_client_is_refused_and_the_first_keeps_working(sim: AdeptController) -> None:
+    """``/CLIENTS 1`` on the motion and state ports (lines 128 and 530)."""
     first = Motion(sim.motion, ">")
     assert first.point(0, (1, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
     second = socket.create_connection(sim.motion, timeout=10)
@@ -388,9 +465,9 @@ def test_a_second_client_is_refused_and_the_first_keeps_working(sim: AdeptContro
     # the first state client goes on receiving
     mark = s1.count()
     s1.wait("joints", lambda j: True, since=mark)
-    # once it leaves, the port takes a new client
+    # once it leaves, its task ends and is restarted, and the port takes a new client
     s1.close()
-    sim.wait_for(lambda s: not s["clients"]["state"], what="state client gone")
+    sim.wait_for(lambda s: not s["clients"]["state"] and s["tasks"]["state"], what="state client gone")
     s3 = State(sim.state, ">")
     s3.wait("joints", lambda j: True)
 
@@ -406,48 +483,30 @@ def test_slow_ack_delays_every_acknowledgement(sim: AdeptController) -> None:
     assert sim.status()["slow_ack_ms"] == 0
 
 
-def test_malformed_frames_close_the_connection_or_fail_and_never_crash(sim: AdeptController) -> None:
+def test_records_of_fixed_length_whatever_a_frame_says() -> None:
+    """Lines 558-573 read 68 bytes per point and check neither the length nor the message
+    type: a 64-byte request of another type is a point like any other, and a shorter frame
+    shifts everything after it, so joints are read from the wrong bytes (here the next
+    frame's header: the controller's zero angles, a motion of its own)."""
     e = ">"
-    # a request of the right size but another message type: failure reply, still connected
-    motion = Motion(sim.motion, e)
-    motion.send(frame(e, 99, REQUEST, 0, b"\0" * 52))
-    assert motion.reply() == (FAILURE, 0)
-    # a topic of another type: ignored; the next real point is answered
-    motion.send(frame(e, JOINT_POSITION, TOPIC, 0, b"\0" * 52))
-    assert motion.point(0, (1, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-    # a wrong length: the V+ program would lose its framing; the simulator hangs up
-    motion.send(frame(e, JOINT_TRAJ_PT, REQUEST, 0, b"\0" * 8))
-    assert closed_by_peer(motion.sock)
-    for length in (0, -5, 0x7FFFFFFF):
-        m = Motion(sim.motion, e)
-        m.send(struct.pack(e + "i", length))
-        assert closed_by_peer(m.sock)
-    # half a frame, then gone
-    m = Motion(sim.motion, e)
-    m.send(traj_pt(e, 7)[:30])
-    sim.wait_for(lambda s: s["clients"]["motion"], what="the half-frame client taken")
-    m.close()
-    st = sim.wait_for(lambda s: not s["clients"]["motion"], what="the half-frame client gone")
-    assert st["malformed_frames"] == 6
-    assert st["points_received"] == 1 and st["points_executed"] <= 1
-    assert sim.proc is not None and sim.proc.poll() is None
-    assert Motion(sim.motion, e).point(1, (2, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-
-
-def test_underrun_counted_when_the_stream_runs_dry_but_not_after_the_end(sim: AdeptController) -> None:
-    motion = Motion(sim.motion, ">")
-    assert motion.point(0, (5, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-    sim.wait_for(lambda s: s["points_executed"] == 1, what="first point")
-    assert sim.wait_for(lambda s: s["underruns"] == 1)["underruns"] == 1
-    assert motion.point(1, (10, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-    assert motion.point(-3, (15, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
-    st = sim.wait_for(lambda s: s["points_executed"] == 3 and not s["in_motion"])
-    assert st["underruns"] == 1 or st["underruns"] == 2  # 2 if point 1 itself came late
-    time.sleep(0.2)
-    assert sim.status()["underruns"] == st["underruns"]  # the -3 ended the trajectory
+    with moving_sim() as ctl:
+        motion = Motion(ctl.motion, e)
+        motion.send(frame(e, 99, REQUEST, 0, struct.pack(e + "i10fff", 0, *to_controller_rad((5, 0, 0, 0, 0, 0)),
+                                                         0, 0, 0, 0, 0.0, 0.0)))
+        assert motion.reply() == (SUCCESS, 0)
+        st = ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
+        assert close_to(st["position_rob6_deg"], (5, 0, 0, 0, 0, 0), 1e-4)
+        motion.send(frame(e, JOINT_TRAJ_PT, REQUEST, 0, struct.pack(e + "ii", 7, 0)))  # 20 bytes, not 68
+        motion.send(traj_pt(e, 8, (10, 0, 0, 0, 0, 0)))
+        assert motion.reply() == (SUCCESS, 0)  # the short frame's record, completed by the next one
+        st = ctl.wait_for(lambda s: s["points_executed"] == 2 and not s["in_motion"])
+        assert close_to(st["position_controller_deg"], (0, 0, 0, 0, 0, 0), 1e-3)  # not (-10, 0, 90, ...)
+        assert st["points_received"] == 2
 
 
 def test_topic_points_are_executed_without_a_reply(sim: AdeptController) -> None:
+    """Only a service request is answered (line 576), but every record is a MOVE (line 597),
+    and a stop is answered also as a topic (lines 590-595)."""
     e = ">"
     motion = Motion(sim.motion, e)
     motion.send(traj_pt(e, -1, (5, 0, 0, 0, 0, 0), comm=TOPIC))
@@ -458,28 +517,18 @@ def test_topic_points_are_executed_without_a_reply(sim: AdeptController) -> None
     st = sim.wait_for(lambda s: s["points_executed"] == 4 and not s["in_motion"])
     assert st["points_received"] == 4 and st["points_acknowledged"] == 1
     assert close_to(st["position_rob6_deg"], (20, 0, 0, 0, 0, 0), 1e-4)
-    # a stop is answered even as a topic, as the V+ program does
     motion.send(traj_pt(e, -4, comm=TOPIC))
     assert motion.reply() == (SUCCESS, -4)
 
 
-def test_duration_is_ignored_like_v_plus_unless_asked_for() -> None:
-    # V+ moves at SPEED 100: a 10 deg move given 30 s is over long before that
+def test_duration_and_velocity_are_ignored() -> None:
+    """Lines 570-573 read them; nothing uses them: a 10 deg move given 30 s is over long before."""
     with AdeptController() as ctl:
         motion = Motion(ctl.motion, ">")
         t0 = time.monotonic()
-        assert motion.point(0, (10, 0, 0, 0, 0, 0), dur=30.0) == (SUCCESS, 0)
+        assert motion.point(0, (10, 0, 0, 0, 0, 0), dur=30.0, vel=0.01) == (SUCCESS, 0)
         ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"], timeout=15)
         assert time.monotonic() - t0 < 15
-    with AdeptController("--timing", "duration") as ctl:
-        motion = Motion(ctl.motion, ">")
-        t0 = time.monotonic()
-        assert motion.point(0, (10, 0, 0, 0, 0, 0), dur=1.5) == (SUCCESS, 0)
-        ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"])
-        assert time.monotonic() - t0 >= 1.5
-        # neither a duration nor a velocity: nothing to time the move by
-        assert motion.point(1, (0, 0, 0, 0, 0, 0), vel=0.0, dur=0.0) == (FAILURE, 0)
-        assert motion.point(2, (0, 0, 0, 0, 0, 0), dur=float("inf")) == (FAILURE, 0)
 
 
 def test_control_channel_rejects_bad_requests_and_stays_up(sim: AdeptController) -> None:
@@ -489,7 +538,6 @@ def test_control_channel_rejects_bad_requests_and_stays_up(sim: AdeptController)
     reply = sim.request({"cmd": "fly"})
     assert reply["ok"] is False and "unknown cmd" in reply["error"]
     assert sim.request({"cmd": "drives"})["ok"] is False
-    assert sim.request({"cmd": "error", "code": 0})["ok"] is False
     assert sim.request({"cmd": "drop_connection", "port": "x"})["ok"] is False
     assert sim.request({"cmd": "slow_ack", "ms": -1})["ok"] is False
     assert sim.status()["ok"] is True
@@ -507,6 +555,7 @@ def io_ask(io: socket.socket, mode: int, number: int) -> str:
 
 
 def test_io_port_reads_and_writes_signals(sim: AdeptController) -> None:
+    """Lines 447-472: SIG(n) answered -1 or 0, SIGNAL(n) answered 1 (``/N``: no line end)."""
     assert sim.io is not None
     io = socket.create_connection(sim.io, timeout=10)
     assert io_ask(io, 1, 5) == "0"
@@ -514,18 +563,41 @@ def test_io_port_reads_and_writes_signals(sim: AdeptController) -> None:
     assert io_ask(io, 1, 5) == "-1"  # V+ TRUE
     assert io_ask(io, 0, -6) == "1"  # any mode but 1 writes
     assert io_ask(io, 2, 2001) == "1"  # a software signal
+    assert io_ask(io, 1, 1003) == "0"  # an installed input can be read
     assert sim.status()["outputs"] == [5, -6, 2001]
     assert io_ask(io, 2, -5) == "1"
     assert io_ask(io, 1, 5) == "0"
-    assert io_ask(io, 2, 1001) == "0"  # an input cannot be written
     st = sim.status()
     assert st["outputs"] == [-5, -6, 2001] and st["io_requests"] == 8 and st["clients"]["io"] == 1
     io.close()
 
 
+@pytest.mark.parametrize("mode, number", [(2, 9), (2, 1001), (1, 97)])
+def test_a_signal_the_controller_lacks_ends_the_io_task_for_good(sim: AdeptController, mode: int, number: int) -> None:
+    """SIGNAL or SIG of a signal that is not installed (or SIGNAL of an input) is a V+ error
+    (lines 463, 470); ``ros.io`` has no handler and nothing restarts task 4 (a.ros line 34
+    starts it once, task.controll restarts tasks 0 and 1 only): nothing is answered any more."""
+    assert sim.io is not None
+    io = socket.create_connection(sim.io, timeout=10)
+    assert io_ask(io, 2, 5) == "1"
+    io.sendall(struct.pack(">i", mode))
+    time.sleep(0.1)
+    io.sendall(struct.pack(">i", number))
+    assert not task_ended(sim, "io")["tasks"]["io"]
+    io.settimeout(0.5)
+    with pytest.raises(TimeoutError):
+        io_ask(io, 2, 6)
+    other = socket.create_connection(sim.io, timeout=10)
+    other.settimeout(0.5)
+    with pytest.raises(TimeoutError):
+        io_ask(other, 2, 6)
+    assert sim.status()["outputs"] == [5]
+
+
 def test_io_port_reads_one_record_per_number_like_v_plus(sim: AdeptController) -> None:
     """Both numbers in one write are one record: the program takes the mode from its first
-    four bytes, loses the rest and reads the number from the next record."""
+    four bytes, loses the rest and reads the number from the next record (lines 450-458);
+    a record shorter than LNGB's four bytes is a V+ error that ends the task."""
     assert sim.io is not None
     io = socket.create_connection(sim.io, timeout=10)
     io.sendall(struct.pack(">ii", 2, 7))  # mode and number at once: 7 is lost
@@ -533,10 +605,9 @@ def test_io_port_reads_one_record_per_number_like_v_plus(sim: AdeptController) -
     io.sendall(struct.pack(">i", 8))  # taken as the number
     assert io.recv(64) == b"1"
     assert sim.status()["outputs"] == [8]
-    io.sendall(b"\x00\x00")  # a record shorter than LNGB's four bytes ends the connection
-    assert closed_by_peer(io)
-    st = sim.status()
-    assert st["io_errors"] == 1 and st["clients"]["io"] == 0 and st["outputs"] == [8]
+    io.sendall(b"\x00\x00")
+    st = task_ended(sim, "io")
+    assert st["io_errors"] == 1 and st["outputs"] == [8]
 
 
 def test_a_port_in_use_is_a_clear_error() -> None:

@@ -509,17 +509,18 @@ def test_adept_profile_drives_the_adept_container(built: None, entry_points: Non
             assert time.monotonic() < deadline, f"the driver never connected to the Adept container: {before}"
             time.sleep(0.5)
         start = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # adept-sm-sim's default start pose (rob6's convention)
-        assert before["position_rob6_deg"] == start and not before["in_motion"], before
+        # the link's opening may be a MOVE to where the arm stands, as float32 radians carry it
+        assert all(abs(a - b) < 2e-4 for a, b in zip(before["position_rob6_deg"], start, strict=True)), before
+        assert not before["in_motion"], before
         target = [30.0, -50.0, 50.0, 10.0, 20.0, -20.0]
         moved_s, status = follow_then_move(stack.port, target, adept)
         # the controller's own arm is at the target and at rest: true means the robot arrived
         assert all(abs(a - b) < 2e-4 for a, b in zip(status["position_rob6_deg"], target, strict=True)), status
         assert not status["in_motion"] and status["queue_length"] == 0, status
-        # the motion went over the wire as acknowledged points, none refused or malformed
+        # the motion went over the wire as acknowledged points, every MOVE the program issued ran
         assert status["points_executed"] > before["points_executed"], status
         assert status["points_acknowledged"] > before["points_acknowledged"], status
-        assert status["points_refused"] == before["points_refused"] == 0, status
-        assert status["malformed_frames"] == 0 and status["error_code"] == 0 and not status["e_stopped"], status
+        assert status["task_errors"] == before["task_errors"] == 0 and not status["e_stopped"], status
         assert status["clients"]["motion"] and status["clients"]["state"], status  # still the same link
         REPORT["adept: controller after the move"] = {
             "move_s": round(moved_s, 2), **{k: status[k] for k in (

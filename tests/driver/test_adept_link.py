@@ -49,13 +49,18 @@ class Ports(TypedDict):
 
 
 class FakeController:
-    """Both ports of a simple_message controller, scripted by the test."""
+    """Both ports of a simple_message controller, scripted by the test. The motion port reads
+    fixed 68-byte records like the V+ program (``discard``: after taking the connection's
+    first four bytes, as its ``GETC`` would if they are the client's); the records of the
+    connection's opening are kept apart from the points."""
 
-    def __init__(self, order: str = "big") -> None:
+    def __init__(self, order: str = "big", discard: bool = False) -> None:
         self.e = ORDERS[order]
+        self.discard = discard
         self.motion_server = socket.create_server(("127.0.0.1", 0))
         self.state_server = socket.create_server(("127.0.0.1", 0))
         self.points: list[Point] = []
+        self.openings: list[Point] = []  # the records the link's openings were read as
         self.reply_code = 1
         self.ack_delay = 0.0
         self.follow = True  # the robot is at every acknowledged point at once
@@ -66,6 +71,7 @@ class FakeController:
         self.pipelined = 0  # requests sent before the previous one was answered
         self.connections = {"motion": 0, "state": 0}
         self._sockets: list[socket.socket] = []
+        self._opened = 0  # openings before the current motion connection's
         self._closing = False
         for server, serve in ((self.motion_server, self._motion), (self.state_server, self._state)):
             threading.Thread(target=self._accept, args=(server, serve), daemon=True).start()
@@ -105,15 +111,23 @@ class FakeController:
 
     def _motion(self, conn: socket.socket) -> None:
         self.connections["motion"] += 1
+        self._opened = len(self.openings)
         e = self.e
+        opening = 1  # records of the opening still to come (a stop read from byte 0: one more)
         try:
+            if self.discard:
+                _exact(conn, 4)
             while True:
-                (length,) = struct.unpack(e + "i", _exact(conn, 4))
-                payload = _exact(conn, length)
-                msg_type, comm, _ = struct.unpack_from(e + "3i", payload)
-                assert msg_type == 11 and length == 64, (msg_type, length)
-                seq, *rest = struct.unpack_from(e + "i10fff", payload, 12)
-                point = Point(seq, comm, rest[:10], rest[10], rest[11])
+                record = _exact(conn, 68)
+                _length, msg_type, comm, _, seq = struct.unpack_from(e + "5i", record)
+                point = Point(seq, comm, struct.unpack_from(e + "10f", record, 20), *struct.unpack_from(e + "ff", record, 60))
+                if opening:
+                    first = opening == 1 and not self.openings[self._opened:]
+                    opening = 1 if first and seq == -4 else 0
+                    self.openings.append(point)
+                    conn.sendall(self._frame(11, 3, 1, struct.pack(e + "i", -4 if seq == -4 else 0)))
+                    continue
+                assert msg_type == 11, msg_type
                 self.points.append(point)
                 if self.ack_delay:
                     time.sleep(self.ack_delay)
@@ -231,6 +245,35 @@ def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig: R
     assert [e.event for e in events][:2] == ["waiting", "connected"]
 
 
+@pytest.mark.parametrize("discard", [False, True])
+def test_the_opening_reads_right_whether_the_first_four_bytes_are_discarded_or_not(discard: bool) -> None:
+    """The V+ program discards four bytes when a client connects (adept_ros.v2 line 539);
+    whether they are the client's cannot be told from the program. Read from its first
+    byte the opening is two stops, from its fifth a point where the arm stands (a MOVE that
+    goes nowhere); either way the stream that follows is framed right."""
+    fake = FakeController(discard=discard)
+    core = MotionCore(ROBOT)
+    link = AdeptLink(core, ROBOT, AdeptSettings(**fake.settings), lambda s: None, retry_s=0.1)
+    try:
+        here = [10.0, -20.0, 15.0, 5.0, 20.0, -30.0]
+        fake.position = to_wire(here)
+        link.start()
+        online(core, link)
+        if discard:
+            assert [p.sequence for p in fake.openings] == [0]
+            assert np.allclose(fake.openings[0].q, here, atol=1e-4)
+        else:
+            assert [p.sequence for p in fake.openings] == [-4, -4]
+        motion, _ = ptp(core, [0.0] * 6)
+        assert motion.wait(20) and motion.ok
+        assert motion.final is not None and link.settle(motion.final.q) == ""
+        assert fake.points[0].sequence == 0 and fake.points[-1].sequence == -3
+        assert [p.sequence for p in fake.points[1:-1]] == list(range(1, len(fake.points) - 1))
+    finally:
+        link.stop()
+        fake.close()
+
+
 def test_an_estop_ends_the_motion_and_the_robot_resumes_where_it_stopped(rig: Rig) -> None:
     fake, core, link, events = rig
     motion = moving(rig, 30.0, 10)
@@ -326,8 +369,11 @@ def test_late_acknowledgements_merge_points_and_keep_the_timing(rig: Rig) -> Non
     assert motion.wait(20) and motion.ok
     assert motion.final is not None and link.settle(motion.final.q) == ""
     assert link.late > 0 and len(fake.points) + link.late == link.late + link.packets
-    assert sum(p.duration for p in fake.points) == pytest.approx((samples - 1) * core.dt + link.period_s + link.lead_s + core.dt,
-                                                                 abs=core.dt + 1e-6)
+    # rob6 slowed its plan to the acknowledgements' pace, and the durations say so
+    assert core.held_back_s > 0.5
+    assert sum(p.duration for p in fake.points) == pytest.approx(
+        (samples - 1) * core.dt + core.held_back_s + link.period_s + link.lead_s + core.dt, abs=core.dt + 1e-6)
+    assert link.longest_segment_s <= 2 * link.period_s + 1e-9
     assert np.allclose(fake.points[-1].q, [8.0, 0.0, 4.0, 0.0, 0.0, 0.0], atol=1e-4)
 
 
@@ -346,23 +392,32 @@ def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig:
     assert core.state().q.tolist() == [0.0] * 6
 
 
-def test_a_point_beyond_the_robots_range_is_never_sent() -> None:
+def test_motions_beyond_the_arms_range_are_refused_before_anything_is_sent() -> None:
+    """The Viper's range in its own joint angles (the URDF's limits: J3 up to 256 deg, rob6's
+    169 maps to 259) bounds the core, whatever limits a client sets: a motion leaving it is
+    refused before it starts, and the link would not send such a point anyway."""
     config = MotionSettings(ROBOT)
     fake = FakeController()
     core = MotionCore(ROBOT)
     link = AdeptLink(core, ROBOT, AdeptSettings(**fake.settings), lambda s: None, retry_s=0.1)
     try:
         link.start()
-        fake.position = to_wire([165.0, 0, 0, 0, 0, 0])
+        fake.position = to_wire([165.0, 0, 160.0, 0, 0, 0])
         online(core, link)
-        # limits wider than the arm's (a client's SetTurnLimits): the core would allow 175
+        # limits wider than the arm's (a client's SetTurnLimits): the core alone would allow 175
         config.turn_min[0], config.turn_max[0] = -200.0, 200.0
         assert core.set_limits(turn_min=config.turn_min, turn_max=config.turn_max)[0]
-        motion, _ = ptp(core, [175.0, 0.0, 0.0, 0.0, 0.0, 0.0], config)
-        assert motion.wait(20)
-        assert motion.error.startswith("refused to send a point outside the robot's range (joint 1 at 170.")
-        assert motion.error.endswith(", range -170 .. 170)")
-        assert max(p.q[0] for p in fake.points) <= 170.0
+        assert core.limits().turn_max[0] == 170.0 and core.limits().turn_max[2] == 166.0  # 256 - 90
+        for target, joint in (([175.0, 0.0, 160.0, 0.0, 0.0, 0.0], 1), ([165.0, 0.0, 167.0, 0.0, 0.0, 0.0], 3)):
+            motion, _ = ptp(core, target, config)
+            assert motion.wait(20) and not motion.ok and motion.error == ""
+            assert motion.reason.startswith(f"joint {joint} sample ") and motion.reason.endswith(" breaks its turn limits")
+        assert fake.points == []
+        with link._cond:
+            assert link._outside_range(np.array([0.0, 0.0, 166.5, 0.0, 0.0, 0.0])) == (
+                "joint 3 at 166.500, range -119 .. 166")
+        motion, _ = ptp(core, [160.0, 0.0, 165.5, 0.0, 0.0, 0.0], config)  # inside: it moves
+        assert motion.wait(20) and motion.ok
     finally:
         link.stop()
         fake.close()
@@ -389,6 +444,8 @@ def test_only_the_adept_and_sensible_settings() -> None:
     for settings, text in ((AdeptSettings(motion_port=0), "ROB6_SM_MOTION_PORT=0"),
                            (AdeptSettings(byte_order="middle"), "ROB6_SM_BYTE_ORDER='middle'"),
                            (AdeptSettings(period_s=0.0), "ROB6_SM_PERIOD=0.0"),
-                           (AdeptSettings(host=" "), "ROB6_SM_HOST is empty")):
+                           (AdeptSettings(host=" "), "ROB6_SM_HOST is empty"),
+                           (AdeptSettings(outputs="1-600"), "ROB6_SM_OUTPUTS='1-600': 1-600 is not a range of V"),
+                           (AdeptSettings(outputs="5,x"), "ROB6_SM_OUTPUTS='5,x': expected ranges")):
         with pytest.raises(ValueError, match=text):
             settings.check()

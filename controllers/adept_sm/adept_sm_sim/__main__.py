@@ -39,6 +39,16 @@ def _pose(value: str) -> tuple[float, ...]:
     return ctrl
 
 
+def _ranges(value: str) -> tuple[range, ...]:
+    out = []
+    for part in value.replace(" ", "").split(","):
+        first, sep, last = part.partition("-")
+        if not first.isdigit() or (sep and not last.isdigit()):
+            raise click.BadParameter(f"--installed: expected ranges like 1-8,1001-1012, got {value!r}")
+        out.append(range(int(first), int(last if sep else first) + 1))
+    return tuple(out)
+
+
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Address of the motion, state and I/O ports.")
@@ -57,21 +67,18 @@ def _pose(value: str) -> tuple[float, ...]:
               help="Initial joints, rob6 convention, degrees (six numbers).")
 @click.option("--state-period", default=0.1, show_default=True,
               type=click.FloatRange(0.001, 60.0), help="Seconds between state messages.")
-@click.option("--timing", default="vplus", show_default=True,
-              type=click.Choice(["vplus", "duration"]),
-              help="vplus: ignore velocity and duration, move at full speed like the V+ "
-                   "program; duration: honour them.")
-@click.option("--monitor-speed", default=100.0, show_default=True,
-              type=click.FloatRange(1.0, 100.0), help="The pendant's monitor speed, percent.")
-@click.option("--queue-depth", default=1, show_default=True, type=click.IntRange(1, 10000),
-              help="Points queued beyond the one moving (V+ runs one motion ahead: 1).")
-@click.option("--status-fields", default="full", show_default=True,
-              type=click.Choice(["full", "vplus"]),
-              help="full: report errors and motion_possible; vplus: exactly what the V+ "
-                   "program sends (no errors, motion_possible = not in motion).")
+@click.option("--monitor-speed", default=100.0, show_default=True, type=click.FloatRange(1.0, 100.0),
+              help="The pendant's monitor speed, percent: scales the joints' speeds and accelerations.")
+@click.option("--connect-read", default="client", show_default=True, type=click.Choice(["client", "notice"]),
+              help="The four bytes the program reads on a new motion connection: the client's first "
+                   "(client) or something V+ delivers itself (notice).")
+@click.option("--restart-s", default=0.5, show_default=True, type=click.FloatRange(0.0, 60.0),
+              help="Seconds the supervisor (task.controll) takes to restart an ended motion or state task.")
+@click.option("--installed", default="1-8,1001-1012", show_default=True,
+              help="The digital signals the controller has, as ranges (soft signals 2001-2512 always).")
 def main(host: str, motion_port: int, state_port: int, io_port: str, control: str, byte_order: str,
-         start_pose: str, state_period: float, timing: str, monitor_speed: float, queue_depth: int,
-         status_fields: str) -> None:
+         start_pose: str, state_period: float, monitor_speed: float, connect_read: str, restart_s: float,
+         installed: str) -> None:
     """A simulated Adept Viper s850 controller running the ROS-Industrial V+ server
     (simple_message over TCP), for testing rob6's simple_message link."""
     control_host, control_port = _host_port(control)
@@ -79,8 +86,8 @@ def main(host: str, motion_port: int, state_port: int, io_port: str, control: st
     cfg = Config(
         host=host, motion_port=motion_port, state_port=state_port, io_port=io,
         control_host=control_host, control_port=control_port, byte_order=byte_order,
-        start_pose_ctrl=_pose(start_pose), state_period=state_period, timing=timing,
-        monitor_speed=monitor_speed, queue_depth=queue_depth, status_fields=status_fields,
+        start_pose_ctrl=_pose(start_pose), state_period=state_period, monitor_speed=monitor_speed,
+        connect_read=connect_read, restart_s=restart_s, installed=_ranges(installed),
     )
     try:
         asyncio.run(_main(cfg))

@@ -1,11 +1,16 @@
-"""The simulated arm: queued joint points played out in real time.
+"""The simulated arm: the MOVEs the V+ program issues, played out in real time.
 
-Each accepted point becomes a segment of a commanded path (joint-space straight line
-from the previous point, timed as the V+ program would move there). The joints follow
-that path like servos with the Viper's speed and acceleration limits: they accelerate
-and brake at their limits, never run past a point they have to stop at, and round the
-corners between points that follow each other in time (V+ continuous path). Everything
-is in the controller's joint convention, degrees, driven by the caller's clock.
+Each ``MOVE`` (``adept_ros.v2`` line 599) is a joint-interpolated segment from the
+previous point, at the speed ``SPEED 100 ALWAYS`` and ``ACCEL 100, 100`` give (lines
+546-547) times the pendant's monitor speed: the joints together along a straight line in
+joint space, the slowest joint at its rated speed; the point's velocity and duration play
+no part. V+ plans a MOVE behind the running motion and returns from it when it begins
+(forward processing), so at most one MOVE waits beyond the one running (``room``). The joints follow the segments like servos:
+they accelerate and brake at their limits (both scaled by the monitor speed), never run
+past a point they have to stop at, and round the corner to the next segment when it was
+issued before the running one ended (continuous path). When it came later, the arm stops
+at the point first and then goes (an underrun, when it happens within a stream). Everything is in the controller's
+joint convention, degrees, driven by the caller's clock.
 """
 
 from __future__ import annotations
@@ -15,61 +20,81 @@ from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from .codec import END_TRAJECTORY
 from .convention import MAX_ACCEL_DEG_S2, MAX_SPEED_DEG_S, N_JOINTS
 
 DT = 0.002  # integration step, s
 KP = 50.0  # 1/s: how firmly the joints close the last bit of a gap
 BRAKE_MARGIN = 0.9  # brake planning uses 90 % of the deceleration, the rest absorbs the step
-SETTLE_DEG = 1e-6
+#: stopped at a point, for a MOVE that came late: this close (deg) and (nearly) at rest
+STOPPED_DEG = 1e-3
 MAX_CATCH_UP_S = 1.0  # a stalled process does not replay more than this
+#: MOVEs issued beyond the one running (V+'s forward processing: the next one is planned)
+AHEAD = 1
 
 
 @dataclass(frozen=True)
-class Point:
+class Move:
     q: tuple[float, ...]  # controller joints, degrees
-    velocity: float  # fraction of the maximum speed
-    duration: float  # s
-    sequence: int
+    arrived_t: float  # when its point arrived on the motion connection (the caller's clock)
 
 
 class Arm:
-    def __init__(self, q0: Sequence[float], now: float, *, timing: str = "vplus", monitor_speed: float = 100.0) -> None:
-        if timing not in ("vplus", "duration"):
-            raise ValueError(f"timing must be 'vplus' or 'duration', not {timing!r}")
-        self.timing = timing
-        self.vcap = [v * monitor_speed / 100.0 for v in MAX_SPEED_DEG_S]
+    def __init__(self, q0: Sequence[float], now: float, *, monitor_speed: float = 100.0) -> None:
+        share = monitor_speed / 100.0
+        self.vcap = [v * share for v in MAX_SPEED_DEG_S]
+        self.acap = [a * share for a in MAX_ACCEL_DEG_S2]
         self.q = [float(x) for x in q0]
         self.v = [0.0] * N_JOINTS
         self.ref = list(self.q)  # where the commanded path is now
-        self.queue: deque[Point] = deque()
-        self.open = False  # a trajectory is under way: running dry is an underrun
+        self.queue: deque[Move] = deque()
+        self.open = False  # a stream is under way: running dry is an underrun
         self.executed = 0
         self.underruns = 0
+        self.longest_segment_s = 0.0  # the longest segment's time at full speed
+        self.longest_segment_deg = 0.0  # ... and its largest joint travel
+        self.ran_on_s = 0.0  # from the arrival of the last point (or stop) to rest, the last time
+        self.max_ran_on_s = 0.0
+        self.peak_speed = [0.0] * N_JOINTS  # the largest |velocity| each joint reached, deg/s
+        self.peak_accel = [0.0] * N_JOINTS  # ... and |acceleration| outside a controller stop, deg/s²
         self.t = now
-        self._seg: tuple[list[float], Point, float, float] | None = None  # (from, point, t0, T)
-        self._decel: tuple[float, ...] | None = None  # braking to rest, per joint
+        self._seg: tuple[list[float], Move, float, float] | None = None  # (from, move, t0, T)
+        self._ran_dry = False  # the path reached its last point with nothing issued after it
+        self._decel: tuple[float, ...] | None = None  # braking to rest, per joint (E-stop, drives off)
+        self._last_word_t: float | None = None  # arrival of the last point or stop before rest
 
     # ---- commands --------------------------------------------------------
-    def enqueue(self, point: Point) -> None:
-        self.queue.append(point)
-        self.open = True
+    @property
+    def room(self) -> bool:
+        """A MOVE may be issued now (none waits behind the running one)."""
+        return len(self.queue) < AHEAD
 
-    def stop(self, decel: Iterable[float]) -> None:
-        """Drop every pending point and brake to rest with these decelerations (deg/s²)."""
+    def issue(self, move: Move) -> None:
+        self.queue.append(move)
+        self.open = True
+        self._last_word_t = move.arrived_t
+
+    def heard(self, arrived_t: float) -> None:
+        """A point that moves nothing arrived (a stop): the arm runs on from here."""
+        self._last_word_t = arrived_t
+
+    def brake(self, decel: Iterable[float]) -> int:
+        """The controller's own stop (E-stop, drives off): every issued MOVE dropped, the
+        joints braked to rest with these decelerations (deg/s²); how many were dropped."""
+        dropped = len(self.queue) + (self._seg is not None)
         self.queue.clear()
         self._seg = None
         self.open = False
         if not any(self.v):  # already at rest: nothing to brake, it stays where it is
             self._decel = None
             self.ref = list(self.q)
-            return
+            return dropped
         if self._decel is not None:  # already braking (say for an E-stop): never softer
             decel = map(max, self._decel, decel)
         self._decel = tuple(decel)
+        return dropped
 
-    def close_trajectory(self) -> None:
-        """The client went away: what is queued still runs, but running dry is no underrun."""
+    def close_stream(self) -> None:
+        """The client went away: what is issued still runs, but running dry is no underrun."""
         self.open = False
 
     # ---- state -------------------------------------------------------------
@@ -83,14 +108,9 @@ class Arm:
             or self.q != self.ref
         )
 
-    def segment_time(self, start: Sequence[float], point: Point) -> float:
-        """How long the commanded path takes from start to point."""
-        full_speed = max(abs(b - a) / v for a, b, v in zip(start, point.q, self.vcap, strict=True))
-        if self.timing == "vplus":  # SPEED 100 ALWAYS: velocity and duration are ignored
-            return full_speed
-        if point.duration > 0:
-            return max(point.duration, full_speed)
-        return full_speed / min(point.velocity, 1.0)
+    def segment_time(self, start: Sequence[float], target: Sequence[float]) -> float:
+        """How long the path takes from start to target at full speed (the slowest joint's time)."""
+        return max(abs(b - a) / v for a, b, v in zip(start, target, self.vcap, strict=True))
 
     # ---- time ----------------------------------------------------------------
     def advance(self, now: float) -> None:
@@ -102,29 +122,52 @@ class Arm:
         while self.t + DT <= now:
             self._step(self.t, DT)
             self.t += DT
+            if not self.in_motion:
+                self._rested(self.t)
+
+    def _rested(self, t: float) -> None:
+        if self._last_word_t is not None:
+            self.ran_on_s = max(0.0, t - self._last_word_t)
+            self.max_ran_on_s = max(self.max_ran_on_s, self.ran_on_s)
+            self._last_word_t = None
+        self._ran_dry = False
+
+    def _stopped_at_point(self) -> bool:
+        """At rest at the end of the path, as V+ would call a motion done (within a small
+        tolerance, not the servo's last exponential approach)."""
+        return all(abs(v) <= a * DT and abs(r - q) <= STOPPED_DEG
+                   for v, a, r, q in zip(self.v, self.acap, self.ref, self.q, strict=True))
 
     def _play(self, t0: float, t: float) -> list[float] | None:
         """Move the commanded path on to time t; its joint velocities, or None at rest."""
-        start = t0  # a point found waiting starts at once
+        start = t0  # a MOVE found waiting starts at once
         while True:
             if self._seg is None:
                 if not self.queue:
                     return None
-                point = self.queue.popleft()
-                self._seg = (list(self.ref), point, start, self.segment_time(self.ref, point))
-            r0, point, ts, T = self._seg
-            if t < ts + T:
-                f = (t - ts) / T
-                self.ref = [a + (b - a) * f for a, b in zip(r0, point.q, strict=True)]
-                return [(b - a) / T for a, b in zip(r0, point.q, strict=True)]
-            self.ref = list(point.q)
+                if self._ran_dry:  # issued after the path had ended: the arm stops first, then goes
+                    if not self._stopped_at_point():
+                        return None
+                    self._ran_dry = False
+                move = self.queue.popleft()
+                travel = max(abs(b - a) for a, b in zip(self.ref, move.q, strict=True))
+                duration = self.segment_time(self.ref, move.q)
+                self.longest_segment_s = max(self.longest_segment_s, duration)
+                self.longest_segment_deg = max(self.longest_segment_deg, travel)
+                self._seg = (list(self.ref), move, start, duration)
+            r0, move, ts, duration = self._seg
+            if duration > 0 and t < ts + duration:
+                f = (t - ts) / duration
+                self.ref = [a + (b - a) * f for a, b in zip(r0, move.q, strict=True)]
+                return [(b - a) / duration for a, b in zip(r0, move.q, strict=True)]
+            self.ref = list(move.q)
             self._seg = None
             self.executed += 1
-            start = ts + T  # the next point continues where this one ended
-            if point.sequence == END_TRAJECTORY:
-                self.open = False
-            elif self.open and not self.queue:
-                self.underruns += 1
+            start = ts + duration  # the next MOVE continues where this one ended
+            if not self.queue:
+                self._ran_dry = True
+                if self.open:
+                    self.underruns += 1
 
     def _step(self, t0: float, dt: float) -> None:
         if self._decel is not None:
@@ -139,18 +182,17 @@ class Arm:
         rdot = self._play(t0, t0 + dt)
         for i in range(N_JOINTS):
             e = self.ref[i] - self.q[i]
-            a = MAX_ACCEL_DEG_S2[i]
+            a = self.acap[i]
             speed = min(
                 self.vcap[i],
                 math.sqrt(2.0 * BRAKE_MARGIN * a * abs(e)),  # can still stop at the path
                 (abs(rdot[i]) if rdot else 0.0) + KP * abs(e),
             )
-            dv = math.copysign(speed, e) - self.v[i]
-            self.v[i] += max(-a * dt, min(a * dt, dv))
+            dv = max(-a * dt, min(a * dt, math.copysign(speed, e) - self.v[i]))
+            self.v[i] += dv
             self.q[i] += self.v[i] * dt
-        if rdot is None and all(
-            abs(r - q) < SETTLE_DEG and abs(v) < KP * SETTLE_DEG * 10
-            for r, q, v in zip(self.ref, self.q, self.v, strict=True)
-        ):
+            self.peak_speed[i] = max(self.peak_speed[i], abs(self.v[i]))
+            self.peak_accel[i] = max(self.peak_accel[i], abs(dv) / dt)
+        if rdot is None and self._stopped_at_point():  # the servo's last bit: at the point
             self.q = list(self.ref)
             self.v = [0.0] * N_JOINTS

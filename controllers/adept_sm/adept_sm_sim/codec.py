@@ -35,25 +35,21 @@ STOP_TRAJECTORY = -4
 
 MAX_JOINTS = 10
 HEADER_LEN = 12
-#: length prefix of a JOINT_TRAJ_PT: header + sequence + 10 joints + velocity + duration
-JOINT_TRAJ_PT_LEN = HEADER_LEN + 4 + 4 * MAX_JOINTS + 4 + 4
+#: what the motion task reads per point, whatever the length word says (adept_ros.v2 lines
+#: 558-573): length, type, comm type, reply code, sequence, ten joints, velocity, duration
+RECORD_LEN = 4 + HEADER_LEN + 4 + 4 * MAX_JOINTS + 4 + 4
 
 BYTE_ORDERS = {"big": ">", "little": "<"}
 
 
 @dataclass(frozen=True)
-class Header:
-    msg_type: int
+class Record:
+    """What the motion task takes of one record: it looks at the comm type, the sequence
+    and the first six joints only."""
+
     comm_type: int
-    reply_code: int
-
-
-@dataclass(frozen=True)
-class TrajPoint:
     sequence: int
     joints_rad: tuple[float, ...]  # all ten
-    velocity: float
-    duration: float
 
 
 class Codec:
@@ -64,20 +60,14 @@ class Codec:
         self.byte_order = byte_order
         self._int = struct.Struct(e + "i")
         self._header = struct.Struct(e + "3i")
-        self._point = struct.Struct(e + f"i{MAX_JOINTS}fff")
+        self._record = struct.Struct(e + f"5i{MAX_JOINTS}fff")
         self._joints = struct.Struct(e + f"i{MAX_JOINTS}f")
         self._status = struct.Struct(e + "7i")
 
-    def length(self, prefix: bytes) -> int:
-        n: int = self._int.unpack(prefix)[0]
-        return n
-
-    def header(self, payload: bytes) -> Header:
-        return Header(*self._header.unpack_from(payload))
-
-    def traj_point(self, payload: bytes) -> TrajPoint:
-        seq, *rest = self._point.unpack_from(payload, HEADER_LEN)
-        return TrajPoint(seq, tuple(rest[:MAX_JOINTS]), rest[MAX_JOINTS], rest[MAX_JOINTS + 1])
+    def record(self, data: bytes) -> Record:
+        """One ``RECORD_LEN``-byte record as the motion task reads it (LNGB, FLTB)."""
+        _length, _msg_type, comm, _reply, seq, *rest = self._record.unpack(data)
+        return Record(comm, seq, tuple(rest[:MAX_JOINTS]))
 
     def _frame(self, msg_type: int, comm_type: int, reply_code: int, body: bytes) -> bytes:
         return (

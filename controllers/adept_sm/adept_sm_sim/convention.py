@@ -25,12 +25,13 @@ ROB6_TO_CONTROLLER_SIGN = (-1.0, 1.0, 1.0, -1.0, 1.0, -1.0)
 ROB6_TO_CONTROLLER_OFFSET_DEG = (0.0, 0.0, 90.0, 0.0, 0.0, 0.0)
 
 #: Joint ranges in the controller's convention, degrees, inclusive (the controller's
-#: soft limits). rob6's ad850 table J1 ±170, J2 −190…45, J3 −119…169, J4 ±190, J5 ±120,
-#: J6 ±360 mapped through the table above. (The published Viper URDF has J3 up to 256°.)
+#: soft limits): the ROS-Industrial Viper URDF's joint limits (adept_experimental,
+#: adept_viper_s650_support/urdf/viper_s650_macro.xacro lines 129-169, radians): J3 up to
+#: 256 deg, where rob6's own ad850 table (J3 -119..169) would map to 259.
 CONTROLLER_LIMITS_DEG = (
     (-170.0, 170.0),
     (-190.0, 45.0),
-    (-29.0, 259.0),
+    (-29.0, 256.0),
     (-190.0, 190.0),
     (-120.0, 120.0),
     (-360.0, 360.0),
@@ -39,8 +40,8 @@ CONTROLLER_LIMITS_DEG = (
 #: Rated joint speeds of the Viper s850, deg/s (V+ "SPEED 100" at monitor speed 100).
 MAX_SPEED_DEG_S = (250.0, 250.0, 250.0, 375.0, 375.0, 600.0)
 
-#: Joint accelerations: Adept publishes none; full speed in 0.25 s is plausible for
-#: the Viper and is what the simulator assumes (also its normal deceleration).
+#: Joint accelerations at monitor speed 100: Adept publishes none; full speed in 0.25 s is
+#: plausible for the Viper and is what the simulator assumes (also its normal deceleration).
 MAX_ACCEL_DEG_S2 = tuple(4.0 * v for v in MAX_SPEED_DEG_S)
 
 #: E-stop: the controller brakes as hard as it can, from full speed to rest in 0.1 s.

@@ -1,11 +1,23 @@
 """The controller: the V+ server's TCP ports, the simulated arm and the fault switches.
 
-Motion port: JOINT_TRAJ_PT in; every service request is answered like the V+ program
-answers it (JOINT_TRAJ_PT service reply, body one int32: 0, or -4 for a stop), topics
-are executed without a reply. The reader takes the next point only when the queue has
-room, so acknowledgements pace the client (the V+ program reads the next point only
-when its previous MOVE was accepted). State port: JOINT_POSITION and STATUS topics
-every period. I/O port (optional): the program's digital-signal protocol.
+Each port is served as ``adept_ros.v2``'s task for it serves it (deploy/adept/README.md
+section 4 and controllers/adept_sm/README.md give the program's lines):
+
+* motion (task 0, ``ros.srv.cmd``): the connection's first four bytes discarded, then
+  fixed 68-byte records read one by one, whatever their length word or message type says;
+  a service request (comm type 2) answered at once (body 0, or -4 for a stop), a stop (-4)
+  answered also as a topic and otherwise ignored (nothing halts), every other record a
+  ``MOVE`` to its joints, planned behind the running motion and returning when it begins
+  (V+'s forward processing): the next record is read only then.
+  A MOVE that cannot run (outside a joint range, not a number, drives off, E-stop) is a V+
+  error: the task ends and its connection closes; the supervisor (``task.controll``)
+  restarts it after ``restart_s``, and the port refuses connections meanwhile;
+* state (task 1, ``ros.srv.fdb``): JOINT_POSITION and STATUS, then ``state_period``; the
+  STATUS fields as the program fills them. A client that leaves ends the task (its WRITE
+  fails), restarted like task 0;
+* I/O (task 4, ``ros.io``): the program's digital-signal protocol; a signal the
+  controller has not installed is a V+ error that ends the task, which nothing restarts.
+
 One client at a time on the motion and state ports (V+ ``/CLIENTS 1``), five on I/O.
 """
 
@@ -18,11 +30,11 @@ import sys
 import time
 from collections import deque
 from collections.abc import Awaitable, Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from . import codec as sm
-from .arm import Arm, Point
+from .arm import Arm, Move
 from .convention import (
     ESTOP_DECEL_DEG_S2,
     MAX_ACCEL_DEG_S2,
@@ -37,6 +49,10 @@ IO_BUFFER = 1024  # V+ "/BUFFER_SIZE 1024" on the I/O port
 VPLUS_CYCLE_S = 0.016  # a V+ task's READ returns what arrived within about one system cycle
 MODE_AUTO = 2  # simple_message RobotMode AUTO (the V+ program's mapping of STATE(5) = 1)
 LATENCY_WINDOW = 10000
+#: V+ signal numbers (V+ Language Reference, SIGNAL): outputs, inputs, soft signals
+OUTPUT_NUMBERS = range(1, 513)
+INPUT_NUMBERS = range(1001, 1513)
+SOFT_SIGNALS = range(2001, 2513)
 
 
 def event(msg: str) -> None:
@@ -54,31 +70,78 @@ class Config:
     byte_order: str = "big"
     start_pose_ctrl: tuple[float, ...] = (0.0, 0.0, 90.0, 0.0, 0.0, 0.0)
     state_period: float = 0.1
-    timing: str = "vplus"
     monitor_speed: float = 100.0
-    queue_depth: int = 1
-    status_fields: str = "full"
+    #: "client": the four bytes read on connecting are the client's first; "notice": V+'s own
+    connect_read: str = "client"
+    #: seconds the supervisor takes to restart an ended motion or state task
+    restart_s: float = 0.5
+    #: the digital signals the controller has (besides the soft signals 2001-2512)
+    installed: tuple[range, ...] = field(default_factory=lambda: (range(1, 9), range(1001, 1013)))
+
+
+class TaskEnds(Exception):
+    """A V+ error in a program task: it stops (the message says why)."""
+
+
+class Inbox:
+    """What arrived on a connection, stamped with when (V+'s TCP buffer): the program
+    takes it at its own pace."""
+
+    def __init__(self, reader: asyncio.StreamReader) -> None:
+        self.data = bytearray()
+        self.taken = 0  # bytes taken so far
+        self.stamps: deque[tuple[int, float]] = deque()  # (bytes received in all, when)
+        self.more = asyncio.Event()
+        self.eof = False
+        self.pump = asyncio.ensure_future(self._pump(reader))
+
+    async def _pump(self, reader: asyncio.StreamReader) -> None:
+        try:
+            while chunk := await reader.read(4096):
+                self.data += chunk
+                self.stamps.append((self.taken + len(self.data), time.monotonic()))
+                self.more.set()
+        except (ConnectionError, OSError):
+            pass
+        self.eof = True
+        self.more.set()
+
+    async def take(self, n: int) -> tuple[bytes, float]:
+        """The next ``n`` bytes and when the last of them arrived; EOFError at the end."""
+        while len(self.data) < n:
+            if self.eof:
+                raise EOFError
+            self.more.clear()
+            await self.more.wait()
+        out = bytes(self.data[:n])
+        del self.data[:n]
+        self.taken += n
+        while self.stamps and self.stamps[0][0] < self.taken:
+            self.stamps.popleft()
+        return out, self.stamps[0][1] if self.stamps else time.monotonic()
+
+    def close(self) -> None:
+        self.pump.cancel()
 
 
 class Controller:
     def __init__(self, cfg: Config) -> None:
         self.cfg = cfg
         self.codec = sm.Codec(cfg.byte_order)
-        self.arm = Arm(cfg.start_pose_ctrl, time.monotonic(), timing=cfg.timing,
-                       monitor_speed=cfg.monitor_speed)
+        self.arm = Arm(cfg.start_pose_ctrl, time.monotonic(), monitor_speed=cfg.monitor_speed)
         self.e_stopped = False
         self.drives_powered = True
-        self.error_code = 0
         self.slow_ack_ms = 0.0
-        self.received = self.acknowledged = self.refused = self.malformed = 0
+        self.received = self.acknowledged = self.moves = self.task_errors = 0
         self.latencies_ms: deque[float] = deque(maxlen=LATENCY_WINDOW)
         self.motion_client: asyncio.StreamWriter | None = None
         self.state_client: asyncio.StreamWriter | None = None
         self.io_clients: set[asyncio.StreamWriter] = set()
+        # the program's tasks: running, or ended (the supervisor restarts motion and state)
+        self.tasks = {"motion": True, "state": True, "io": cfg.io_port is not None}
         self.signals: dict[int, bool] = {}
         self.io_requests = self.io_errors = 0
-        self.room = asyncio.Event()  # set whenever the queue shrinks or is flushed
-        self.generation = 0  # bumped by every stop: points waiting for room are void
+        self.room = asyncio.Event()  # set whenever the arm takes a MOVE off its queue or halts
         self.done = asyncio.Event()
         self._underruns_logged = 0
 
@@ -90,8 +153,8 @@ class Controller:
             self.room.set()
         if self.arm.underruns > self._underruns_logged:
             self._underruns_logged = self.arm.underruns
-            event(f"queue underrun (the path reached the last queued point before the next "
-                  f"point came); {self.arm.underruns} so far")
+            event(f"the arm ran dry (the next MOVE came after the path had ended: it stops, then "
+                  f"goes); {self.arm.underruns} so far")
 
     async def tick(self) -> None:
         while True:
@@ -100,41 +163,30 @@ class Controller:
             await asyncio.sleep(TICK_S if self.arm.in_motion else IDLE_TICK_S)
 
     def refusal(self) -> str | None:
+        """Why a MOVE fails now, or None."""
         if self.e_stopped:
-            return "e-stop is active"
+            return "E-stop is active"
         if not self.drives_powered:
             return "drives are off"
-        if self.error_code:
-            return f"controller error {self.error_code}"
         return None
 
     def halt(self, why: str, decel: Iterable[float]) -> None:
         self.advance()
-        dropped = len(self.arm.queue)
-        self.arm.stop(decel)
-        self.generation += 1
+        dropped = self.arm.brake(decel)
         self.room.set()
-        event(f"{why}: stopping, {dropped} queued point(s) discarded")
+        event(f"{why}: the arm brakes, {dropped} issued MOVE(s) dropped")
 
-    async def accept(self, pt: sm.TrajPoint, client: asyncio.StreamWriter) -> str | None:
-        """Queue a point (waiting for room); why it was refused, or None."""
-        q = tuple(math.degrees(x) for x in pt.joints_rad[:6])
-        reason = self.refusal() or limit_violation(q)
-        if reason is None and self.cfg.timing == "duration" and not _timed(pt):
-            reason = "no usable duration or velocity to time the move by"
-        if reason:
-            return reason
-        gen = self.generation
-        while len(self.arm.queue) >= self.cfg.queue_depth:
-            self.room.clear()
-            await self.room.wait()
-            if self.generation != gen:
-                return "the motion was stopped while the point waited for room in the queue"
-            if client is not self.motion_client:
-                return "the connection was dropped"
-        self.advance()  # the path starts from where it is now
-        self.arm.enqueue(Point(q, pt.velocity, pt.duration, pt.sequence))
-        return None
+    # ---- the program's tasks ----------------------------------------------------
+    def task_ended(self, task: str, why: str) -> None:
+        """A task stopped; the supervisor restarts motion and state after ``restart_s``."""
+        self.tasks[task] = False
+        event(f"{task} task ended: {why}")
+        if task in ("motion", "state"):
+            asyncio.get_running_loop().call_later(self.cfg.restart_s, self._restarted, task)
+
+    def _restarted(self, task: str) -> None:
+        self.tasks[task] = True
+        event(f"{task} task restarted by task.controll")
 
     # ---- faults ---------------------------------------------------------------
     def estop(self) -> None:
@@ -142,13 +194,11 @@ class Controller:
             self.e_stopped = True
             self.drives_powered = False  # an Adept E-stop drops high power
             self.halt("E-stop", ESTOP_DECEL_DEG_S2)
-        self.push_status()
 
     def estop_release(self) -> None:
         if self.e_stopped:
             self.e_stopped = False
             event("E-stop released (drives stay off until switched on)")
-        self.push_status()
 
     def set_drives(self, on: bool) -> None:
         if on and self.e_stopped:
@@ -159,39 +209,19 @@ class Controller:
                 event("drives on")
             else:
                 self.halt("drives off", MAX_ACCEL_DEG_S2)
-        self.push_status()
 
-    def set_error(self, code: int) -> None:
-        self.error_code = code
-        if code:
-            self.halt(f"controller error {code}", MAX_ACCEL_DEG_S2)
-        else:
-            event("error cleared")
-        self.push_status()
-
-    # ---- wire: state port ------------------------------------------------------
+    # ---- wire: state port (task 1) ----------------------------------------------
     def status_frame(self) -> bytes:
+        """STATUS as ``ros.robot.state`` fills it (lines 327-371): drives and E-stop, error
+        code and in_error always 0, in motion, mode AUTO, motion possible = not in motion."""
         moving = int(self.arm.in_motion)
-        if self.cfg.status_fields == "vplus":
-            # exactly what the V+ program fills in: no error reporting, and "motion
-            # possible" is just "not in motion"
-            return self.codec.status(int(self.drives_powered), int(self.e_stopped), 0, 0,
-                                     moving, MODE_AUTO, 1 - moving)
-        possible = int(self.refusal() is None)
-        return self.codec.status(int(self.drives_powered), int(self.e_stopped), self.error_code,
-                                 int(bool(self.error_code)), moving, MODE_AUTO, possible)
+        return self.codec.status(int(self.drives_powered), int(self.e_stopped), 0, 0, moving, MODE_AUTO,
+                                 1 - moving)
 
     def state_frames(self) -> bytes:
         self.advance()
         joints = [math.radians(x) for x in self.arm.q]
         return self.codec.joint_position(joints) + self.status_frame()
-
-    def push_status(self) -> None:
-        """A STATUS at once, between the periodic ones."""
-        w = self.state_client
-        if w is not None and not w.is_closing():
-            self.advance()
-            w.write(self.status_frame())
 
     async def serve_state(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         if not self._claim("state", writer):
@@ -211,72 +241,88 @@ class Controller:
             pass
         finally:
             watcher.cancel()
-            self._release("state", writer)
+            if self._release("state", writer):
+                self.task_ended("state", "its client left (the WRITE failed)")
 
-    # ---- wire: motion port ------------------------------------------------------
+    # ---- wire: motion port (task 0) ------------------------------------------------
     async def serve_motion(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         if not self._claim("motion", writer):
             return
+        inbox = Inbox(reader)
         try:
-            while True:
-                prefix = await reader.readexactly(4)
-                length = self.codec.length(prefix)
-                if length != sm.JOINT_TRAJ_PT_LEN:
-                    # the V+ program reads a fixed JOINT_TRAJ_PT layout and would lose
-                    # its framing; closing is the deterministic equivalent
-                    self.malformed += 1
-                    event(f"motion: frame length {length}, a JOINT_TRAJ_PT has "
-                          f"{sm.JOINT_TRAJ_PT_LEN}: closing the connection")
-                    break
-                payload = await reader.readexactly(length)
-                t_recv = time.monotonic()
-                hdr = self.codec.header(payload)
-                if hdr.msg_type != sm.JOINT_TRAJ_PT or hdr.comm_type not in (
-                    sm.TOPIC, sm.SERVICE_REQUEST
-                ):
-                    self.malformed += 1
-                    event(f"motion: message type {hdr.msg_type}, comm type {hdr.comm_type}: "
-                          "not a JOINT_TRAJ_PT topic or request, not executed")
-                    if hdr.comm_type == sm.SERVICE_REQUEST:
-                        await self._reply(writer, sm.FAILURE, 0, t_recv)
-                    continue
-                pt = self.codec.traj_point(payload)
-                self.received += 1
-                if pt.sequence == sm.STOP_TRAJECTORY:
-                    self.halt("stop (-4) received", MAX_ACCEL_DEG_S2)
-                    code, seq = sm.SUCCESS, sm.STOP_TRAJECTORY
-                else:
-                    reason = await self.accept(pt, writer)
-                    code, seq = (sm.FAILURE, 0) if reason else (sm.SUCCESS, 0)
-                    if reason:
-                        self.refused += 1
-                        event(f"point {pt.sequence} refused: {reason}")
-                # the V+ program answers a stop even when it came as a topic
-                if hdr.comm_type == sm.SERVICE_REQUEST or seq == sm.STOP_TRAJECTORY:
-                    await self._reply(writer, code, seq, t_recv)
-        except (asyncio.IncompleteReadError, ConnectionError, OSError):
-            pass
+            await self._motion_task(inbox, writer)
+        except TaskEnds as exc:
+            self.task_errors += 1
+            if self._release("motion", writer):
+                self.task_ended("motion", str(exc))
+        except (EOFError, ConnectionError, OSError):
+            if self._release("motion", writer):
+                self.task_ended("motion", "the client closed the connection (IOSTAT -562)")
         finally:
-            if self.motion_client is writer:
-                self.arm.close_trajectory()
+            inbox.close()
+            self.arm.close_stream()
             self._release("motion", writer)
 
-    async def _reply(self, writer: asyncio.StreamWriter, code: int, seq: int, t_recv: float) -> None:
+    async def _motion_task(self, inbox: Inbox, writer: asyncio.StreamWriter) -> None:
+        """``ros.srv.cmd`` from line 539 on: the discarded four bytes, then point after point."""
+        if self.cfg.connect_read == "client":
+            await inbox.take(4)
+        while True:
+            data, arrived = await inbox.take(sm.RECORD_LEN)
+            record = self.codec.record(data)
+            comm, seq = record.comm_type, record.sequence
+            self.received += 1
+            if comm == sm.SERVICE_REQUEST:
+                await self._reply(writer, sm.STOP_TRAJECTORY if seq == sm.STOP_TRAJECTORY else 0, arrived)
+            if seq == sm.STOP_TRAJECTORY:
+                if comm != sm.SERVICE_REQUEST:
+                    await self._reply(writer, sm.STOP_TRAJECTORY, arrived)
+                self.arm.heard(arrived)
+                self.arm.close_stream()
+                event("stop (-4) answered; nothing halts: the issued MOVEs run out")
+                continue
+            await self._move(tuple(math.degrees(x) for x in record.joints_rad[:6]), seq, arrived)
+
+    async def _move(self, q: tuple[float, ...], seq: int, arrived: float) -> None:
+        """``MOVE #PPOINT(...)`` (lines 597-599), with V+'s forward processing: the motion is
+        planned behind the running one and the instruction returns when it begins; TaskEnds
+        when the controller cannot move there."""
+        move = Move(q, arrived)
+        issued = False
+        while True:
+            why = self.refusal() or limit_violation(q)  # also for a motion a brake dropped
+            if why:
+                raise TaskEnds(f"MOVE to point {seq} failed: {why}")
+            self.advance()
+            if not issued and self.arm.room:
+                self.arm.issue(move)
+                self.moves += 1
+                issued = True
+                continue
+            if issued and not any(m is move for m in self.arm.queue):
+                break
+            self.room.clear()
+            await self.room.wait()
+        if seq == sm.END_TRAJECTORY:
+            self.arm.close_stream()  # for the statistics only: the program treats -3 as a point
+
+    async def _reply(self, writer: asyncio.StreamWriter, sequence: int, arrived: float) -> None:
+        """The acknowledgement (lines 578-586): JOINT_TRAJ_PT, service reply, code 1, one int32."""
         if self.slow_ack_ms > 0:
             await asyncio.sleep(self.slow_ack_ms / 1000.0)
-        writer.write(self.codec.traj_reply(code, seq))
+        writer.write(self.codec.traj_reply(sm.SUCCESS, sequence))
         await writer.drain()
-        self.latencies_ms.append((time.monotonic() - t_recv) * 1000.0)
-        if code == sm.SUCCESS:
-            self.acknowledged += 1
+        self.latencies_ms.append((time.monotonic() - arrived) * 1000.0)
+        self.acknowledged += 1
 
-    # ---- wire: I/O port ------------------------------------------------------------
+    # ---- wire: I/O port (task 4) -------------------------------------------------------
     async def serve_io(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         """The program's own I/O protocol (``ros.io``): two V+ READs per request, each
         taking what has arrived as one record, and a big-endian int32 (LNGB) from the first
         four bytes of each: the mode (1 read, anything else write), then the signal
         (negative: switch off). The answer is ASCII without a line end: SIG(n) as $ENCODE
-        writes it (-1 on, 0 off) for a read, ``1`` after SIGNAL(n) for a write."""
+        writes it (-1 on, 0 off) for a read, ``1`` after SIGNAL(n) for a write. Once the
+        task has ended nothing is answered any more."""
         if len(self.io_clients) >= IO_MAX_CLIENTS:
             event(f"io: {IO_MAX_CLIENTS} clients already connected, refusing another")
             writer.close()
@@ -287,8 +333,13 @@ class Controller:
                 number = await self._io_record(reader)
                 if number is None:
                     break
+                if not self.tasks["io"]:
+                    continue  # the task has ended: the connection stays, nobody reads it
+                answer = self._io(mode, number)
+                if answer is None:
+                    continue
                 self.io_requests += 1
-                writer.write(self._io(mode, number).encode())
+                writer.write(answer.encode())
                 await writer.drain()
         except (ConnectionError, OSError):
             pass
@@ -300,7 +351,7 @@ class Controller:
         """One V+ READ: the bytes that arrived within one V+ cycle of the first (at most the
         port's 1024-byte buffer; a record's bytes beyond the first four are lost), as LNGB
         reads them; None at the end of the connection, or for a record shorter than four
-        bytes (V+ LNGB fails: the program's task would end)."""
+        bytes (V+ LNGB fails: the program's task ends)."""
         record = await reader.read(IO_BUFFER)
         if not record:
             return None
@@ -315,31 +366,38 @@ class Controller:
             record += more
         if len(record) < 4:
             self.io_errors += 1
-            event(f"io: a record of {len(record)} byte(s); LNGB needs 4 (V+ would end the I/O "
-                  "server with an error): closing the connection")
+            if self.tasks["io"]:
+                self.task_ended("io", f"LNGB of a record of {len(record)} byte(s)")
             return None
         if len(record) > 4:
             event(f"io: a record of {len(record)} bytes, the V+ program reads the first 4 "
                   "(send the mode and the number as separate records)")
         return int.from_bytes(record[:4], "big", signed=True)
 
-    def _io(self, mode: int, number: int) -> str:
+    def _installed(self, n: int) -> bool:
+        return n in SOFT_SIGNALS or any(n in r for r in self.cfg.installed)
+
+    def _io(self, mode: int, number: int) -> str | None:
+        """The answer to one request (lines 461-472), or None when it ended the task."""
         n = abs(number)
-        valid = 1 <= n <= 512 or 1001 <= n <= 1512 or 2001 <= n <= 2512
         if mode == 1:
-            if not valid:
-                event(f"io: read of signal {number}: no such signal")
-                return "0"
+            if not self._installed(n):
+                self.task_ended("io", f"SIG({number}): no such signal is installed")
+                return None
             return "-1" if self.signals.get(n, False) else "0"  # V+ TRUE is -1
-        if not valid or 1001 <= n <= 1512:
-            event(f"io: write of signal {number}: not an output or soft signal")
-            return "0"
+        if not self._installed(n) or n in INPUT_NUMBERS:
+            self.task_ended("io", f"SIGNAL({number}): not an installed output or soft signal")
+            return None
         self.signals[n] = number > 0
         event(f"io: SIGNAL {number}")
         return "1"
 
     # ---- connections ----------------------------------------------------------------
     def _claim(self, port: str, writer: asyncio.StreamWriter) -> bool:
+        if not self.tasks[port]:
+            event(f"{port}: the {port} task is not running, the connection is refused")
+            writer.close()
+            return False
         if getattr(self, f"{port}_client") is not None:
             event(f"{port}: a client is already connected, refusing another")
             writer.close()
@@ -348,11 +406,16 @@ class Controller:
         event(f"{port}: client connected from {_peer(writer)}")
         return True
 
-    def _release(self, port: str, writer: asyncio.StreamWriter) -> None:
+    def _release(self, port: str, writer: asyncio.StreamWriter) -> bool:
+        """The connection closed; True when it was this port's client until now."""
+        writer.close()
         if getattr(self, f"{port}_client") is writer:
             setattr(self, f"{port}_client", None)
             event(f"{port}: client disconnected")
-        writer.close()
+            if port == "motion":
+                self.room.set()  # a MOVE waiting for room notices
+            return True
+        return False
 
     def drop(self, port: str) -> bool:
         if port == "io":
@@ -363,35 +426,37 @@ class Controller:
         writer = getattr(self, f"{port}_client")
         if writer is None:
             return False
-        setattr(self, f"{port}_client", None)  # the port takes a new client at once
-        writer.close()
-        self.room.set()  # a reader waiting for room notices it lost its connection
-        if port == "motion":
-            self.arm.close_trajectory()
+        writer.close()  # the task sees its connection end (and ends, to be restarted)
         event(f"{port}: connection dropped on request")
         return True
 
     # ---- control channel --------------------------------------------------------------
     def status(self) -> dict[str, Any]:
         self.advance()
-        q = [round(x, 6) for x in self.arm.q]
+        arm = self.arm
+        q = [round(x, 6) for x in arm.q]
         lat = sorted(self.latencies_ms)
         return {
             "ok": True,
-            "position_rob6_deg": [round(x, 6) for x in controller_to_rob6(self.arm.q)],
+            "position_rob6_deg": [round(x, 6) for x in controller_to_rob6(arm.q)],
             "position_controller_deg": q,
-            "velocity_controller_deg_s": [round(x, 4) for x in self.arm.v],
-            "queue_length": len(self.arm.queue),
+            "velocity_controller_deg_s": [round(x, 4) for x in arm.v],
+            "queue_length": len(arm.queue),
             "points_received": self.received,
             "points_acknowledged": self.acknowledged,
-            "points_refused": self.refused,
-            "points_executed": self.arm.executed,
-            "underruns": self.arm.underruns,
-            "malformed_frames": self.malformed,
-            "in_motion": self.arm.in_motion,
+            "moves_issued": self.moves,
+            "points_executed": arm.executed,
+            "task_errors": self.task_errors,
+            "underruns": arm.underruns,
+            "longest_segment_s": round(arm.longest_segment_s, 4),
+            "longest_segment_deg": round(arm.longest_segment_deg, 4),
+            "ran_on_s": round(arm.ran_on_s, 4),
+            "max_ran_on_s": round(arm.max_ran_on_s, 4),
+            "peak_speed_deg_s": [round(x, 4) for x in arm.peak_speed],
+            "peak_accel_deg_s2": [round(x, 3) for x in arm.peak_accel],
+            "in_motion": arm.in_motion,
             "e_stopped": self.e_stopped,
             "drives_powered": self.drives_powered,
-            "error_code": self.error_code,
             "ack_latency_ms": {
                 "count": len(lat),
                 "p50": round(_pct(lat, 0.50), 3),
@@ -402,6 +467,7 @@ class Controller:
             "outputs": [n if on else -n for n, on in sorted(self.signals.items())],
             "io_requests": self.io_requests,
             "io_errors": self.io_errors,
+            "tasks": dict(self.tasks),
             "clients": {
                 "motion": self.motion_client is not None,
                 "state": self.state_client is not None,
@@ -424,13 +490,6 @@ class Controller:
             if not isinstance(on, bool):
                 raise ValueError('"drives" needs "on": true or false')
             self.set_drives(on)
-        elif cmd == "error":
-            code = req.get("code")
-            if not isinstance(code, int) or isinstance(code, bool) or code == 0:
-                raise ValueError('"error" needs a non-zero integer "code"')
-            self.set_error(code)
-        elif cmd == "clear_error":
-            self.set_error(0)
         elif cmd == "drop_connection":
             port = req.get("port")
             if port not in ("motion", "state", "io"):
@@ -446,8 +505,8 @@ class Controller:
             self.done.set()
         else:
             raise ValueError(
-                f"unknown cmd {cmd!r}; known: status, estop, estop_release, drives, error, "
-                "clear_error, drop_connection, slow_ack, quit"
+                f"unknown cmd {cmd!r}; known: status, estop, estop_release, drives, drop_connection, "
+                "slow_ack, quit"
             )
         return {"ok": True}
 
@@ -468,12 +527,6 @@ class Controller:
             pass
         finally:
             writer.close()
-
-
-def _timed(pt: sm.TrajPoint) -> bool:
-    if not (math.isfinite(pt.duration) and math.isfinite(pt.velocity)):
-        return False
-    return pt.duration > 0 or pt.velocity > 0
 
 
 async def _until_eof(reader: asyncio.StreamReader) -> None:

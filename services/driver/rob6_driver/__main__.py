@@ -18,6 +18,7 @@ from rob6.config import LINKS, BusSettings, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
 
+from .links.adept_io import DEFAULT_OUTPUTS
 from .links.kawasaki import DEFAULT_PERIOD_S as DEFAULT_KAS_PERIOD_S, DEFAULT_PORT as DEFAULT_KAS_PORT, KawasakiSettings
 from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, parse_address
 from .links.simple_message import (
@@ -60,6 +61,9 @@ from .service import DriverService
 @click.option("--sm-period", envvar="ROB6_SM_PERIOD", default=DEFAULT_PERIOD_S, show_default=True, type=float,
               help="simple_message: seconds between streamed points, rounded to controller cycles "
                    "[env ROB6_SM_PERIOD].")
+@click.option("--sm-outputs", envvar="ROB6_SM_OUTPUTS", default=DEFAULT_OUTPUTS, show_default=True,
+              help="simple_message: the digital outputs the controller has installed, as ranges; no other "
+                   "is sent (SIGNAL of one it lacks ends the V+ program's I/O task) [env ROB6_SM_OUTPUTS].")
 @click.option("--kas-host", envvar="ROB6_KAS_HOST", default="127.0.0.1", show_default=True,
               help="kawasaki: the controller's address [env ROB6_KAS_HOST].")
 @click.option("--kas-port", envvar="ROB6_KAS_PORT", default=DEFAULT_KAS_PORT, show_default=True, type=int,
@@ -69,11 +73,11 @@ from .service import DriverService
                                "[env ROB6_KAS_PERIOD].")
 def main(settings: BusSettings, log_level: str, dummy: bool, link: str, rsi_listen: str, rsi_sentype: str,
          sm_host: str, sm_motion_port: int, sm_state_port: int, sm_io_port: int, sm_byte_order: str,
-         sm_period: float, kas_host: str, kas_port: int, kas_period: float) -> None:
+         sm_period: float, sm_outputs: str, kas_host: str, kas_port: int, kas_period: float) -> None:
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
     sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,
-                       byte_order=sm_byte_order, period_s=sm_period)
+                       byte_order=sm_byte_order, period_s=sm_period, outputs=sm_outputs)
     kas = KawasakiSettings(host=kas_host, port=kas_port, period_s=kas_period)
     if link in ("simple_message", "adept"):
         _check_link(link, robot.is_adept, "the Adept Viper s850 (ad850)", robot.name, dummy, sm.check)

@@ -46,6 +46,20 @@ once; the monitor keeps ``max(old, new)`` until the robot has settled within the
 ones (a running trajectory keeps its old limits until it ends). New turn limits that
 the current motion would cross cause a controlled stop; the monitor's turn bounds are
 widened just enough to contain that stop (reported), and close again at rest.
+
+Time scaling (the feed)
+-----------------------
+A link whose arm runs at its own pace (the Adept's V+ program moves every point at the
+controller's monitor speed) slows the core so that its setpoints and the arm stay
+together: ``set_feed(f)``, 0 <= f <= 1, the plan's seconds per controller second. A
+trajectory then advances ``f`` samples per cycle along the same path (positions
+interpolated between its samples, so a LIN move stays on the line the monitor checked),
+and the feed changes only as fast as the acceleration limits leave room for: the
+acceleration a change of pace adds to the path's own stays within them. Alter plans its
+generated motion with its speed limits times the feed, and its watchdog counts the plan's
+time (a target missing for ``alter_timeout_s`` of it stops the motion). A stop is never
+slowed: it brakes from the speed the arm is commanded at. ``held_back_s`` says how much
+longer the current trajectory takes than planned (the driver extends its deadline by it).
 """
 
 from __future__ import annotations
@@ -76,6 +90,14 @@ N_JOINTS = 6
 #: how close the current state must be to a trajectory's first sample (deg)
 START_TOL_DEG = 1e-6
 REST_EPS = 1e-9
+#: a change of the feed may add acceleration up to this share of the limit, less the path's own
+FEED_ACCEL_SHARE = 0.95
+#: a change of the feed that does not fit is halved this often before the feed stays
+FEED_HALVINGS = 12
+#: Alter plans with its speed limits times the feed, never less than this share of them
+ALTER_FEED_MIN = 0.02
+#: Alter replans the motion under way when the feed has changed this much since its plan
+ALTER_FEED_STEP = 0.05
 
 
 # ====================================================================== data
@@ -120,6 +142,7 @@ class Motion:
         self.ok: bool | None = None
         self.reason = ""
         self.error = ""
+        self.started = False  # it ran (a refused one never does)
         self.final: CoreState | None = None
         self._callbacks: list[Callable[[Motion], None]] = []
         self._lock = threading.Lock()
@@ -171,6 +194,7 @@ class MotionCore:
         self.violation_count = 0
         self._lock = threading.RLock()
         self._lim = (limits or Limits.defaults(self.robot)).copy()
+        self._plant: tuple[np.ndarray, np.ndarray] | None = None  # the plant's own range (``restrict``)
         # every setpoint passes it; its limits may be wider than _lim during a transition
         self._monitor = LimitMonitor(self._lim, self.dt)
         self._cycle = 0
@@ -183,8 +207,14 @@ class MotionCore:
         self._samples: np.ndarray | None = None
         self._samples_qd: np.ndarray | None = None
         self._samples_qdd: np.ndarray | None = None
-        self._k = 0
+        self._pos = 0.0  # where along the samples the setpoint is (a sample index, fractional when slowed)
         self._motion: Motion | None = None
+        # time scaling: plan seconds per controller second, now and as the link asks
+        self._feed = 1.0
+        self._feed_target = 1.0
+        self._held_back = 0.0  # controller seconds the running trajectory has lost to the feed
+        self._alter_feed = 1.0  # the feed the current Alter plan was made with
+        self._plan_t = 0.0  # the plan's clock: controller seconds times the feed (the Alter watchdog's)
         # internal generator (Alter, stops)
         self._otg = ruckig.Ruckig(N_JOINTS, self.dt)
         self._inp = ruckig.InputParameter(N_JOINTS)
@@ -254,6 +284,32 @@ class MotionCore:
         """The stop in progress (completes at rest), or None."""
         with self._lock:
             return self._stop_motion
+
+    @property
+    def feed(self) -> float:
+        """The pace the plan runs at now, plan seconds per controller second: a trajectory's
+        feed, the share of its speed limits Alter plans with; 1 for anything else."""
+        if self._mode == "trajectory":
+            return self._feed
+        if self._mode == "alter" and self._gen is not None:
+            return self._alter_feed
+        return 1.0
+
+    def speed_share(self) -> float:
+        """How fast the setpoint moved in the last cycle, as a share of the speed limits
+        (the largest joint's)."""
+        with self._lock:
+            return float(np.max(np.abs(self._v_fd) / np.maximum(self._monitor.enforced.vmax, MIN_LIMIT)))
+
+    @property
+    def held_back_s(self) -> float:
+        """Controller seconds the running (or last) trajectory has taken beyond its plan."""
+        return self._held_back
+
+    def set_feed(self, target: float) -> None:
+        """Run the plan at ``target`` (0..1, clipped) of its pace from now on: a trajectory
+        gets there as fast as the acceleration limits allow, Alter at its next plan."""
+        self._feed_target = min(1.0, max(0.0, float(target)))
 
     # ------------------------------------------------------------------ events
     def _event(self, **event: Any) -> None:
@@ -346,9 +402,23 @@ class MotionCore:
                 return False, str(exc)
             if np.any(new.vmax < 0) or np.any(new.amax < 0):
                 return False, "negative speed or acceleration limit"
-            self._apply_limits(new)
+            self._apply_limits(self._within_plant(new))
         self._run_deferred()
         return True, ""
+
+    def restrict(self, lo: npt.ArrayLike, hi: npt.ArrayLike) -> None:
+        """The plant's own joint range (deg): the turn limits never reach beyond it, whatever
+        limits are set later, so a motion leaving it is refused before it starts."""
+        with self._lock:
+            self._plant = (_six(lo), _six(hi))
+            self._apply_limits(self._within_plant(self._lim.copy()))
+        self._run_deferred()
+
+    def _within_plant(self, new: Limits) -> Limits:
+        if self._plant is not None:
+            new.turn_min = np.maximum(new.turn_min, self._plant[0])
+            new.turn_max = np.minimum(new.turn_max, self._plant[1])
+        return new
 
     def _apply_limits(self, new: Limits) -> None:
         self._lim = new
@@ -381,7 +451,7 @@ class MotionCore:
     def _future_extrema(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(min, max) per joint of the rest of the current motion, or None at rest."""
         if self._mode == "trajectory" and self._samples is not None:
-            rest = self._samples[self._k:]
+            rest = self._samples[int(self._pos) + 1:]
             if len(rest) == 0:
                 return None
             rest = np.vstack([self._q, rest])
@@ -429,8 +499,10 @@ class MotionCore:
                 self._samples = arr
                 self._samples_qd = None if qd is None else np.asarray(qd, float)
                 self._samples_qdd = None if qdd is None else np.asarray(qdd, float)
-                self._k = 1
+                self._pos = 0.0
+                self._held_back = 0.0
                 self._motion = motion
+                motion.started = True
                 self._mode = "trajectory"
                 if len(arr) <= 1:
                     self._finish_trajectory(True, "")
@@ -490,7 +562,7 @@ class MotionCore:
             self._mode = "alter"
             self._target = self._q.copy()
             self._target_pending = False
-            self._last_heard = self.t
+            self._last_heard = self._plan_t
             self._watchdog_fired = False
             return True, ""
 
@@ -517,7 +589,7 @@ class MotionCore:
                 raise Offline(self._offline)
             if not self._alter:
                 return False, "alter mode is not enabled"
-            self._last_heard = self.t
+            self._last_heard = self._plan_t
             checked, reason = _check_target(q, self._q.tolist(), relative, self._lim)
             if checked is None:
                 return False, reason
@@ -536,7 +608,7 @@ class MotionCore:
     def heartbeat(self) -> None:
         """The client is alive (keeps the Alter watchdog quiet without a new target)."""
         with self._lock:
-            self._last_heard = self.t
+            self._last_heard = self._plan_t
 
     # ------------------------------------------------------------------ stop
     def stop(self, reason: str = "stopped") -> Motion:
@@ -661,12 +733,21 @@ class MotionCore:
                 return traj
         return None
 
+    def _alter_pace(self) -> float:
+        return max(ALTER_FEED_MIN, self._feed_target)
+
     def _plan_target(self) -> ruckig.Trajectory | None:
-        inp = self._gen_input(self._lim, self._target)
+        pace = self._alter_pace()
+        lim = self._lim
+        if pace < 1.0:
+            lim = lim.copy()
+            lim.vmax = lim.vmax * pace
+        inp = self._gen_input(lim, self._target)
         inp.synchronization = ruckig.Synchronization.Time if self._sync else ruckig.Synchronization.No
         traj = self._calculate(inp)
         if traj is not None and self._safe(traj, self._lim, self._monitor.enforced):
             self._gen_version = self._lim_version
+            self._alter_feed = pace
             return traj
         return None
 
@@ -675,6 +756,7 @@ class MotionCore:
         """Advance one controller cycle; returns the new state."""
         with self._lock:
             self._cycle += 1
+            self._plan_t += self.feed * self.dt
             if self._mode == "trajectory":
                 self._step_trajectory()
             else:
@@ -708,39 +790,91 @@ class MotionCore:
         return breach
 
     def _step_trajectory(self) -> None:
-        k = self._k
         samples = self._samples
         assert samples is not None  # following a trajectory
-        qd = None if self._samples_qd is None else self._samples_qd[k]
-        qdd = None if self._samples_qdd is None else self._samples_qdd[k]
-        bad = self._command(samples[k], qd, qdd)
+        wanted = self._next_feed(samples)
+        for feed in dict.fromkeys((wanted, (wanted + self._feed) / 2, self._feed)):  # the monitor decides
+            bad = self._command(*self._sample_at(samples, self._pos + feed, feed))
+            if bad is None:
+                break
         if bad is not None:
             kind, j, value, limit = bad
+            at = min(self._pos + feed, len(samples) - 1.0)
             self._violation(kind, j + 1, value, limit, "trajectory",
-                            f"trajectory sample {k}: joint {j + 1} {kind} {value:.6g} beyond {limit:.6g}; stopping")
+                            f"trajectory sample {at:g}: joint {j + 1} {kind} {value:.6g} beyond {limit:.6g}; stopping")
             self._begin_stop(f"limit violation ({kind}, joint {j + 1})", force=True)
             self._step_generator()
             return
-        self._k = k + 1
-        if self._k >= len(samples):
+        self._held_back += (1.0 - feed) * self.dt
+        self._feed = feed
+        self._pos = min(self._pos + feed, len(samples) - 1.0)
+        if self._pos >= len(samples) - 1:
             self._finish_trajectory(True, "")
             self._finish_stop_if_any()
+
+    def _sample_at(self, samples: np.ndarray, pos: float,
+                   feed: float) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """The setpoint ``pos`` samples along the trajectory (linear between two samples),
+        with the samples' own velocity and acceleration when it is one of them, run at
+        full pace."""
+        last = len(samples) - 1
+        k = min(int(pos), last)
+        frac = pos - k if k < last else 0.0
+        if frac < 1e-9 or frac > 1.0 - 1e-9:
+            k, frac = min(k + (frac > 0.5), last), 0.0
+        if frac:
+            q: np.ndarray = samples[k] + frac * (samples[k + 1] - samples[k])
+            return q, None, None
+        exact = feed == 1.0 and self._feed == 1.0
+        qd = self._samples_qd[k] if exact and self._samples_qd is not None else None
+        qdd = self._samples_qdd[k] if exact and self._samples_qdd is not None else None
+        return samples[k], qd, qdd
+
+    def _next_feed(self, samples: np.ndarray) -> float:
+        """The feed of this cycle: towards the target, by as much as the acceleration limits
+        leave room for. Along the path (velocity ``v``, acceleration ``a`` in plan time) the
+        commanded acceleration at the new feed ``f = feed + df`` is ``df v / dt`` plus the
+        path's own, between ``f**2 a`` (a smooth path) and ``f a`` (its samples joined by
+        straight lines): each joint's stays within ``FEED_ACCEL_SHARE`` of its limit (or no
+        further beyond it than the path alone already is); ``df`` is halved until it does."""
+        feed, target = self._feed, self._feed_target
+        if target == feed:
+            return feed
+        k = min(int(self._pos), len(samples) - 2)
+        if k < 1:
+            return target  # at the start the path is at rest: any pace fits
+        dt = self.dt
+        v = (samples[k + 1] - samples[k]) / dt
+        a = (samples[k + 1] - 2.0 * samples[k] + samples[k - 1]) / dt**2
+        room = np.maximum(self._monitor.enforced.amax * FEED_ACCEL_SHARE, np.abs(feed * a))
+        df = target - feed
+        for _ in range(FEED_HALVINGS):
+            f = feed + df
+            push = df * v / dt
+            if (np.abs(f * a + push) <= room).all() and (np.abs(f * f * a + push) <= room).all():
+                return f
+            df /= 2
+        return feed
 
     def _step_generator(self) -> None:
         if self._alter and self._mode == "alter":
             # watchdog
-            if (not self._watchdog_fired and self.t - self._last_heard > self.alter_timeout_s
+            if (not self._watchdog_fired and self._plan_t - self._last_heard > self.alter_timeout_s
                     and (self._gen is not None or self._target_pending)):
                 self._watchdog_fired = True
                 self._event(type="watchdog", timeout_s=self.alter_timeout_s)
                 self._begin_stop("alter watchdog: no target within timeout")
                 self._stop_motion = None  # nobody waits for a watchdog stop
-            elif self._target_pending:
-                traj = self._plan_target()
-                if traj is not None:
-                    self._gen, self._gen_t, self._gen_kind = traj, 0.0, "alter"
-                    self._target_pending = False
-                # else: keep the current (checked) motion; retry next cycle
+            else:
+                if (self._gen is not None and self._gen_kind == "alter"
+                        and abs(self._alter_pace() - self._alter_feed) >= ALTER_FEED_STEP):
+                    self._target_pending = True  # slower or faster: replan what runs
+                if self._target_pending:
+                    traj = self._plan_target()
+                    if traj is not None:
+                        self._gen, self._gen_t, self._gen_kind = traj, 0.0, "alter"
+                        self._target_pending = False
+                    # else: keep the current (checked) motion; retry next cycle
         elif self._resync and self._mode == "stopping" and not self._ebrake:
             brake = self._plan_stop()
             if brake is not None:

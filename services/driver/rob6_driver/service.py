@@ -65,6 +65,8 @@ STOP_REQUESTED = "stop requested"
 REST_STATE_PERIOD_S = 0.1
 #: at most this long a switched output waits for the next cycle's state to carry it
 SIGNAL_PUBLISH_WAIT_S = 0.5
+#: a motion slowed to its arm's pace announces its longer bound each time it grew this much (s)
+REANNOUNCE_S = 0.5
 
 
 class DriverService:
@@ -138,15 +140,14 @@ class DriverService:
         if not req.wait and not (motion.done.is_set() and not motion.ok):
             return ExecuteReply(ok=True)
         duration = len(trajectory.q) * trajectory.dt
-        bound = arm_s(duration)  # then the link's own check that the robot arrived
-        if not (motion.done.is_set() and self.link.settle_bound_s == 0.0):  # a dummy's is done
-            ctx.waiting(bound + self.link.settle_bound_s, f"waiting for the {duration:.1f} s motion")
-        if not motion.wait(bound):
+        if not self._ended(motion, duration, ctx):
             self.core.stop("the motion did not end in time")
             return ExecuteReply(ok=False, reason="the motion did not end in time",
                                 state=self.joint_state(self.core.state()))
         final = motion.final or self.core.state()
-        if motion.ok:  # the setpoints are done; a robot that lags behind them must arrive too
+        if motion.ok or (motion.started and not motion.error):
+            # the setpoints are done, or stopped on the ramp: a robot that lags behind them
+            # must be there too before the reply says where it rests
             failed = self.link.settle(final.q)
             if failed:
                 log.info("motion failed: %s", failed)
@@ -158,6 +159,26 @@ class DriverService:
                     "trajectory refused or stopped: %s", motion.reason)
         return ExecuteReply(ok=bool(motion.ok), reason=motion.reason or "", error=motion.error,
                             state=self.joint_state(final))
+
+    def _ended(self, motion: Motion, duration: float, ctx: Context) -> bool:
+        """Wait for a trajectory of ``duration`` s to end, announced to the caller: its bound,
+        then the link's own check that the robot arrived. A link that paces the core by its
+        arm (``MotionCore.held_back_s``) makes it longer: the bound grows with it, announced
+        again each time it has grown by ``REANNOUNCE_S``."""
+        if motion.done.is_set() and self.link.settle_bound_s == 0.0:  # a dummy's is done
+            return True
+        what = f"waiting for the {duration:.1f} s motion"
+        began, held = time.monotonic(), 0.0
+        deadline = began + arm_s(duration)
+        ctx.waiting(deadline - began + self.link.settle_bound_s, what)
+        while not motion.wait(max(0.0, min(deadline - time.monotonic(), REANNOUNCE_S))):
+            if self.core.held_back_s >= held + REANNOUNCE_S:
+                held = self.core.held_back_s
+                deadline = began + arm_s(duration + held)
+                ctx.waiting(deadline - time.monotonic() + self.link.settle_bound_s, f"{what}, slowed to its arm's pace")
+            elif time.monotonic() >= deadline:
+                return False
+        return True
 
     def limits(self, req: LimitsUpdate, _ctx: Context) -> Ack:
         ok, reason = self.core.set_limits(req.turn_min, req.turn_max, req.max_speed, req.max_accel,
@@ -197,10 +218,17 @@ class DriverService:
 
     def _stopped(self, stop: Motion, ctx: Context) -> Ack:
         """The answer to an operation that stops the arm: at rest (with the state there,
-        where the next motion starts), or not in time."""
+        where the next motion starts; a link whose arm lags behind the setpoints waits for
+        the arm to rest there too), or not in time."""
         if not self._at_rest(stop, ctx):
             return Ack(ok=False, reason="the robot did not come to rest in time")
-        return Ack(ok=True, state=self.joint_state(stop.final or self.core.state()))
+        final = stop.final or self.core.state()
+        if self.link.settle_bound_s and not self.core.offline_reason:  # an arm that lags: at rest too
+            ctx.waiting(self.link.settle_bound_s, STOPPING)
+            failed = self.link.settle(final.q)
+            if failed:
+                return Ack(ok=False, reason=failed, error=failed, state=self.joint_state(self.core.state()))
+        return Ack(ok=True, state=self.joint_state(final))
 
     def signal(self, req: SignalRequest, ctx: Context) -> Ack:
         """Switch the Adept's digital outputs; the numbers are checked again here (rob6.vplus),

@@ -12,6 +12,10 @@ number ``GAP_S`` after the mode.
 The connection is opened on the first request and kept; a request on a kept connection
 that the controller has closed meanwhile is sent again once on a new one (switching an
 output twice is the same as once).
+
+``SIGNAL`` of an output the controller has not installed is a V+ error, and ``ros.io`` has
+no handler: its task ends for good (nothing restarts it; ``a.ros()`` again does). So only
+the outputs the lab lists as installed (``ROB6_SM_OUTPUTS``, ``parse_outputs``) are sent.
 """
 
 from __future__ import annotations
@@ -22,7 +26,11 @@ import threading
 import time
 
 from rob6.errors import LinkError
+from rob6.vplus import OUTPUTS, SOFT_SIGNALS
 
+#: the outputs a controller has without saying: a SmartController's XDIO outputs, and the
+#: software signals every V+ system has (rob6.vplus)
+DEFAULT_OUTPUTS = "1-8,2001-2512"
 #: the mode rob6 sends: any value but 1 (read) makes the program write
 WRITE_MODE = 2
 #: between the mode and the number: two records for the program's two READs
@@ -30,6 +38,23 @@ GAP_S = 0.1
 ANSWER_TIMEOUT_S = 2.0
 CONNECT_TIMEOUT_S = 2.0
 _INT32 = struct.Struct(">i")
+
+
+def parse_outputs(text: str) -> tuple[range, ...]:
+    """The installed outputs from ``ROB6_SM_OUTPUTS`` ("1-8,97-104,2001-2512"); ValueError
+    (one line) for anything but ranges of V+ outputs (1-512) and software signals (2001-2512)."""
+    out = []
+    for part in text.replace(" ", "").split(","):
+        first, dash, last = part.partition("-")
+        if not first.isdigit() or (dash and not last.isdigit()):
+            raise ValueError(f"ROB6_SM_OUTPUTS={text!r}: expected ranges of signal numbers like 1-8,2001-2512")
+        numbers = range(int(first), int(last if dash else first) + 1)
+        if not numbers or not any(numbers[0] in r and numbers[-1] in r for r in (OUTPUTS, SOFT_SIGNALS)):
+            raise ValueError(f"ROB6_SM_OUTPUTS={text!r}: {part} is not a range of V+ outputs "
+                             f"({OUTPUTS.start}-{OUTPUTS.stop - 1}) or software signals "
+                             f"({SOFT_SIGNALS.start}-{SOFT_SIGNALS.stop - 1})")
+        out.append(numbers)
+    return tuple(out)
 
 
 class IoPortError(LinkError):
@@ -86,7 +111,7 @@ class AdeptIoPort:
         except IoPortError:
             self._close()
             raise
-        if answer != b"1":
+        if answer.strip() != b"1":  # "/N": no line end; whitespace around it would change nothing
             self._close()  # whatever it was, the next request starts on a fresh connection
             raise IoPortError(f"the controller at {self.name} answered {answer.decode('latin-1')!r} to "
                               f"SIGNAL {signal} instead of '1'")
@@ -97,7 +122,8 @@ class AdeptIoPort:
             answer = sock.recv(64)
         except TimeoutError:
             ms = round(self.answer_timeout_s * 1000)
-            raise IoPortError(f"no answer from the controller's I/O port {self.name} within {ms} ms") from None
+            raise IoPortError(f"no answer from the controller's I/O port {self.name} within {ms} ms (has its "
+                              "I/O task ended? a.ros() starts it again)") from None
         if not answer:
             raise _Lost(f"the controller at {self.name} closed the I/O connection without an answer")
         return answer

@@ -12,25 +12,32 @@ The controller is the TCP server, rob6 the client on its ports (``ROB6_SM_HOST``
   ``signal`` (DirectAdeptCmd signal 5, -6), which switches digital outputs.
 
 The clock is the driver's own (like the simulation): every ``robot.cycle_s`` (16 ms) the
-motion core steps, and while the robot moves every ``period_s`` (default 48 ms, three
-cycles) its setpoint becomes one point, with the time since the previous point as its
-``duration`` and the speed that implies as ``velocity`` (fraction of the rated joint
-speeds). Every setpoint has passed the core's limit monitor; the link also refuses to
-send one outside the controller's joint ranges. A motion's stream
+motion core steps, and while the robot moves each time the plan has run ``period_s``
+(default 48 ms, three cycles) its setpoint becomes one point, with the time since the
+previous point as its ``duration`` and the speed that implies as ``velocity`` (fraction of
+the rated joint speeds). Every setpoint has passed the core's limit monitor; the
+controller's own joint ranges (``CONTROLLER_RANGE_DEG``) bound the core's turn limits, so
+a motion leaving them is refused before it starts, and the link never sends such a point.
+A motion's stream
 
 * starts with a *hold point*: the position the robot rests at, lasting one period plus
-  a lead (one more period). A controller that honours durations thus runs one lead
-  behind rob6, so the next point is always there before the previous one is played out
-  (no underrun, however the machine's timing jitters up to a lead);
+  a lead (one more period), for a controller that honours durations;
 * ends with the final setpoint as sequence -3 (END_TRAJECTORY) once the core is at rest.
 
-When an acknowledgement comes late the points produced meanwhile are merged into one
-(the newest position, the durations summed: the timing is kept; ``late`` counts them).
+Each point waits for its acknowledgement. The Adept's V+ program reads a point only when
+its previous MOVE has begun (one motion runs, the next is planned behind it), so its
+acknowledgements come at the arm's pace: the base (``streamed_points.py``) merges what was made meanwhile, never
+beyond two periods of the core's full speed, and slows the core (time scaling) when the
+answers fall behind, so the arm and rob6's setpoints stay together at any monitor speed.
 
-The Adept's V+ program ignores velocity and duration (``SPEED 100 ALWAYS``): the arm
-runs each point at the pendant's monitor speed, one point ahead of the program. It
-acknowledges every point at once with code 1 and reports no errors in STATUS (only
-drives, E-stop and motion); the simulator ``adept-sm-sim`` can do both ways.
+A motion connection begins with the *opening* (``Codec.opening``): the program discards
+the first four bytes of a connection, and the opening reads right whether they are rob6's
+or not (deploy/adept/README.md section 4).
+
+The V+ program ignores velocity and duration (``SPEED 100 ALWAYS``): the arm runs each
+point at the pendant's monitor speed. It acknowledges every point at once with code 1 and
+reports no errors in STATUS (only drives, E-stop and motion); a MOVE it cannot make ends
+its motion task, which closes the connection.
 
 A motion returns ``true`` only when the robot has arrived: all points acknowledged,
 the controller reports it at rest, and its JOINT_POSITION is the final setpoint within
@@ -50,8 +57,8 @@ Motion commands meanwhile are refused with the same error. The link resumes once
 connections are up, STATUS is clear and the robot is at rest (two state messages after
 the fault, the same position in both): the core continues from the robot's actual
 position, never from where an interrupted motion would have been. When the stream was
-cut mid-motion the link sends a stop (sequence -4) as soon as it can; the simulator
-brakes on it, the V+ program does not (its issued motions, at most two points, run out).
+cut mid-motion the link sends a stop (sequence -4) as soon as it can; the V+ program
+answers it and halts nothing: the MOVEs it has issued (at most three short segments) run out.
 
 Joints: rob6 (rob6server's convention, degrees) versus the controller's (radians on the
 wire), see ``to_controller_deg`` and deploy/adept/README.md.
@@ -75,7 +82,7 @@ from rob6.robots import RobotModel
 
 from ..motion import MotionCore
 from . import Outputs, Publish
-from .adept_io import AdeptIoPort, IoPortError
+from .adept_io import DEFAULT_OUTPUTS, AdeptIoPort, IoPortError, parse_outputs
 from .simple_message_codec import (
     BYTE_ORDERS,
     END_TRAJECTORY,
@@ -122,6 +129,13 @@ ARRIVAL_TOL_DEG = 0.05
 #: kinematics against the ROS-Industrial Viper URDF (tests/driver/test_adept_convention.py).
 TO_CONTROLLER_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
 TO_CONTROLLER_OFFSET_DEG = np.array([0.0, 0.0, 90.0, 0.0, 0.0, 0.0])
+#: the Viper's joint ranges in the controller's own angles, deg: ``MOVE`` to a point
+#: outside them is a V+ error that ends the program's motion task, so none is ever sent.
+#: The ROS-Industrial Viper URDF (adept_experimental, ``viper_s650_macro.xacro``, the
+#: joints' ``<limit lower upper>`` in rad): J3 reaches 256 deg, not the 259 rob6's own
+#: table maps to (deploy/adept/README.md section 5)
+CONTROLLER_RANGE_DEG = np.array([(-170.0, 170.0), (-190.0, 45.0), (-29.0, 256.0), (-190.0, 190.0),
+                                 (-120.0, 120.0), (-360.0, 360.0)])
 #: rated joint speeds of the Viper s850, deg/s (Adept's data sheet): the maximum the
 #: points' velocity fraction refers to
 RATED_SPEED_DEG_S = np.array([250.0, 250.0, 250.0, 375.0, 375.0, 600.0])
@@ -163,6 +177,7 @@ class AdeptSettings:
     io_port: int = DEFAULT_IO_PORT
     byte_order: str = DEFAULT_BYTE_ORDER
     period_s: float = DEFAULT_PERIOD_S
+    outputs: str = DEFAULT_OUTPUTS  # the digital outputs the controller has installed
 
     def check(self) -> None:
         """ValueError (one line, naming the setting) when a value cannot work."""
@@ -171,6 +186,7 @@ class AdeptSettings:
         if self.byte_order not in BYTE_ORDERS:
             raise ValueError(f"ROB6_SM_BYTE_ORDER={self.byte_order!r}: expected big or little")
         check_period("ROB6_SM", self.period_s)
+        parse_outputs(self.outputs)
 
 
 class AdeptLink(StreamedPointsLink):
@@ -184,14 +200,16 @@ class AdeptLink(StreamedPointsLink):
         settings.check()
         self.settings = settings
         self.codec = Codec(settings.byte_order)
-        self.hw_min = np.array(robot.hw_min, float)
-        self.hw_max = np.array(robot.hw_max, float)
+        # the controller's range in rob6's joints (a sign flips a joint's ends)
+        ends = np.sort(from_controller_deg(CONTROLLER_RANGE_DEG.T), axis=0)
+        self.range_min, self.range_max = ends[0], ends[1]
         host = settings.host
         self.motion_addr = (host, int(settings.motion_port))
         self.state_addr = (host, int(settings.state_port))
         self.motion_name = _name(self.motion_addr)
         self.state_name = _name(self.state_addr)
         self.io = AdeptIoPort(host, int(settings.io_port))
+        self.installed = parse_outputs(settings.outputs)
         self._outputs = Outputs()
         # the connections (guarded by _cond)
         self._motion_up = False
@@ -204,6 +222,7 @@ class AdeptLink(StreamedPointsLink):
         waiting = f"robot not connected (waiting for simple_message at {host}:{settings.motion_port}/{settings.state_port})"
         super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
         self.lead_s = LEAD_PERIODS * self.period_s
+        core.restrict(self.range_min, self.range_max)  # motions beyond the arm's range are refused up front
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
@@ -225,7 +244,12 @@ class AdeptLink(StreamedPointsLink):
     # ------------------------------------------------------------------ digital outputs
     def signal(self, signals: list[int]) -> str:
         """SIGNAL each number through the program's I/O port, in order; stops at the first
-        the controller does not confirm (the ones before it stay switched)."""
+        the controller does not confirm (the ones before it stay switched). Nothing is sent
+        when one is not installed (its SIGNAL would end the program's I/O task)."""
+        missing = [n for n in signals if not any(abs(n) in r for r in self.installed)]
+        if missing:
+            return (f"signal {missing[0]} is not installed on the controller (ROB6_SM_OUTPUTS="
+                    f"{self.settings.outputs}): SIGNAL of it would end the V+ program's I/O task; nothing was switched")
         done: list[int] = []
         for signal in signals:
             try:
@@ -270,11 +294,11 @@ class AdeptLink(StreamedPointsLink):
         return self._robot_status.in_motion == TS_TRUE
 
     def _outside_range(self, q: Joints) -> str:
-        outside = np.flatnonzero(~((q >= self.hw_min) & (q <= self.hw_max)))
+        outside = np.flatnonzero(~((q >= self.range_min) & (q <= self.range_max)))
         if not outside.size:
             return ""
         j = int(outside[0])
-        return f"joint {j + 1} at {q[j]:.3f}, range {self.hw_min[j]:g} .. {self.hw_max[j]:g}"
+        return f"joint {j + 1} at {q[j]:.3f}, range {self.range_min[j]:g} .. {self.range_max[j]:g}"
 
     # ------------------------------------------------------------------ the stream's extras
     def _on_open(self) -> None:
@@ -369,7 +393,7 @@ class AdeptLink(StreamedPointsLink):
     # ------------------------------------------------------------------ the motion port
     def _motion_loop(self) -> None:
         self._keep_connected(self.motion_addr, "the controller's motion port {}", self._serve_motion,
-                             self._motion_down, self._motion_connected)
+                             self._motion_down)
 
     def _motion_connected(self) -> None:
         with self._cond:
@@ -393,6 +417,9 @@ class AdeptLink(StreamedPointsLink):
         connected = time.monotonic()
         self._talked = False
         sock.setblocking(False)
+        if not self._open_motion(sock, buffer, connected):
+            return "closing"
+        self._motion_connected()
         while not self._closing.is_set():
             with self._cond:
                 request = self._next_request()
@@ -407,15 +434,44 @@ class AdeptLink(StreamedPointsLink):
             frame, ctrl, stop = request
             sent = time.perf_counter()
             self._talked = True
-            try:
-                _send_all(sock, frame, self.ack_timeout_s)
-            except OSError as exc:
-                raise LinkDown(f"sending to the controller at {self.motion_name} failed: "
-                               f"{exc.strerror or exc}") from None
-            code = self._await_reply(sock, buffer, connected)
+            self._send(sock, frame)
+            code, _sequence = self._await_reply(sock, buffer, connected)
             latency = time.perf_counter() - sent
             self._on_reply(code, ctrl, stop, latency)
         return "closing"
+
+    def _open_motion(self, sock: socket.socket, buffer: bytearray, connected: float) -> bool:
+        """Begin a motion connection with the opening (``Codec.opening``) once the arm can
+        take it (its position known, drives on, no E-stop: the opening may be a MOVE to
+        where it stands), and its rest when it was read from its first byte; False when the
+        link closes meanwhile. ``LinkDown`` when the controller closes or does not answer."""
+        while True:
+            with self._cond:
+                ready = self._state_up and self._position is not None and self._controller_fault() == ""
+                here = self._position
+            if self._closing.is_set():
+                return False
+            if ready and here is not None:
+                break
+            if select.select([sock], [], [], 0.1)[0]:
+                self._receive_motion(sock, buffer, connected)
+                self._skip_unasked(buffer)
+        self._talked = True
+        self._send(sock, self.codec.opening(to_wire(here)))
+        _code, sequence = self._await_reply(sock, buffer, connected)
+        if sequence == STOP_TRAJECTORY:  # read from its first byte: the second stop completes it
+            self._send(sock, self.codec.opening_rest())
+            self._await_reply(sock, buffer, connected)
+        log.info("driver: the controller at %s read the opening from byte %d", self.motion_name,
+                 0 if sequence == STOP_TRAJECTORY else 4)
+        return True
+
+    def _send(self, sock: socket.socket, data: bytes) -> None:
+        try:
+            _send_all(sock, data, self.ack_timeout_s)
+        except OSError as exc:
+            raise LinkDown(f"sending to the controller at {self.motion_name} failed: "
+                           f"{exc.strerror or exc}") from None
 
     def _next_request(self) -> tuple[bytes, Joints | None, bool] | None:
         """(frame, controller joints, is_stop) of the next request, or None (lock held).
@@ -434,14 +490,15 @@ class AdeptLink(StreamedPointsLink):
             velocity = float(min(1.0, np.max(np.abs(ctrl - self._sent) / duration / RATED_SPEED_DEG_S)))
         return self.codec.traj_pt(last.sequence, np.radians(ctrl).tolist(), velocity, duration), ctrl, False
 
-    def _await_reply(self, sock: socket.socket, buffer: bytearray, connected: float) -> int:
-        """The reply code of the request just sent (``LinkDown`` when none comes in time)."""
+    def _await_reply(self, sock: socket.socket, buffer: bytearray, connected: float) -> tuple[int, int | None]:
+        """The reply code of the request just sent and the sequence its body carries
+        (``LinkDown`` when none comes in time)."""
         deadline = time.monotonic() + self.ack_timeout_s
         while True:
             for payload in self._frames(buffer):
                 message = self.codec.decode(payload)
                 if message.header.comm_type == SERVICE_REPLY and message.header.msg_type == JOINT_TRAJ_PT:
-                    return message.header.reply_code
+                    return message.header.reply_code, self.codec.reply_sequence(message.body)
                 self._garbage(f"driver: ignored a message of type {message.header.msg_type} "
                               f"(comm type {message.header.comm_type}) on the motion port")
             remaining = deadline - time.monotonic()

@@ -26,6 +26,15 @@ Bodies rob6 uses:
 
 A service reply (comm type 3) may carry any body (the Adept program sends one int32,
 other programs echo the point): only its header matters.
+
+The connection's opening (``opening``, ``opening_rest``): the Adept V+ program discards
+the first four bytes it reads on a new motion connection, and whether those are the
+client's first bytes or something V+ itself delivers on connecting cannot be told from
+the program (deploy/adept/README.md section 4). The opening reads right either way: from
+its first byte it is a stop (-4, answered -4, no motion) followed by the first word of a
+second frame, whose remaining 64 bytes (``opening_rest``, another stop) are sent once the
+-4 came; from its fifth byte it is a point at the arm's current joints (answered 0, a
+MOVE that goes nowhere), after which the framing is right.
 """
 
 from __future__ import annotations
@@ -149,6 +158,24 @@ class Codec:
         body = self._status.pack(status.drives_powered, status.e_stopped, status.error_code, status.in_error,
                                  status.in_motion, status.mode, status.motion_possible)
         return self.frame(STATUS, TOPIC, INVALID, body)
+
+    def opening(self, joints_rad: Iterable[float]) -> bytes:
+        """The 72 bytes a motion connection begins with (see the module's doc): as a
+        JOINT_TRAJ_PT from byte 0 a stop, from byte 4 a point at ``joints_rad``."""
+        words = [
+            self._int.pack(HEADER_SIZE + self._traj_pt.size),  # read from byte 0: the length ...
+            self._header.pack(JOINT_TRAJ_PT, SERVICE_REQUEST, SERVICE_REQUEST),  # ... from 4: length, type, comm
+            self._int.pack(STOP_TRAJECTORY),  # from 0: the sequence (a stop); from 4: the reply code
+            self._int.pack(0),  # from 0: joint 1 (ignored by a stop); from 4: the sequence
+            struct.pack(self._int.format[0] + f"{MAX_JOINTS}ff", *_ten(joints_rad), 0.0),  # from 4: joints, velocity
+            self._int.pack(HEADER_SIZE + self._traj_pt.size),  # from 4: the duration; from 0: the next length
+        ]
+        return b"".join(words)
+
+    def opening_rest(self) -> bytes:
+        """The rest of the opening when it was read from byte 0: a stop frame without its
+        length word (that came with the opening)."""
+        return self.traj_pt(STOP_TRAJECTORY, [])[PREFIX_SIZE:]
 
     def reply(self, msg_type: int, reply_code: int, body: bytes = b"") -> bytes:
         return self.frame(msg_type, SERVICE_REPLY, reply_code, body)

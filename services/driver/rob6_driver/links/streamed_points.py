@@ -3,10 +3,22 @@
 What the simple_message (Adept) and kawasaki links share; their wire is left to subclasses.
 
 The clock is the driver's own: every ``core.dt`` the motion core steps, and while the
-robot moves every ``period_s`` (whole cycles) its setpoint becomes one point with the
-time since the previous point as its duration; the last point of a motion is final.
+robot moves its setpoint becomes one point each time the plan has run ``period_s`` (whole
+cycles; longer when the core is slowed), with the time since the previous point as its
+duration; the last point of a motion is final.
 Each point waits for its answer before the next goes out; points made meanwhile are
-merged into one (the newest position, durations summed; ``late`` counts them).
+merged into one (the newest position, durations summed; ``late`` counts them), but never
+into a segment longer than what the core moves at its full speed in ``MAX_SEGMENT_PERIODS``
+periods: what a controller has taken runs out even after a stop, so no segment may be long.
+
+Pacing: a controller that answers only when its arm is ready for more (the Adept's V+
+program reads the next point when its previous MOVE has begun) holds rob6 back by its
+answers. The link measures how long its stream has been waiting for the controller
+(``ahead_s``: the age of the oldest point not yet answered, plus what the controller says
+it still holds beyond its design lead, ``_held_s`` and ``pace_lead_s``) and slows the
+motion core (``core.set_feed``, time scaling along the same path) from full pace at
+``PACE_FULL_PERIODS`` to a halt at ``PACE_HALT_PERIODS``: the arm and rob6's setpoints
+stay together, whatever speed the arm runs at.
 
 The base keeps the controller's health: offline (``core.offline``) while a connection
 is down or the controller reports a fault, back online (``core.online`` at the robot's
@@ -19,7 +31,9 @@ A subclass supplies the wire: the connections and their messages, the controller
 joint ranges and what its state says (``_link_up``, ``_sending_up``, ``_controller_fault``,
 ``_controller_moving``, ``_outside_range``) and, optionally, the stream's extras
 (``_on_open``, ``_resting``, ``_number``, ``_on_resync``, ``_controller_missed``,
-``_close_extra``).
+``_close_extra``), and what it knows of the points the controller has taken but its arm
+has not run (``_held_s``, with ``pace_lead_s`` of them held by design). A subclass takes
+the next point to send from ``_merge`` and reports its answer with ``_answered``.
 """
 
 from __future__ import annotations
@@ -65,6 +79,13 @@ SETTLE_MAX_S = 4.0
 REST_TOL_DEG = 1e-3
 STOP_WAIT_S = 0.5
 LATENCY_WINDOW = 10000
+#: the longest segment one point may span: what the core moves at its full speed in this
+#: many periods (points merged while answers are late)
+MAX_SEGMENT_PERIODS = 2
+#: pacing: full pace while the stream has waited for the controller at most this many
+#: periods, then slower, to a halt at the second
+PACE_FULL_PERIODS = 1.5
+PACE_HALT_PERIODS = 4.0
 
 
 class StreamSettings(Protocol):
@@ -109,6 +130,8 @@ class StreamedPoint:
     duration: float  # s
     final: bool = False
     sequence: int = 0  # the wire's number, when the link numbers points as they are made
+    made_t: float = 0.0  # the core's clock when it was made (s)
+    span: float = 0.0  # how far it goes: seconds of the core's full speed (its duration, less when slowed)
 
 
 class LinkDown(Exception):
@@ -149,14 +172,18 @@ class StreamedPointsLink(Link):
         # the stream (guarded by _cond)
         self._open = False
         self._since = 0
+        self._paced = 0.0  # plan seconds the core has run since the last point (its feed, summed)
+        self._span = 0.0  # ... and what it moved meanwhile, in seconds of its full speed
         self._outbox: deque[StreamedPoint] = deque()
         self._inflight = False
         self._stop_pending = False
         self._sent: Joints | None = None  # the last point the controller took (the subclass's joints)
         self._acked_mark = 0  # state count at the last acknowledgement
+        self._inflight_made_t = 0.0  # the core's clock when the (oldest) point in flight was made
         # statistics
         self.packets = 0  # points acknowledged
         self.late = 0  # points merged into a later one (their answer came late)
+        self.longest_segment_s = 0.0  # the longest segment sent, in seconds of the core's full speed
         self.refused = 0
         self.garbage = 0
         self.runs = 0  # (motion) connections made
@@ -170,6 +197,9 @@ class StreamedPointsLink(Link):
         self._threads: list[threading.Thread] = []
         self.waiting_reason = waiting_reason
         self._reason = waiting_reason
+        self.max_segment_s = MAX_SEGMENT_PERIODS * self.period_s
+        #: the points the controller holds by design before its arm runs them (seconds of stream)
+        self.pace_lead_s = 0.0
         core.offline(waiting_reason)
 
     # ------------------------------------------------------------------ the wire's hooks
@@ -209,6 +239,11 @@ class StreamedPointsLink(Link):
     def _controller_missed(self) -> int:
         """Cycles the controller ran without a point (as it reports them)."""
         return 0
+
+    def _held_s(self) -> float:
+        """Seconds of stream the controller has taken but its arm not yet run, as far as it
+        says (lock held); 0 when its answers already wait for the arm."""
+        return 0.0
 
     def _close_extra(self) -> None:
         """Release what the subclass holds besides the connections."""
@@ -303,6 +338,7 @@ class StreamedPointsLink(Link):
         with self._cond:
             state = self.core.step()
             self._stream(state)
+            self.core.set_feed(self._pace())
         # cycles the runner skipped (the machine was too busy), and the controller's own
         self.missed = self.runner.stats.missed + self._controller_missed()
         return state
@@ -316,14 +352,19 @@ class StreamedPointsLink(Link):
             if not self._open:
                 self._open = True
                 self._since = 0
+                self._paced = self._span = 0.0
                 self._on_open()
             self._since += 1
-            if self._since >= self.decimation:
+            self._paced += self.core.feed * self.core.dt
+            self._span += self.core.speed_share() * self.core.dt
+            # a period of the plan (slowed, the points come less often), or as far as it goes in one
+            if max(self._paced, self._span) >= self.period_s - 1e-9:
                 self._push(state.q, self._since * self.core.dt)
                 self._since = 0
         else:
             if self._open:
                 self._open = False
+                self._span += self.core.speed_share() * self.core.dt
                 self._push(state.q, max(self._since, 1) * self.core.dt, final=True)
             self._resting(state.q)
 
@@ -332,27 +373,52 @@ class StreamedPointsLink(Link):
         if why:  # the core's limits allow more than the controller: never send it
             self._evaluate(f"refused to send a point outside the robot's range ({why})")
             return
-        self._outbox.append(StreamedPoint(np.array(q, float), float(duration), final, self._number(final)))
+        self._outbox.append(StreamedPoint(np.array(q, float), float(duration), final, self._number(final),
+                                          self.core.t, self._span))
+        self._paced = self._span = 0.0
         self._wake()
 
     def _merge(self) -> tuple[StreamedPoint, float]:
-        """The points waiting since the last answer, up to a final one, as one: the last
-        of them and their summed duration (lock held, the outbox not empty)."""
-        merged: list[StreamedPoint] = []
-        while self._outbox:
+        """The points waiting since the last answer, up to a final one, as one, never going
+        further than the core's full speed in ``max_segment_s``: the last of them and their
+        summed duration (lock held, the outbox not empty). It is in flight from now on."""
+        merged = [self._outbox.popleft()]
+        span = merged[0].span
+        while self._outbox and not merged[-1].final and span + self._outbox[0].span <= self.max_segment_s + 1e-9:
             p = self._outbox.popleft()
             merged.append(p)
-            if p.final:
-                break
+            span += p.span
         self.late += len(merged) - 1
+        self.longest_segment_s = max(self.longest_segment_s, span)
         self._inflight = True
+        self._inflight_made_t = merged[0].made_t
         return merged[-1], sum(p.duration for p in merged)
+
+    def ahead_s(self) -> float:
+        """How long rob6's stream has been waiting for the controller, seconds of the core's
+        clock (lock held): the age of the oldest point it has not taken, plus what it says it
+        holds beyond its design lead."""
+        if self._inflight:
+            oldest = self._inflight_made_t
+        elif self._outbox:
+            oldest = self._outbox[0].made_t
+        else:
+            oldest = self.core.t
+        return max(0.0, self.core.t - oldest) + max(0.0, self._held_s() - self.pace_lead_s)
+
+    def _pace(self) -> float:
+        """The feed for the core (lock held): 1 up to ``PACE_FULL_PERIODS`` ahead, 0 at
+        ``PACE_HALT_PERIODS``, linear between."""
+        ahead = self.ahead_s() / self.period_s
+        return min(1.0, max(0.0, (PACE_HALT_PERIODS - ahead) / (PACE_HALT_PERIODS - PACE_FULL_PERIODS)))
 
     # ------------------------------------------------------------------ health
     def _fault(self) -> str:
         """Why the robot cannot move right now ("" when it can), lock held."""
-        fault = self._controller_fault() if self._link_up() and self._position is not None else None
-        if fault is None:
+        fault = self._controller_fault() if self._position is not None else None
+        if fault:  # the controller's own word first: a connection it closed may be its consequence
+            return fault
+        if fault is None or not self._link_up():
             if not self._ready_once:
                 return self.waiting_reason
             return f"{self.kind} link lost: {self._lost or 'reconnecting'}"
