@@ -178,10 +178,6 @@ def test_a_point_outside_the_controllers_range_is_never_sent(rig: Rig) -> None:
     assert reply(client, "MovePTPJoints " + fmt(START)) == "true\n"
 
 
-@pytest.mark.xfail(strict=True, reason="needs the link's pacing by acknowledgement (issue 51: "
-                   "streamed_points.py/motion.py slow rob6's core when the controller falls behind); "
-                   "without it the core's motion ends at full speed and the link gives up waiting for "
-                   "the arm at 10 % ('robot stopped short of the target')")
 def test_a_long_ptp_at_a_monitor_speed_of_ten_percent(rig: Rig) -> None:
     """At 10 % every SPEED ... S segment runs ten times longer: the link must pace itself by
     the controller's queue, never have a point refused and never let the queue run dry

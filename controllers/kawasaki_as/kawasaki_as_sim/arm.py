@@ -133,8 +133,9 @@ class Arm:
         scale = self.monitor_speed / 100.0
         for i in range(N):
             e = self.ref[i] - self.q[i]
-            a = MAX_ACCEL[i] * scale * scale
-            speed = min(RATED_SPEED[i] * scale, math.sqrt(2.0 * BRAKE_MARGIN * a * abs(e)),
+            a = MAX_ACCEL[i] * scale * scale  # the motion stretched in time: speed by scale, acceleration by its square
+            # the position loop's last approach is the servo's, which no monitor speed slows
+            speed = min(RATED_SPEED[i] * scale, math.sqrt(2.0 * BRAKE_MARGIN * MAX_ACCEL[i] * abs(e)),
                         (abs(rdot[i]) if rdot else 0.0) + KP * abs(e))
             dv = math.copysign(speed, e) - self.v[i]
             self.v[i] += max(-a * DT, min(a * DT, dv))

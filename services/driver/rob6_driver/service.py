@@ -148,7 +148,7 @@ class DriverService:
         if motion.ok or (motion.started and not motion.error):
             # the setpoints are done, or stopped on the ramp: a robot that lags behind them
             # must be there too before the reply says where it rests
-            failed = self.link.settle(final.q)
+            failed = self.link.settle(final.q, waiting=ctx.waiting)
             if failed:
                 log.info("motion failed: %s", failed)
                 return ExecuteReply(ok=False, reason=failed, error=failed, state=self.joint_state(self.core.state()))
@@ -225,7 +225,7 @@ class DriverService:
         final = stop.final or self.core.state()
         if self.link.settle_bound_s and not self.core.offline_reason:  # an arm that lags: at rest too
             ctx.waiting(self.link.settle_bound_s, STOPPING)
-            failed = self.link.settle(final.q)
+            failed = self.link.settle(final.q, waiting=ctx.waiting)
             if failed:
                 return Ack(ok=False, reason=failed, error=failed, state=self.joint_state(self.core.state()))
         return Ack(ok=True, state=self.joint_state(final))

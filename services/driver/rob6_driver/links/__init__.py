@@ -82,13 +82,16 @@ class Link(ABC):
 
     @property
     def settle_bound_s(self) -> float:
-        """The longest ``settle`` waits (its own timeouts), seconds."""
+        """The longest ``settle`` waits (its own timeouts), seconds, unless it says otherwise
+        through its ``waiting``."""
         return 0.0
 
-    def settle(self, q_final: npt.ArrayLike, timeout: float | None = None) -> str:
+    def settle(self, q_final: npt.ArrayLike, timeout: float | None = None,
+               waiting: Callable[[float, str], None] | None = None) -> str:
         """After a motion ended at ``q_final`` (deg): wait until the robot is there.
         "" when it is, else why not (the motion then fails with that error). Links
-        whose robot is where the setpoint is (sim, rsi) return at once."""
+        whose robot is where the setpoint is (sim, rsi) return at once. ``waiting(seconds,
+        what)``: told when the wait grows beyond ``settle_bound_s`` (an arm still coming)."""
         return ""
 
     # ---- events: logged and published off the link's real-time thread

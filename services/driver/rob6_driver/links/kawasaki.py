@@ -5,13 +5,15 @@ to its PC program (``ROB6_KAS_HOST``, ``ROB6_KAS_PORT``), in the protocol of ``k
 
 The clock is the driver's own: every ``robot.cycle_s`` (16 ms) the motion core steps,
 and while the robot moves every ``period_s`` (default 48 ms, three cycles) its setpoint
-becomes one point ``P`` with the time since the previous point as its duration; the last
-point of a motion is marked final (the arm stops exactly there; the others blend, CP ON).
-Each point waits for its answer ``A`` before the next goes out; points made meanwhile are
-merged into one (the newest position, durations summed; ``late`` counts them). The
+becomes one point ``P`` with the plan's time since the previous point as its duration; the
+last point of a motion is marked final (the arm stops exactly there; the others blend, CP
+ON). Each point waits for its answer ``A`` before the next goes out; points made meanwhile
+are merged into one (the newest position, durations summed; ``late`` counts them). The
 controller's robot program waits for three points (or a final one) before it starts a
 motion, so it runs two periods behind rob6 and a point may come up to two periods late
-before the arm would run dry (an underrun).
+before the arm would run dry (an underrun). When its queue holds more than those three (its
+monitor speed below 100 % stretches every segment), the base slows rob6's core
+(``_held_s``, pacing by acknowledgement), so the arm and the plan stay together.
 
 Every setpoint has passed the core's limit monitor; the link also refuses to send one
 outside the controller's joint ranges (they and rob6's differ, see kawasaki_codec).
@@ -118,6 +120,14 @@ class KawasakiLink(StreamedPointsLink):
         self.controller_capacity = 0  # the queue's size, from the hello
         waiting = f"robot not connected (waiting for the Kawasaki AS program at {self.name})"
         super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
+        # the program starts a motion at three points (deploy/kawasaki/PROTOCOL.md): those it
+        # holds by design; more is the arm falling behind (a monitor speed below 100 %)
+        self.pace_lead_s = 3 * self.period_s
+
+    def _held_s(self) -> float:
+        """The points the controller's queue holds, as its last answer or state said, at a
+        period each (a merged one may be longer): the stream the arm has not run yet."""
+        return max(self.controller_queued, 0) * self.period_s
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
@@ -231,9 +241,11 @@ class KawasakiLink(StreamedPointsLink):
             return cancel(self._sequence), self._sequence, None, True
         if not self._outbox:
             return None
-        last, duration = self._merge()
+        # the program times each segment (SPEED ... S) and its monitor speed stretches that time:
+        # the plan's seconds, not the core's clock, or a slowed core would slow the arm twice
+        last, _, plan_s = self._merge()
         self._sequence = self._sequence % MAX_SEQUENCE + 1
-        return point(self._sequence, last.q, duration, last.final), self._sequence, last.q, False
+        return point(self._sequence, last.q, plan_s, last.final), self._sequence, last.q, False
 
     def _await(self, sock: socket.socket, buffer: bytearray, kind: type[Hello] | type[Ack], timeout: float,
                what: str, sequence: int | None = None) -> Message:

@@ -483,7 +483,7 @@ class AdeptLink(StreamedPointsLink):
             return self.codec.traj_pt(STOP_TRAJECTORY, joints), None, True
         if not self._outbox:
             return None
-        last, duration = self._merge()
+        last, duration, _ = self._merge()
         ctrl = to_controller_deg(last.q)
         velocity = 0.0
         if self._sent is not None and duration > 0:

@@ -73,8 +73,12 @@ RETRY_S = 0.5
 CONNECT_TIMEOUT_S = 2.0
 #: a motion fails when the robot has not moved for this long before arriving
 NO_PROGRESS_S = 2.0
-#: ... or has not arrived this long after rob6's trajectory ended
+#: ... or has not arrived this long after rob6's trajectory ended, or after it last came nearer
 SETTLE_MAX_S = 4.0
+#: ... and in any case this long after
+SETTLE_CAP_S = 60.0
+#: a longer wait is told to the caller when it has grown by this much
+REANNOUNCE_S = 0.5
 #: a position that changes less than this between state messages stands still (deg)
 REST_TOL_DEG = 1e-3
 STOP_WAIT_S = 0.5
@@ -132,6 +136,7 @@ class StreamedPoint:
     sequence: int = 0  # the wire's number, when the link numbers points as they are made
     made_t: float = 0.0  # the core's clock when it was made (s)
     span: float = 0.0  # how far it goes: seconds of the core's full speed (its duration, less when slowed)
+    plan_s: float = 0.0  # the plan's seconds it covers: its duration at full feed (the core slowed: less)
 
 
 class LinkDown(Exception):
@@ -301,13 +306,19 @@ class StreamedPointsLink(Link):
     def settle_bound_s(self) -> float:
         return self.settle_max_s + self.ack_timeout_s  # stopped short, or the last points never taken
 
-    def settle(self, q_final: npt.ArrayLike, timeout: float | None = None) -> str:
-        """Wait until the robot has arrived at ``q_final`` (deg); "" or why it did not."""
+    def settle(self, q_final: npt.ArrayLike, timeout: float | None = None,
+               waiting: Callable[[float, str], None] | None = None) -> str:
+        """Wait until the robot has arrived at ``q_final`` (deg); "" or why it did not. While
+        the controller says its arm still comes nearer (its queue of slowed segments: a low
+        monitor speed), the wait goes on ``settle_max_s`` from its latest step nearer, up to
+        ``SETTLE_CAP_S``, and ``waiting`` is told the new bound."""
         target = np.asarray(q_final, float)
-        deadline = time.monotonic() + (self.settle_max_s if timeout is None else timeout)
+        began = time.monotonic()
+        deadline = began + (self.settle_max_s if timeout is None else timeout)
         with self._cond:
             moved_at: float | None = None
             last: Joints | None = None
+            nearest = math.inf  # the least error so far
             while True:
                 if not self._online:
                     return self._reason or self.core.offline_reason or "the robot went offline"
@@ -319,9 +330,17 @@ class StreamedPointsLink(Link):
                     if (self._state_count >= self._acked_mark + 2 and error.max() <= self.arrival_tol_deg
                             and not moving):
                         return ""
+                    if moving and timeout is None and error.max() < nearest - REST_TOL_DEG:
+                        nearest = float(error.max())
+                        later = min(began + SETTLE_CAP_S, now + self.settle_max_s)
+                        if later >= deadline + REANNOUNCE_S and waiting is not None:
+                            waiting(later - now + self.ack_timeout_s, "waiting for the robot to arrive")
+                        deadline = max(deadline, later)
                     if moved_at is None or last is None or np.abs(position - last).max() > REST_TOL_DEG:
                         moved_at, last = now, position
-                    if now - moved_at > self.no_progress_s or now > deadline:
+                    # still, and the controller says so (a slow final approach, at a low monitor
+                    # speed, moves less than REST_TOL_DEG a state), or out of time
+                    if (now - moved_at > self.no_progress_s and not moving) or now > deadline:
                         j = int(np.argmax(error))
                         reason = (f"robot stopped short of the target (joint {j + 1} at {position[j]:.3f}, "
                                   f"target {target[j]:.3f})")
@@ -365,6 +384,7 @@ class StreamedPointsLink(Link):
             if self._open:
                 self._open = False
                 self._span += self.core.speed_share() * self.core.dt
+                self._paced += self.core.feed * self.core.dt
                 self._push(state.q, max(self._since, 1) * self.core.dt, final=True)
             self._resting(state.q)
 
@@ -374,14 +394,16 @@ class StreamedPointsLink(Link):
             self._evaluate(f"refused to send a point outside the robot's range ({why})")
             return
         self._outbox.append(StreamedPoint(np.array(q, float), float(duration), final, self._number(final),
-                                          self.core.t, self._span))
+                                          self.core.t, self._span, self._paced))
         self._paced = self._span = 0.0
         self._wake()
 
-    def _merge(self) -> tuple[StreamedPoint, float]:
+    def _merge(self) -> tuple[StreamedPoint, float, float]:
         """The points waiting since the last answer, up to a final one, as one, never going
-        further than the core's full speed in ``max_segment_s``: the last of them and their
-        summed duration (lock held, the outbox not empty). It is in flight from now on."""
+        further than the core's full speed in ``max_segment_s``: the last of them, their summed
+        duration and their summed plan seconds (what a controller that times its segments, and
+        scales them by its monitor speed, must be given: the core's own slowing is already
+        the arm's pace) (lock held, the outbox not empty). It is in flight from now on."""
         merged = [self._outbox.popleft()]
         span = merged[0].span
         while self._outbox and not merged[-1].final and span + self._outbox[0].span <= self.max_segment_s + 1e-9:
@@ -392,7 +414,7 @@ class StreamedPointsLink(Link):
         self.longest_segment_s = max(self.longest_segment_s, span)
         self._inflight = True
         self._inflight_made_t = merged[0].made_t
-        return merged[-1], sum(p.duration for p in merged)
+        return merged[-1], sum(p.duration for p in merged), sum(p.plan_s for p in merged)
 
     def ahead_s(self) -> float:
         """How long rob6's stream has been waiting for the controller, seconds of the core's
