@@ -41,6 +41,13 @@ under the motion) becomes an acceleration-limited emergency brake (shortest stop
 distance). Alter targets use target velocity 0: the robot never runs past the last
 target it received.
 
+Safety zones: with a cell (``zones.ZoneGuard``), each next setpoint of a trajectory or
+of Alter is also asked whether a stop from it would keep the arm out of every zone; if
+not, it is not applied and the robot stops from its last setpoint (``ok`` False, the
+reason a ``ZoneReason`` the client is told). An Alter target whose pose is in a zone is
+refused, and the first target after such a stop is refused with that stop's reason, so
+a client streaming targets learns why the arm stopped.
+
 Limit changes while moving: new speed/acceleration limits drive the generator at
 once; the monitor keeps ``max(old, new)`` until the robot has settled within the new
 ones (a running trajectory keeps its old limits until it ends). New turn limits that
@@ -69,6 +76,7 @@ from rob6.robots import RobotModel, get_robot
 from rob6.units import accel_si, jerk_si, speed_si
 
 from .limits import MIN_LIMIT, Breach, LimitMonitor, Limits, within
+from .zones import ZoneGuard, ZoneReason
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +104,7 @@ class CoreState:
 class Violation:
     t: float
     cycle: int
-    kind: str  # turn | speed | acceleration | limits_changed | unavoidable
+    kind: str  # turn | speed | acceleration | limits_changed | unavoidable | zone
     joint: int  # 1..6 (0: not joint specific)
     value: float
     limit: float
@@ -160,7 +168,8 @@ class MotionCore:
     def __init__(self, robot: RobotModel | str, dt: float | None = None, *, dummy: bool = False,
                  q0: npt.ArrayLike | None = None, limits: Limits | None = None,
                  alter_timeout_s: float = 0.5, offline: str = "",
-                 on_event: Callable[[dict[str, Any]], None] | None = None, max_violations: int = 1000) -> None:
+                 on_event: Callable[[dict[str, Any]], None] | None = None, max_violations: int = 1000,
+                 zones: ZoneGuard | None = None) -> None:
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
         self._offline = offline  # why the plant cannot be reached ("": it can)
         self.dt = float(dt if dt is not None else self.robot.cycle_s)
@@ -204,6 +213,8 @@ class MotionCore:
         self._watchdog_fired = False
         self._stop_motion: Motion | None = None
         self._deferred: list[Callable[[], None]] = []
+        self._zones = zones if zones is not None and not zones.empty else None
+        self._zone_stop: ZoneReason | None = None  # why the cell stopped Alter: told with the next target
 
     # ------------------------------------------------------------------ queries
     @property
@@ -522,6 +533,10 @@ class MotionCore:
             if checked is None:
                 return False, reason
             target = np.array(checked)
+            refused = self._zone_stop or (self._zones.target(target) if self._zones is not None else None)
+            if refused:
+                self._zone_stop = None
+                return False, refused
             if synchronized is not None:
                 self._sync = bool(synchronized)
             self._watchdog_fired = False
@@ -713,6 +728,12 @@ class MotionCore:
         assert samples is not None  # following a trajectory
         qd = None if self._samples_qd is None else self._samples_qd[k]
         qdd = None if self._samples_qdd is None else self._samples_qdd[k]
+        why = self._zone_check(samples[k], qd, qdd)
+        if why is not None:
+            self._violation("zone", 0, 0.0, 0.0, "trajectory", f"trajectory sample {k}: {why}")
+            self._begin_stop(why, force=True)
+            self._step_generator()
+            return
         bad = self._command(samples[k], qd, qdd)
         if bad is not None:
             kind, j, value, limit = bad
@@ -760,6 +781,13 @@ class MotionCore:
         self._gen_t += self.dt
         pos, vel, acc = self._gen.at_time(self._gen_t)
         qn = np.asarray(pos, float)
+        if self._gen_kind == "alter" and (why := self._zone_check(qn, vel, acc)) is not None:
+            self._gen_t -= self.dt
+            self._violation("zone", 0, 0.0, 0.0, "alter", why)
+            self._zone_stop = why
+            self._begin_stop(why, force=True)
+            self._step_generator()
+            return
         bad = self._command(qn, np.asarray(vel, float), np.asarray(acc, float))
         if bad is not None:
             self._apply_clamped(qn, bad, self._gen_kind or "alter")
@@ -770,6 +798,16 @@ class MotionCore:
                 if self._alter and not self._target_pending:
                     self._target = self._q.copy()
             self._finish_stop_if_any()
+
+    def _zone_check(self, qn: np.ndarray, qd: npt.ArrayLike | None, qdd: npt.ArrayLike | None) -> ZoneReason | None:
+        """The cell's word on the next setpoint (``ZoneGuard.setpoint``): why it may not be
+        commanded, or None. Without ``qd``/``qdd`` (a trajectory without them) the finite
+        differences from the last setpoint stand in."""
+        if self._zones is None:
+            return None
+        v = (qn - self._q) / self.dt if qd is None else np.asarray(qd, float)
+        a = (v - self._v_fd) / self.dt if qdd is None else np.asarray(qdd, float)
+        return self._zones.setpoint(qn, v, a, self._monitor.enforced)
 
     def _apply_clamped(self, qn: np.ndarray, breach: Breach, source: str) -> None:
         """Apply the admissible sample closest to qn (the monitor's last resort), then stop."""

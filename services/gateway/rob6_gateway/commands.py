@@ -43,6 +43,7 @@ from rob6.messages import (
     MoveReply,
     MoveRequest,
     PingReply,
+    PoseCheck,
     SessionEnd,
     SessionEvent,
     SignalRequest,
@@ -509,7 +510,12 @@ def backward_calc(gw: Gateway, session: Session, args: Args) -> str:
 
 @command("IsPossible")
 def is_possible(gw: Gateway, session: Session, args: Args) -> str:
-    return boolean(_backward(gw, session, args) is not None)
+    """Reachable, and not in the way of the cell's safety zones (the planner checks the pose)."""
+    joints = _backward(gw, session, args)
+    if joints is None:
+        return FALSE
+    reply: Ack = gw.call(session, "planner", "pose_check", PoseCheck(joints=joints))
+    return error(reply.zone) if reply.zone else boolean(reply.ok)
 
 
 # ====================================================================== motion
@@ -530,6 +536,8 @@ def _move(gw: Gateway, session: Session, kind: MotionKind, **fields: Any) -> str
         return error(reply.busy)
     if not reply.ok and reply.error:  # the robot failed (not connected, link lost), not the command
         return error(f"driver: {reply.error}")
+    if not reply.ok and reply.zone:  # the cell's safety zones: the client is told why
+        return error(reply.zone)
     if not reply.ok and reply.reason:
         log.warning("%s refused: %s", kind, reply.reason)
     return boolean(reply.ok)
@@ -582,7 +590,7 @@ def _routetest(gw: Gateway, session: Session, request: MoveRequest) -> str:
     reply: MoveReply = gw.call(session, "planner", "move", request)
     if reply.ok and reply.joints is not None:
         session.routetest = list(reply.joints)
-    return boolean(reply.ok)
+    return error(reply.zone) if reply.zone else boolean(reply.ok)
 
 
 @command("RoutetestJoints")
@@ -656,6 +664,8 @@ def _alter_joints(relative: bool) -> Handler:
             q=joints, synchronized=config.rt_speed_control == 0, relative=relative))
         if not reply.ok and reply.error:  # the robot failed (not connected, link lost)
             return error(f"driver: {reply.error}")
+        if not reply.ok and reply.zone:  # the cell's safety zones: the client is told why
+            return error(reply.zone)
         if not reply.ok:
             log.warning("Alter target refused: %s", reply.reason)
         return boolean(reply.ok)

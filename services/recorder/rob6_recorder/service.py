@@ -34,7 +34,8 @@ URDF_DIR = Path(rob6.__file__).parent / "urdf"
 # bus key (after rob6/<id>/) -> recording topic, for the streams recorded as they are; they
 # are recorded from the trace batches (``Bus.publish_state``, ``Bus.trace``), never from their
 # live copies, which are dropped under congestion and not kept for a recorder that was away
-TOPICS = {"driver/state": "/driver/joint_state", "driver/link": "/driver/link", "gripper/state": "/gripper/state"}
+TOPICS = {"driver/state": "/driver/joint_state", "driver/link": "/driver/link", "gripper/state": "/gripper/state",
+          "driver/clearance": "/driver/clearance"}
 
 
 class RecorderService:

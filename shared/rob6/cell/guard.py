@@ -1,0 +1,242 @@
+"""The rule of the safety zones: no part comes nearer a zone, or another part, than the margin plus what a stop from there travels.
+
+One rule for the planner (every sample of a path, before anything moves) and the driver
+(every setpoint, Alter streams above all): a setpoint is admitted only if, were the arm to
+brake from it at once (the driver's jerk-limited stop, with the limits it enforces), every
+part would stay farther than ``margin_mm`` from every zone and from every part it may not
+touch, all the way to rest. The driver brakes from the last admitted setpoint instead of
+commanding one that breaks the rule, so the arm comes to rest on its ramp outside every
+zone, and the rule holds there too.
+
+How far a stop travels is bounded in three steps, each only when the one before cannot
+show enough room: (1) a bound of the brake's joint travel from the speed and acceleration
+alone; (2) the joint travel of the brake itself (Ruckig, as the driver plans it, with and
+without phase synchronisation); (3) the brake's path sampled, each sample's distances
+measured and the motion between samples bounded. ``CellModel.lever`` turns joint travel
+into a bound of how far any point of a part moves, in every configuration, so each step is
+conservative: the arm may stop a little farther out than needed, never nearer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import ruckig
+
+from .model import N_JOINTS, CellModel, Pair
+
+#: the brake's path is sampled at this period at most (step 3), and at most this often
+BRAKE_SAMPLE_S = 0.02
+BRAKE_SAMPLES_MAX = 24
+#: how many samples of a path one measured sample's bound covers at most
+LOOK_AHEAD = 256
+#: limits below this (deg/s^2, deg/s^3) freeze a joint: it does not move, so it adds no travel
+FROZEN = 1e-9
+
+
+@dataclass(frozen=True)
+class Stop:
+    """Why a pose or setpoint breaks the rule: the pair, how far apart it is (mm, < 0 inside)
+    and how far it had to be (the margin plus a stop's travel)."""
+
+    pair: Pair
+    distance_mm: float
+    needed_mm: float
+    margin_mm: float
+
+    def describe(self) -> str:
+        """``tool tip 12 mm inside keep-out 'table'``, ``link_6 40 mm from keep-out 'table',
+        a stop there needs 65 mm``..."""
+        p, d = self.pair, self.distance_mm
+        other = f"keep-{p.keep} '{p.other}'" if p.zone else p.other
+        if d < 0:
+            where = "outside" if p.keep == "in" else "inside" if p.zone else "into"
+            return f"{p.part} {-d:.0f} mm {where} {other}"
+        if d <= self.margin_mm:
+            return f"{p.part} {d:.0f} mm from {other}, within the {self.margin_mm:g} mm margin"
+        return f"{p.part} {d:.0f} mm from {other}, a stop there needs {self.needed_mm:.0f} mm"
+
+
+@dataclass(frozen=True)
+class PathRefusal:
+    """A path that breaks the rule: the first time it does, and how."""
+
+    stop: Stop
+    t: float  # seconds from the start of the path
+    deepest_mm: float  # the pair's least distance along the whole path
+    moving: bool  # only too fast to stop there: every pose of the path keeps the margin
+
+    def message(self) -> str:
+        """``path enters keep-out 'table' at 0.82 s (tool tip 12 mm inside)`` and its kin."""
+        p, at = self.stop.pair, f"at {self.t:.2f} s"
+        other = f"keep-{p.keep} '{p.other}'" if p.zone else p.other
+        if self.moving:
+            return f"path passes {other} {at} too fast to stop before it ({self.stop.describe()})"
+        if self.deepest_mm < 0:
+            verb = "leaves" if p.keep == "in" else "enters" if p.zone else "collides with"
+            where = "outside" if p.keep == "in" else "inside" if p.zone else "into it"
+            return f"path {verb} {other} {at} ({p.part} {-self.deepest_mm:.0f} mm {where})"
+        return (f"path comes within the {self.stop.margin_mm:g} mm margin of {other} {at} "
+                f"({p.part} {self.deepest_mm:.0f} mm away)")
+
+
+class Guard:
+    """The rule for one robot's cell (see the module doc); not thread-safe (one per thread)."""
+
+    def __init__(self, model: CellModel) -> None:
+        self.model = model
+        self.margin = model.cell.margin_mm
+        self._otg = ruckig.Ruckig(N_JOINTS)
+        self._inp = ruckig.InputParameter(N_JOINTS)
+        self._inp.control_interface = ruckig.ControlInterface.Velocity
+        self._inp.target_velocity = [0.0] * N_JOINTS
+        self._inp.target_acceleration = [0.0] * N_JOINTS
+
+    @property
+    def empty(self) -> bool:
+        """Nothing to check (no zone, no pair of the arm)."""
+        return not self.model.pairs
+
+    def pose(self, q: np.ndarray) -> Stop | None:
+        """The pose alone (at rest): every pair farther apart than the margin."""
+        if self.empty or self.model.nearest(q) > self.margin:
+            return None
+        return self._worst(self.model.distances(q), 0.0)
+
+    def setpoint(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+                 jmax: np.ndarray, nearest: float | None = None) -> Stop | None:
+        """A setpoint ``q`` (deg) reached with ``qd``, ``qdd`` (deg/s, deg/s^2): would a stop
+        from there (limits in deg/s, deg/s^2, deg/s^3) keep every pair apart? None: yes.
+        ``nearest``: ``CellModel.nearest(q)``, when the caller has it."""
+        if self.empty:
+            return None
+        room = (self.model.nearest(q) if nearest is None else nearest) - self.margin
+        if room <= 0:
+            return self._worst(self.model.distances(q), 0.0)
+        if not qd.any() and not qdd.any():
+            return None
+        # (1) the brake's joint travel bounded from the state alone
+        bound = np.array(_brake_bound(qd.tolist(), qdd.tolist(), amax.tolist(), jmax.tolist()))
+        if room > self.model.travel(bound).max():
+            return None
+        d = self.model.distances(q)
+        # (2) the brake itself, as the driver plans it (phase-synchronised, else not)
+        brakes = self._brakes(q, qd, qdd, vmax, amax, jmax)
+        if not brakes:
+            return self._worst(d, self.model.travel(bound))
+        travel = np.max([np.abs(np.asarray(b.at_time(b.duration)[0]) - q) for b in brakes], axis=0)
+        needed = self.model.travel(travel)
+        if (d - self.margin > needed).all():
+            return None
+        # (3) the brake's path, sampled: each sample's distances, the motion between them bounded
+        for brake in brakes:
+            count = min(BRAKE_SAMPLES_MAX, max(2, math.ceil(brake.duration / BRAKE_SAMPLE_S)))
+            previous, previous_room = q, d - self.margin
+            for k in range(1, count + 1):
+                here = np.asarray(brake.at_time(brake.duration * k / count)[0])
+                if (previous_room <= self.model.travel(here - previous)).any():
+                    return self._worst(d, needed)
+                previous, previous_room = here, self.model.distances(here) - self.margin
+            if (previous_room <= 0).any():
+                return self._worst(d, needed)
+        return None
+
+    def path(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, dt: float, vmax: np.ndarray,
+             amax: np.ndarray, jmax: np.ndarray) -> PathRefusal | None:
+        """A sampled path (rows at the driver's cycle ``dt``): every pose keeps the margin, and
+        every sample the rule of ``setpoint``. None: it may run."""
+        if self.empty or len(q) == 0:
+            return None
+        lower = self._lower_bounds(q)  # each sample's least room, or a bound below it
+        for k in np.flatnonzero(lower <= 0):  # where the bound cannot rule it out: measured
+            d = self.model.distances(q[k])
+            stop = self._worst(d, 0.0)
+            if stop is not None:
+                return PathRefusal(stop, float(k * dt), self._deepest(q, int(k), stop.pair), moving=False)
+        limits = amax.tolist(), jmax.tolist()
+        reach = self.model.travel(np.array([_brake_bound(v, a, *limits) for v, a in zip(qd.tolist(), qdd.tolist(),
+                                                                                       strict=True)])).max(axis=-1)
+        for k in np.flatnonzero(lower <= reach):
+            stop = self.setpoint(q[k], qd[k], qdd[k], vmax, amax, jmax)
+            if stop is not None:
+                return PathRefusal(stop, float(k * dt), stop.distance_mm, moving=True)
+        return None
+
+    # ------------------------------------------------------------------ helpers
+    def _worst(self, d: np.ndarray, needed: np.ndarray | float) -> Stop | None:
+        """The pair with the least room (distance - margin - needed), if it has none."""
+        short = d - self.margin - needed
+        k = int(np.argmin(short))
+        if short[k] > 0:
+            return None
+        need = needed[k] if isinstance(needed, np.ndarray) else needed
+        return Stop(self.model.pairs[k], float(d[k]), float(self.margin + need), self.margin)
+
+    def _lower_bounds(self, q: np.ndarray) -> np.ndarray:
+        """A lower bound of each sample's least room (mm), measuring few of them: from a
+        measured sample, the next ones have at least its room minus how far any pair came
+        nearer (``CellModel.travel``); the next one measured is the first whose bound has
+        lost half of it."""
+        n = len(q)
+        lower = np.empty(n)
+        k = 0
+        while k < n:
+            lower[k] = room = self.model.nearest(q[k]) - self.margin
+            ahead = q[k + 1:k + 1 + LOOK_AHEAD]
+            if len(ahead) == 0:
+                break
+            bound = room - self.model.travel(ahead - q[k]).max(axis=1)
+            stale = np.flatnonzero(bound <= 0.5 * max(room, 0.0))
+            end = k + 1 + (int(stale[0]) if len(stale) else len(ahead))
+            lower[k + 1:end] = bound[:end - k - 1]
+            k = end
+        return lower
+
+    def _deepest(self, q: np.ndarray, first: int, pair: Pair) -> float:
+        """The least distance of ``pair`` along the path from sample ``first`` on (mm)."""
+        index = self.model.pairs.index(pair)
+        return min(float(self.model.distances(row)[index]) for row in q[first:])
+
+    def _brakes(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+                jmax: np.ndarray) -> list[ruckig.Trajectory]:
+        """The brakes the driver may make from this state (rob6_driver.motion: phase-synchronised
+        first, else each joint on its own); empty when none can be planned."""
+        inp = self._inp
+        held = (amax <= FROZEN) | (jmax <= FROZEN)
+        inp.current_position = q.tolist()
+        inp.current_velocity = np.where(held, 0.0, qd).tolist()
+        inp.current_acceleration = np.where(held, 0.0, qdd).tolist()
+        inp.max_velocity = np.where(held, 1.0, np.maximum(np.maximum(vmax, np.abs(qd)), FROZEN)).tolist()
+        inp.max_acceleration = np.where(held, 1.0, np.maximum(amax, np.abs(qdd))).tolist()
+        inp.max_jerk = np.where(held, 1.0, jmax).tolist()
+        brakes = []
+        for sync in (ruckig.Synchronization.Phase, ruckig.Synchronization.No):
+            inp.synchronization = sync
+            trajectory = ruckig.Trajectory(N_JOINTS)
+            try:
+                result = self._otg.calculate(inp, trajectory)
+            except RuntimeError:
+                continue
+            if result in (ruckig.Result.Working, ruckig.Result.Finished):
+                brakes.append(trajectory)
+        return brakes
+
+
+def _brake_bound(qd: Sequence[float], qdd: Sequence[float], amax: Sequence[float],
+                 jmax: Sequence[float]) -> list[float]:
+    """Per joint, a bound of how far (deg) any jerk-limited brake with these limits travels,
+    phase-synchronised ones included: at most the speed it can reach, for as long as the
+    slowest joint's brake lasts (turn the acceleration round, brake at the limit, end it).
+    Plain floats: it runs for every setpoint, where numpy on six values costs more."""
+    peaks, longest = [], 0.0
+    for v, a0, a, j in zip(qd, qdd, amax, jmax, strict=True):
+        if a <= FROZEN or j <= FROZEN:
+            peaks.append(0.0)
+            continue
+        peak = abs(v) + a0 * a0 / (2.0 * j)
+        peaks.append(peak)
+        longest = max(longest, (abs(a0) + a) / j + peak / a + a / j)
+    return [peak * longest for peak in peaks]
