@@ -57,12 +57,13 @@ def test_an_alter_stream_aimed_50_mm_into_the_table_stops_with_the_tool_outside(
     core, _ = _core(robot, tmp_path)
     states, refused = _stream(core, r.q(HOVER_S), r.q(r.s_at(-50.0)), 2.0)
     clearance = r.tip_clearance(states)
-    print(f"{robot}: closest {clearance.min():.1f} mm above the table, {len(refused)} targets refused")
+    print(f"{robot}: closest {clearance.min():.1f} mm above the table, at rest {clearance[-1]:.1f} mm; "
+          f"{len(refused)} targets refused, the first: {refused[0]}")
     assert clearance.min() > 0.0  # outside at every setpoint
     assert clearance[-1] == pytest.approx(clearance[-50:].min())  # at rest there
-    # the targets within the margin were refused, each saying why; the arm stopped at the last one taken
-    assert refused and all(isinstance(why, ZoneReason) for why in refused)
-    assert refused[0].startswith("target refused: tool tip") and "'table'" in refused[0]
+    # the guard's stop and then the targets within the margin were refused, each saying why
+    assert refused and all(isinstance(why, ZoneReason) and "tool tip" in why and "'table'" in why for why in refused)
+    assert any(why.startswith("target refused: tool tip") for why in refused)
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

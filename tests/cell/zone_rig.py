@@ -57,10 +57,6 @@ class Rig:
         return f"""\
 margin_mm: 5
 zones:
-  - name: floor
-    keep: out
-    half_space: {{point: [0, 0, 0], normal: [0, 0, 1]}}
-    ignore: [link_1]
   - name: table
     keep: out
     box: {{min: [{x - half:.1f}, {-half:.1f}, {self.table_z - 100:.1f}], max: [{x + half:.1f}, {half:.1f}, {self.table_z:.1f}]}}

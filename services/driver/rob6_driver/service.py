@@ -176,7 +176,7 @@ class DriverService:
         elif not motion.ok:  # stopped on request (a client's Stop or its leaving, rob6 stopping) is no fault
             log.log(logging.INFO if motion.reason == STOP_REQUESTED else logging.WARNING,
                     "trajectory refused or stopped: %s", motion.reason)
-        return ExecuteReply(ok=bool(motion.ok), reason=motion.reason or "", error=motion.error,
+        return ExecuteReply(ok=bool(motion.ok), reason=str(motion.reason or ""), error=motion.error,
                             state=self.joint_state(final), zone=_zone(motion.reason))
 
     def limits(self, req: LimitsUpdate, _ctx: Context) -> Ack:
@@ -209,7 +209,7 @@ class DriverService:
             ok, reason = self.core.set_target(req.q, req.synchronized, req.relative)
         except Offline as exc:
             return Ack(ok=False, reason=str(exc), error=str(exc))
-        return Ack(ok=ok, reason=reason, zone=_zone(reason))
+        return Ack(ok=ok, reason=str(reason), zone=_zone(reason))
 
     def get_cell(self, _req: Empty, _ctx: Context) -> Cell:
         """The cell this driver guards (``ROB6_CELL``): the planner checks every path against it."""

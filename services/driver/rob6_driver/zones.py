@@ -29,40 +29,39 @@ class ZoneReason(str):
 
 
 class ZoneGuard:
-    """The cell's rule for the motion core's cycle. Thread-safe: the cycle and a request
-    (an Alter target) may ask at the same time; each thread has its own Pinocchio data."""
+    """The cell's rule for the motion core's cycle. Thread-safe: the cycle, a request (an
+    Alter target) and the state's publication take turns on one Pinocchio model (each asks
+    for well under a millisecond; a model per thread cost each new thread of Zenoh's a
+    model's build, some 100 ms, on the real-time path)."""
 
     def __init__(self, robot: RobotModel, cell: Cell) -> None:
         self.robot, self.cell = robot, cell
-        self._local = threading.local()
-        self._guard()  # built now: a cell Pinocchio cannot take fails the start, not the first motion
-
-    def _guard(self) -> Guard:
-        guard: Guard | None = getattr(self._local, "guard", None)
-        if guard is None:
-            guard = self._local.guard = Guard(CellModel(self.robot, self.cell))
-        return guard
+        self._lock = threading.Lock()
+        # built now: a cell Pinocchio cannot take fails the start, not the first motion
+        self._guard = Guard(CellModel(robot, cell))
 
     @property
     def empty(self) -> bool:
         """Nothing to check: no zone and no pair of the arm."""
-        return self._guard().empty
+        return self._guard.empty
 
     def setpoint(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, limits: Limits) -> ZoneReason | None:
         """Why ``q`` (reached with ``qd``, ``qdd``) may not be commanded: a stop from there would
         not keep the arm out of every zone (None when it may)."""
-        stop = self._guard().setpoint(q, qd, qdd, limits.vmax, limits.amax, limits.jmax)
+        with self._lock:
+            stop = self._guard.setpoint(q, qd, qdd, limits.vmax, limits.amax, limits.jmax)
         return ZoneReason(f"stopped before {stop.describe()}") if stop is not None else None
 
     def target(self, q: np.ndarray) -> ZoneReason | None:
         """Why an Alter target at ``q`` is refused: the pose is in a zone or within the margin (None: it is not)."""
-        stop = self._guard().pose(q)
+        with self._lock:
+            stop = self._guard.pose(q)
         return ZoneReason(f"target refused: {stop.describe()}") if stop is not None else None
 
     def clearance(self, t: float, q: np.ndarray) -> Clearance | None:
         """The pair nearest at ``q``, for the live view and the recording (None: nothing to measure)."""
-        guard = self._guard()
-        if guard.empty:
+        if self.empty:
             return None
-        distance, pair = guard.model.nearest_pair(q)
+        with self._lock:
+            distance, pair = self._guard.model.nearest_pair(q)
         return Clearance(t=t, distance_mm=round(distance, 1), part=pair.part, other=pair.other, zone=pair.zone)

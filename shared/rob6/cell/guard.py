@@ -10,9 +10,10 @@ zone, and the rule holds there too.
 
 How far a stop travels is bounded in three steps, each only when the one before cannot
 show enough room: (1) a bound of the brake's joint travel from the speed and acceleration
-alone; (2) the joint travel of the brake itself (Ruckig, as the driver plans it, with and
-without phase synchronisation); (3) the brake's path sampled, each sample's distances
-measured and the motion between samples bounded. ``CellModel.lever`` turns joint travel
+alone; (2) the joint travel of the brake itself (Ruckig, as the driver plans it); (3) the brake's path sampled, each sample's distances
+measured and the motion between samples bounded by what both ends' distances leave (a
+segment they do not cover is halved, within ``MEASURES_MAX`` measurements), so an arm
+moving away from a zone it is near may go. ``CellModel.lever`` turns joint travel
 into a bound of how far any point of a part moves, in every configuration, so each step is
 conservative: the arm may stop a little farther out than needed, never nearer.
 """
@@ -29,8 +30,11 @@ import ruckig
 from .model import N_JOINTS, CellModel, Pair
 
 #: the brake's path is sampled at this period at most (step 3), and at most this often
-BRAKE_SAMPLE_S = 0.02
-BRAKE_SAMPLES_MAX = 24
+BRAKE_SAMPLE_S = 0.05
+BRAKE_SAMPLES_MAX = 12
+#: the most distance measurements one setpoint's check makes on a brake's path (step 3): its
+#: cost stays within the driver's cycle (docs/SAFETY_ZONES.md has the figures)
+MEASURES_MAX = 24
 #: how many samples of a path one measured sample's bound covers at most
 LOOK_AHEAD = 256
 #: limits below this (deg/s^2, deg/s^3) freeze a joint: it does not move, so it adds no travel
@@ -46,6 +50,7 @@ class Stop:
     distance_mm: float
     needed_mm: float
     margin_mm: float
+    index: int  # of the pair in ``CellModel.pairs``
 
     def describe(self) -> str:
         """``tool tip 12 mm inside keep-out 'table'``, ``link_6 40 mm from keep-out 'table',
@@ -59,6 +64,11 @@ class Stop:
             return f"{p.part} {d:.0f} mm from {other}, within the {self.margin_mm:g} mm margin"
         return f"{p.part} {d:.0f} mm from {other}, a stop there needs {self.needed_mm:.0f} mm"
 
+    @property
+    def zone_name(self) -> str:
+        """``keep-out 'table'``, or the other part for a pair of the arm."""
+        return f"keep-{self.pair.keep} '{self.pair.other}'" if self.pair.zone else self.pair.other
+
 
 @dataclass(frozen=True)
 class PathRefusal:
@@ -71,16 +81,19 @@ class PathRefusal:
 
     def message(self) -> str:
         """``path enters keep-out 'table' at 0.82 s (tool tip 12 mm inside)`` and its kin."""
-        p, at = self.stop.pair, f"at {self.t:.2f} s"
-        other = f"keep-{p.keep} '{p.other}'" if p.zone else p.other
+        p, at, other = self.stop.pair, f"at {self.t:.2f} s", self.stop.zone_name
+        depth = -self.deepest_mm
         if self.moving:
             return f"path passes {other} {at} too fast to stop before it ({self.stop.describe()})"
-        if self.deepest_mm < 0:
-            verb = "leaves" if p.keep == "in" else "enters" if p.zone else "collides with"
-            where = "outside" if p.keep == "in" else "inside" if p.zone else "into it"
-            return f"path {verb} {other} {at} ({p.part} {-self.deepest_mm:.0f} mm {where})"
-        return (f"path comes within the {self.stop.margin_mm:g} mm margin of {other} {at} "
-                f"({p.part} {self.deepest_mm:.0f} mm away)")
+        if depth > 0 and p.zone:
+            verb, where = ("leaves", "outside") if p.keep == "in" else ("enters", "inside")
+            return f"path {verb} {other} {at} ({p.part} {depth:.0f} mm {where})"
+        if depth > 0:
+            return f"path collides {p.part} with {other} {at} ({depth:.0f} mm deep)"
+        margin = f"the {self.stop.margin_mm:g} mm margin of"
+        if p.zone:
+            return f"path comes within {margin} {other} {at} ({p.part} {-depth:.0f} mm away)"
+        return f"path brings {p.part} within {margin} {other} {at} ({-depth:.0f} mm apart)"
 
 
 class Guard:
@@ -131,18 +144,46 @@ class Guard:
         needed = self.model.travel(travel)
         if (d - self.margin > needed).all():
             return None
-        # (3) the brake's path, sampled: each sample's distances, the motion between them bounded
+        # (3) the brake's path, sampled where (2) left pairs short: each sample's room for them,
+        # the motion between samples bounded
+        short = np.flatnonzero(d - self.margin <= needed)
+        budget = [MEASURES_MAX]
         for brake in brakes:
             count = min(BRAKE_SAMPLES_MAX, max(2, math.ceil(brake.duration / BRAKE_SAMPLE_S)))
-            previous, previous_room = q, d - self.margin
-            for k in range(1, count + 1):
-                here = np.asarray(brake.at_time(brake.duration * k / count)[0])
-                if (previous_room <= self.model.travel(here - previous)).any():
+            times = [brake.duration * k / count for k in range(count + 1)]
+            rooms = [d[short] - self.margin] + [self._room(self._at(brake, t), short, budget) for t in times[1:]]
+            for k in range(count):
+                if not self._segment_clear(brake, times[k], times[k + 1], rooms[k], rooms[k + 1], short, budget):
                     return self._worst(d, needed)
-                previous, previous_room = here, self.model.distances(here) - self.margin
-            if (previous_room <= 0).any():
-                return self._worst(d, needed)
         return None
+
+    def _room(self, q: np.ndarray, pairs: np.ndarray, budget: list[int]) -> np.ndarray:
+        """The room (distance minus margin) of ``pairs`` at ``q``: one measurement of the budget's."""
+        budget[0] -= 1
+        if budget[0] < 0:
+            return np.full(len(pairs), -math.inf)
+        room: np.ndarray = self.model.distances(q, pairs) - self.margin
+        return room
+
+    def _segment_clear(self, brake: ruckig.Trajectory, t0: float, t1: float, room0: np.ndarray, room1: np.ndarray,
+                       pairs: np.ndarray, budget: list[int]) -> bool:
+        """Does the brake keep ``pairs`` apart between ``t0`` and ``t1``, whose rooms are
+        measured? A point between is no nearer than both ends allow: it holds when ``room0 +
+        room1`` exceeds how much nearer each pair can come on the way (half of it from each
+        end); else the segment is halved while the budget of measurements lasts (a setpoint the
+        guard cannot clear within it is refused: the arm stops a little early, never late)."""
+        if (room0 <= 0).any() or (room1 <= 0).any():
+            return False
+        if (room0 + room1 > self.model.travel(self._at(brake, t1) - self._at(brake, t0))[pairs]).all():
+            return True
+        mid = (t0 + t1) / 2
+        room = self._room(self._at(brake, mid), pairs, budget)
+        return (self._segment_clear(brake, t0, mid, room0, room, pairs, budget)
+                and self._segment_clear(brake, mid, t1, room, room1, pairs, budget))
+
+    @staticmethod
+    def _at(brake: ruckig.Trajectory, t: float) -> np.ndarray:
+        return np.asarray(brake.at_time(t)[0], float)
 
     def path(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, dt: float, vmax: np.ndarray,
              amax: np.ndarray, jmax: np.ndarray) -> PathRefusal | None:
@@ -173,7 +214,7 @@ class Guard:
         if short[k] > 0:
             return None
         need = needed[k] if isinstance(needed, np.ndarray) else needed
-        return Stop(self.model.pairs[k], float(d[k]), float(self.margin + need), self.margin)
+        return Stop(self.model.pairs[k], float(d[k]), float(self.margin + need), self.margin, k)
 
     def _lower_bounds(self, q: np.ndarray) -> np.ndarray:
         """A lower bound of each sample's least room (mm), measuring few of them: from a
@@ -196,14 +237,17 @@ class Guard:
         return lower
 
     def _deepest(self, q: np.ndarray, first: int, pair: Pair) -> float:
-        """The least distance of ``pair`` along the path from sample ``first`` on (mm)."""
-        index = self.model.pairs.index(pair)
-        return min(float(self.model.distances(row)[index]) for row in q[first:])
+        """The least distance of ``pair``'s two parts (any of their shapes) along the path from
+        sample ``first`` on (mm)."""
+        same = [k for k, other in enumerate(self.model.pairs) if other == pair]
+        return min(float(self.model.distances(row)[same].min()) for row in q[first:])
 
     def _brakes(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
                 jmax: np.ndarray) -> list[ruckig.Trajectory]:
-        """The brakes the driver may make from this state (rob6_driver.motion: phase-synchronised
-        first, else each joint on its own); empty when none can be planned."""
+        """The brake the driver makes from this state (rob6_driver.motion: phase-synchronised,
+        else each joint on its own); empty when none can be planned. (The driver falls back to
+        the second also when the first would leave the turn limits, which only limits changed
+        under a motion can bring about; then it brakes at once, the shortest way.)"""
         inp = self._inp
         held = (amax <= FROZEN) | (jmax <= FROZEN)
         inp.current_position = q.tolist()
@@ -212,7 +256,6 @@ class Guard:
         inp.max_velocity = np.where(held, 1.0, np.maximum(np.maximum(vmax, np.abs(qd)), FROZEN)).tolist()
         inp.max_acceleration = np.where(held, 1.0, np.maximum(amax, np.abs(qdd))).tolist()
         inp.max_jerk = np.where(held, 1.0, jmax).tolist()
-        brakes = []
         for sync in (ruckig.Synchronization.Phase, ruckig.Synchronization.No):
             inp.synchronization = sync
             trajectory = ruckig.Trajectory(N_JOINTS)
@@ -221,8 +264,8 @@ class Guard:
             except RuntimeError:
                 continue
             if result in (ruckig.Result.Working, ruckig.Result.Finished):
-                brakes.append(trajectory)
-        return brakes
+                return [trajectory]
+        return []
 
 
 def _brake_bound(qd: Sequence[float], qdd: Sequence[float], amax: Sequence[float],

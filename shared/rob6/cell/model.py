@@ -6,9 +6,8 @@ each visual cylinder becomes the capsule that covers it (radius plus the cell's
 flange frame. A keep-out half-space is a coal ``Halfspace``, a keep-out box a ``Box``, a
 keep-in box the six half-spaces outside its faces. The pairs measured: every moving part
 against every zone it does not ignore (the base never: it cannot move), and, with
-self-collision on, every two parts that are neither adjacent in the chain nor touching at
-the zero position (as the elbow's and the wrist's neighbours do by design) nor allowed
-by the file. ``distances(q)`` is one ``pinocchio.computeDistances`` call: signed, in mm.
+self-collision on, every two parts that are neither near in the chain (``NEAR_IN_CHAIN``)
+nor touching at the zero position nor allowed by the file. ``distances(q)`` is one ``pinocchio.computeDistances`` call: signed, in mm.
 
 ``lever`` bounds how far a part can move when a joint turns: for each part and joint the
 distance from that joint's origin to the part's farthest point, summed link by link along
@@ -34,6 +33,12 @@ URDF_DIR = Path(__file__).resolve().parents[1] / "urdf"
 N_JOINTS = 6
 #: the joint a part rides on: base 0, link_k k, the tool 6 (on the flange)
 TOOL_JOINT = 6
+#: parts this near along the chain (the base, link_1 ... link_6, the tool) are not measured
+#: against each other: a joint's limits keep its neighbours apart, and the URDF's simple
+#: shapes overlap there (the elbow's offset, the wrist) where the real links pass beside
+#: each other. Two apart still: the upper arm and the forearm fold past each other within
+#: the Viper's joint limits.
+NEAR_IN_CHAIN = 2
 
 
 @dataclass(frozen=True)
@@ -111,9 +116,14 @@ class CellModel:
         self._pair_parts.append((part_a, part_b))
 
     def _self_pairs(self, count: int, parts_index: dict[str, int]) -> None:
-        """Every two parts' objects, but adjacent parts, parts touching at the zero position
-        (by design: the elbow's, the wrist's neighbours) and the file's allowed pairs."""
+        """Every two parts' objects, but those within ``NEAR_IN_CHAIN`` of each other along
+        the chain, parts touching at the zero position and the file's allowed pairs."""
         allowed = {frozenset(pair) for pair in self.cell.allowed_pairs}
+        tool = {shape.name for shape in self.cell.tool}
+
+        def place(part: str) -> int:  # along the chain: the base 0, link_k k, the tool after link_6
+            return N_JOINTS + 1 if part in tool else self._joint[part]
+
         probe = pin.GeometryModel()
         for obj in self.geometry.geometryObjects[:count]:
             probe.addGeometryObject(obj)
@@ -121,11 +131,8 @@ class CellModel:
         for a in range(count):
             for b in range(a + 1, count):
                 pa, pb = self._part_of[a], self._part_of[b]
-                if pa == pb or frozenset((pa, pb)) in allowed or abs(self._joint[pa] - self._joint[pb]) <= 1:
+                if frozenset((pa, pb)) in allowed or abs(place(pa) - place(pb)) <= NEAR_IN_CHAIN:
                     continue
-                if {pa, pb} & {shape.name for shape in self.cell.tool} and "base" not in (pa, pb) \
-                        and min(self._joint[pa], self._joint[pb]) >= TOOL_JOINT - 1:
-                    continue  # the tool and the wrist it is mounted on
                 candidates.append((a, b))
                 probe.addCollisionPair(pin.CollisionPair(a, b))
         probe_data = pin.GeometryData(probe)
@@ -133,7 +140,9 @@ class CellModel:
         touching = {frozenset((self._part_of[a], self._part_of[b]))
                     for (a, b), result in zip(candidates, probe_data.distanceResults, strict=True)
                     if result.min_distance <= self.cell.margin_mm / 1000.0}
-        for a, b in candidates:
+        for pair in candidates:
+            # the one further along the chain first: "tool tip with base"
+            a, b = sorted(pair, key=lambda k: -place(self._part_of[k]))
             pa, pb = self._part_of[a], self._part_of[b]
             if frozenset((pa, pb)) not in touching:
                 self._pair(a, b, Pair(pa, pb, ""), parts_index[pa], parts_index[pb])
@@ -174,11 +183,14 @@ class CellModel:
         k = pin.computeDistances(self.model, self.data, self.geometry, self.geometry_data, np.radians(q_deg))
         return float(self.geometry_data.distanceResults[k].min_distance) * 1000.0, self.pairs[k]
 
-    def distances(self, q_deg: np.ndarray) -> np.ndarray:
-        """Signed distance of every pair (mm; < 0: inside) with the joints at ``q_deg``."""
+    def distances(self, q_deg: np.ndarray, pairs: np.ndarray | None = None) -> np.ndarray:
+        """Signed distance of every pair, or of those indexed by ``pairs`` (mm; < 0: inside),
+        with the joints at ``q_deg``."""
         pin.computeDistances(self.model, self.data, self.geometry, self.geometry_data, np.radians(q_deg))
-        return np.fromiter((r.min_distance for r in self.geometry_data.distanceResults), float,
-                           len(self.pairs)) * 1000.0
+        results = self.geometry_data.distanceResults
+        if pairs is None:
+            return np.fromiter((r.min_distance for r in results), float, len(self.pairs)) * 1000.0
+        return np.fromiter((results[k].min_distance for k in pairs.tolist()), float, len(pairs)) * 1000.0
 
     def travel(self, dq_deg: np.ndarray) -> np.ndarray:
         """For each pair, how much nearer its two sides can come while the joints turn by at most
