@@ -269,6 +269,9 @@ class Cell(Struct):
     self_collision: bool = True
     arm_padding_mm: float = 0.0  # added to the radius of every capsule of the arm (cables, covers)
     allowed_pairs: list[list[str]] = []  # pairs of parts that may touch, beyond the adjacent ones
+    #: the lab's own (ROB6_CELL), not the default: IsPossible then checks poses against it too
+    #: (with the default it answers as the original, whose transcripts ask about poses below the floor)
+    from_file: bool = True
 
 
 class Clearance(Struct):

@@ -35,7 +35,7 @@ arm:
 
 def test_a_full_cell_is_read_with_every_value() -> None:
     cell = parse_cell(FULL, "lab.yaml")
-    assert cell.source == "lab.yaml" and cell.margin_mm == 8.0
+    assert cell.source == "lab.yaml" and cell.from_file and cell.margin_mm == 8.0
     table, fixture, room = cell.zones
     assert table.keep == "out" and table.half_space is not None
     assert table.half_space.normal == [0.0, 0.0, 1.0] and table.half_space.point == [0.0, 0.0, 120.0]
@@ -88,6 +88,6 @@ def test_a_missing_file_says_so(tmp_path: Path) -> None:
 @pytest.mark.parametrize("robot", sorted(ROBOTS))
 def test_every_robot_type_ships_a_default_the_floor_and_self_collision(robot: str) -> None:
     cell = default_cell(ROBOTS[robot])
-    assert cell.source == f"default {robot}" and cell.self_collision and cell.margin_mm == 5.0
+    assert cell.source == f"default {robot}" and not cell.from_file and cell.self_collision and cell.margin_mm == 5.0
     (floor,) = cell.zones
     assert floor.half_space is not None and floor.half_space.normal == [0.0, 0.0, 1.0] and floor.keep == "out"

@@ -7,6 +7,7 @@ Pinocchio model.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from rob6.cell import load_cell
+from rob6.robots import get_robot
 from rob6_driver.motion import MotionCore
 from rob6_driver.zones import ZoneGuard, ZoneReason
 from tests.cell.zone_rig import HOVER_S, rig
@@ -24,16 +26,11 @@ ROBOTS = ("kr16", "kr3", "ad850", "kaw_fs")
 def _core(robot: str, tmp: Path, speed_scale: float = 1.0) -> tuple[MotionCore, list[dict[str, object]]]:
     r = rig(robot)
     events: list[dict[str, object]] = []
-    core = MotionCore(robot, q0=r.q(HOVER_S), zones=ZoneGuard(core_robot(robot), load_cell(r.write(tmp))),
+    core = MotionCore(robot, q0=r.q(HOVER_S), zones=ZoneGuard(get_robot(robot), load_cell(r.write(tmp))),
                       on_event=events.append)
     limits = core.limits()
     core.set_limits(max_speed=(limits.vmax * 0.012 * speed_scale).tolist())
     return core, events
-
-
-def core_robot(name: str):  # type: ignore[no-untyped-def]
-    from rob6.robots import get_robot
-    return get_robot(name)
 
 
 def _stream(core: MotionCore, start: list[float], end: list[float], seconds: float) -> tuple[np.ndarray, list[str]]:
@@ -91,3 +88,16 @@ def test_a_trajectory_into_the_table_stops_before_it_whatever_the_planner_sent(r
     assert motion.done.is_set() and not motion.ok
     assert isinstance(motion.reason, ZoneReason) and "'table'" in motion.reason
     assert r.tip_clearance(np.array(states)).min() > 0.0
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_a_trajectory_whose_poses_enter_the_table_never_starts(robot: str, tmp_path: Path) -> None:
+    r = rig(robot)
+    core, _ = _core(robot, tmp_path)
+    start, end = np.array(r.q(HOVER_S)), np.array(r.q(r.s_at(-50.0)))
+    f = (1 - np.cos(np.linspace(0, np.pi, 400))) / 2
+    motion = core.execute(start + f[:, None] * (end - start), core.dt)
+    assert motion.done.is_set() and not motion.ok
+    assert isinstance(motion.reason, ZoneReason)
+    assert re.match(r"^trajectory refused: at \d+\.\d\d s tool tip \d+ mm (inside|from) keep-out 'table'", motion.reason)
+    assert core.state().q.tolist() == start.tolist()

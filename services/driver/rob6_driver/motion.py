@@ -76,7 +76,7 @@ from rob6.robots import RobotModel, get_robot
 from rob6.units import accel_si, jerk_si, speed_si
 
 from .limits import MIN_LIMIT, Breach, LimitMonitor, Limits, within
-from .zones import ZoneGuard, ZoneReason
+from .zones import ZoneGuard, ZoneReason, straight
 
 log = logging.getLogger(__name__)
 
@@ -215,6 +215,7 @@ class MotionCore:
         self._deferred: list[Callable[[], None]] = []
         self._zones = zones if zones is not None and not zones.empty else None
         self._zone_stop: ZoneReason | None = None  # why the cell stopped Alter: told with the next target
+        self._along: np.ndarray | None = None  # the end of the straight trajectory being followed
 
     # ------------------------------------------------------------------ queries
     @property
@@ -425,6 +426,8 @@ class MotionCore:
         motion = Motion("trajectory")
         with self._lock:
             reason = self._check_execute(q, dt, qd, qdd, check)
+            if not reason and self._zones is not None and check:
+                reason = self._zones.trajectory(np.asarray(q, float), self.dt) or ""
             if self._offline:
                 self._deferred += motion._finish(False, self._offline, self._state(), error=self._offline)
             elif reason:
@@ -438,6 +441,8 @@ class MotionCore:
             else:
                 arr = np.asarray(q, float)
                 self._samples = arr
+                # a brake on a straight trajectory stays on its poses, which the cell checked
+                self._along = arr[-1] if check and self._zones is not None and straight(arr) else None
                 self._samples_qd = None if qd is None else np.asarray(qd, float)
                 self._samples_qdd = None if qdd is None else np.asarray(qdd, float)
                 self._k = 1
@@ -728,7 +733,7 @@ class MotionCore:
         assert samples is not None  # following a trajectory
         qd = None if self._samples_qd is None else self._samples_qd[k]
         qdd = None if self._samples_qdd is None else self._samples_qdd[k]
-        why = self._zone_check(samples[k], qd, qdd)
+        why = self._zone_check(samples[k], qd, qdd, self._along)
         if why is not None:
             self._violation("zone", 0, 0.0, 0.0, "trajectory", f"trajectory sample {k}: {why}")
             self._begin_stop(why, force=True)
@@ -799,7 +804,8 @@ class MotionCore:
                     self._target = self._q.copy()
             self._finish_stop_if_any()
 
-    def _zone_check(self, qn: np.ndarray, qd: npt.ArrayLike | None, qdd: npt.ArrayLike | None) -> ZoneReason | None:
+    def _zone_check(self, qn: np.ndarray, qd: npt.ArrayLike | None, qdd: npt.ArrayLike | None,
+                    along: np.ndarray | None = None) -> ZoneReason | None:
         """The cell's word on the next setpoint (``ZoneGuard.setpoint``): why it may not be
         commanded, or None. Without ``qd``/``qdd`` (a trajectory without them) the finite
         differences from the last setpoint stand in."""
@@ -807,7 +813,7 @@ class MotionCore:
             return None
         v = (qn - self._q) / self.dt if qd is None else np.asarray(qd, float)
         a = (v - self._v_fd) / self.dt if qdd is None else np.asarray(qdd, float)
-        return self._zones.setpoint(qn, v, a, self._monitor.enforced)
+        return self._zones.setpoint(qn, v, a, self._monitor.enforced, along=along)
 
     def _apply_clamped(self, qn: np.ndarray, breach: Breach, source: str) -> None:
         """Apply the admissible sample closest to qn (the monitor's last resort), then stop."""

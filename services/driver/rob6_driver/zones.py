@@ -17,10 +17,13 @@ import threading
 import numpy as np
 
 from rob6.cell import CellModel, Guard
+from rob6.cell.guard import straight
 from rob6.messages import Cell, Clearance
 from rob6.robots import RobotModel
 
 from .limits import Limits
+
+__all__ = ["ZoneGuard", "ZoneReason", "straight"]
 
 
 class ZoneReason(str):
@@ -45,12 +48,24 @@ class ZoneGuard:
         """Nothing to check: no zone and no pair of the arm."""
         return self._guard.empty
 
-    def setpoint(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, limits: Limits) -> ZoneReason | None:
+    def setpoint(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, limits: Limits,
+                 along: np.ndarray | None = None) -> ZoneReason | None:
         """Why ``q`` (reached with ``qd``, ``qdd``) may not be commanded: a stop from there would
-        not keep the arm out of every zone (None when it may)."""
+        not keep the arm out of every zone (None when it may). ``along``: the end of the straight
+        trajectory it follows, whose poses ``trajectory`` found clear."""
         with self._lock:
-            stop = self._guard.setpoint(q, qd, qdd, limits.vmax, limits.amax, limits.jmax)
+            stop = self._guard.setpoint(q, qd, qdd, limits.vmax, limits.amax, limits.jmax, along=along)
         return ZoneReason(f"stopped before {stop.describe()}") if stop is not None else None
+
+    def trajectory(self, q: np.ndarray, dt: float) -> ZoneReason | None:
+        """Why a trajectory (rows of setpoints) may not start: one of its poses is in a zone or
+        within the margin (the planner checked it too; the driver does not rely on that)."""
+        with self._lock:
+            breach = self._guard.poses(q)
+        if breach is None:
+            return None
+        k, stop = breach
+        return ZoneReason(f"trajectory refused: at {k * dt:.2f} s {stop.describe()}")
 
     def target(self, q: np.ndarray) -> ZoneReason | None:
         """Why an Alter target at ``q`` is refused: the pose is in a zone or within the margin (None: it is not)."""

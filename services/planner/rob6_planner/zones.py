@@ -75,6 +75,11 @@ class PathCheck:
         return refusal.message() if refusal is not None else ""
 
     def pose(self, joints: list[float]) -> str:
-        """Why the arm may not be at ``joints`` (a zone, or the margin), or ""."""
-        stop = self._guard().pose(np.asarray(joints, float))
+        """IsPossible: why the arm may not be at ``joints`` (a zone of the lab's cell file, or
+        the margin), or "". With the default cell IsPossible answers as the original did: its
+        transcripts ask about poses below the floor and count on ``true`` (docs/SAFETY_ZONES.md)."""
+        guard = self._guard()
+        if not guard.model.cell.from_file:
+            return ""
+        stop = guard.pose(np.asarray(joints, float))
         return f"pose in the cell's way: {stop.describe()}" if stop is not None else ""

@@ -61,7 +61,7 @@ def load_cell(path: str | Path) -> Cell:
 def default_cell(robot: RobotModel) -> Cell:
     """The cell of ``robot`` when ROB6_CELL is not set (``default.yaml``)."""
     cell = load_cell(DEFAULT_FILE)
-    cell.source = f"default {robot.name}"
+    cell.source, cell.from_file = f"default {robot.name}", False
     return cell
 
 

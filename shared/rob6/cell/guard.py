@@ -35,6 +35,8 @@ BRAKE_SAMPLES_MAX = 12
 #: the most distance measurements one setpoint's check makes on a brake's path (step 3): its
 #: cost stays within the driver's cycle (docs/SAFETY_ZONES.md has the figures)
 MEASURES_MAX = 24
+#: how far (deg) a sample may be off the line and still count as on it (``straight``)
+STRAIGHT_TOL = 1e-6
 #: how many samples of a path one measured sample's bound covers at most
 LOOK_AHEAD = 256
 #: limits below this (deg/s^2, deg/s^3) freeze a joint: it does not move, so it adds no travel
@@ -120,13 +122,14 @@ class Guard:
         return self._worst(self.model.distances(q), 0.0)
 
     def setpoint(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
-                 jmax: np.ndarray, nearest: float | None = None) -> Stop | None:
+                 jmax: np.ndarray, along: np.ndarray | None = None) -> Stop | None:
         """A setpoint ``q`` (deg) reached with ``qd``, ``qdd`` (deg/s, deg/s^2): would a stop
         from there (limits in deg/s, deg/s^2, deg/s^3) keep every pair apart? None: yes.
-        ``nearest``: ``CellModel.nearest(q)``, when the caller has it."""
+        ``along``: the end of a straight path (in joint space) from ``q`` whose poses are known
+        to be clear (``poses``): a brake that stays on it is clear too."""
         if self.empty:
             return None
-        room = (self.model.nearest(q) if nearest is None else nearest) - self.margin
+        room = self.model.nearest(q) - self.margin
         if room <= 0:
             return self._worst(self.model.distances(q), 0.0)
         if not qd.any() and not qdd.any():
@@ -135,13 +138,19 @@ class Guard:
         bound = np.array(_brake_bound(qd.tolist(), qdd.tolist(), amax.tolist(), jmax.tolist()))
         if room > self.model.travel(bound).max():
             return None
-        d = self.model.distances(q)
+        if along is not None and _on_segment(q, qd, qdd, along, bound):
+            return None  # the brake's path is the rest of a path whose poses are clear
         # (2) the brake itself, as the driver plans it (phase-synchronised, else not)
         brakes = self._brakes(q, qd, qdd, vmax, amax, jmax)
         if not brakes:
-            return self._worst(d, self.model.travel(bound))
-        travel = np.max([np.abs(np.asarray(b.at_time(b.duration)[0]) - q) for b in brakes], axis=0)
-        needed = self.model.travel(travel)
+            return self._worst(self.model.distances(q), self.model.travel(bound))
+        end = np.asarray(brakes[0].at_time(brakes[0].duration)[0])
+        if along is not None and _on_segment(q, qd, qdd, along, np.abs(end - q)):
+            return None
+        needed = self.model.travel(np.abs(end - q))
+        if room > needed.max():
+            return None
+        d = self.model.distances(q)
         if (d - self.margin > needed).all():
             return None
         # (3) the brake's path, sampled where (2) left pairs short: each sample's room for them,
@@ -185,23 +194,36 @@ class Guard:
     def _at(brake: ruckig.Trajectory, t: float) -> np.ndarray:
         return np.asarray(brake.at_time(t)[0], float)
 
+    def poses(self, q: np.ndarray, lower: np.ndarray | None = None) -> tuple[int, Stop] | None:
+        """The first sample of a path (rows of joints) whose pose breaks the margin, and how;
+        None: every pose keeps it. Few samples are measured (``lower``: ``_lower_bounds(q)``)."""
+        if self.empty or len(q) == 0:
+            return None
+        for k in np.flatnonzero((self._lower_bounds(q) if lower is None else lower) <= 0).tolist():
+            stop = self._worst(self.model.distances(q[k]), 0.0)  # the bound cannot rule it out: measured
+            if stop is not None:
+                return k, stop
+        return None
+
     def path(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, dt: float, vmax: np.ndarray,
              amax: np.ndarray, jmax: np.ndarray) -> PathRefusal | None:
         """A sampled path (rows at the driver's cycle ``dt``): every pose keeps the margin, and
         every sample the rule of ``setpoint``. None: it may run."""
         if self.empty or len(q) == 0:
             return None
-        lower = self._lower_bounds(q)  # each sample's least room, or a bound below it
-        for k in np.flatnonzero(lower <= 0):  # where the bound cannot rule it out: measured
-            d = self.model.distances(q[k])
-            stop = self._worst(d, 0.0)
-            if stop is not None:
-                return PathRefusal(stop, float(k * dt), self._deepest(q, int(k), stop.pair), moving=False)
+        lower = self._lower_bounds(q)
+        breach = self.poses(q, lower)
+        if breach is not None:
+            first, found = breach
+            return PathRefusal(found, first * dt, self._deepest(q, first, found.pair), moving=False)
+        along = q[-1] if straight(q) else None  # a point-to-point move: a brake stays on the path
         limits = amax.tolist(), jmax.tolist()
-        reach = self.model.travel(np.array([_brake_bound(v, a, *limits) for v, a in zip(qd.tolist(), qdd.tolist(),
-                                                                                       strict=True)])).max(axis=-1)
-        for k in np.flatnonzero(lower <= reach):
-            stop = self.setpoint(q[k], qd[k], qdd[k], vmax, amax, jmax)
+        bounds = np.array([_brake_bound(v, a, *limits) for v, a in zip(qd.tolist(), qdd.tolist(), strict=True)])
+        unsure = lower <= self.model.travel(bounds).max(axis=-1)
+        if along is not None:
+            unsure &= ~_on_segment(q, qd, qdd, along, bounds)
+        for k in np.flatnonzero(unsure):
+            stop = self.setpoint(q[k], qd[k], qdd[k], vmax, amax, jmax, along=along)
             if stop is not None:
                 return PathRefusal(stop, float(k * dt), stop.distance_mm, moving=True)
         return None
@@ -266,6 +288,36 @@ class Guard:
             if result in (ruckig.Result.Working, ruckig.Result.Finished):
                 return [trajectory]
         return []
+
+
+def straight(q: np.ndarray) -> bool:
+    """Is the path (rows of joints) a straight line in joint space, from its first row to its
+    last (a point-to-point move, phase-synchronised: rob6_planner.trajectory)?"""
+    if len(q) < 2:
+        return True
+    direction = q[-1] - q[0]
+    length = float(np.linalg.norm(direction))
+    if length < STRAIGHT_TOL:
+        return bool(np.abs(q - q[0]).max() <= STRAIGHT_TOL)
+    offsets = q - q[0]
+    along = offsets @ (direction / length)
+    return bool(np.abs(offsets - along[:, None] * (direction / length)).max() <= STRAIGHT_TOL)
+
+
+def _on_segment(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, end: np.ndarray, travel: np.ndarray) -> np.ndarray:
+    """Does a phase-synchronised brake from (``q``, ``qd``, ``qdd``) that travels at most
+    ``travel`` per joint stay on the straight segment from ``q`` to ``end``? Its path is the
+    line through ``q`` along the velocity (the acceleration parallel to it), so: both point
+    to ``end``, and no joint goes past it. Rows (..., 6) give (...,) answers."""
+    direction = end - q
+    length = np.linalg.norm(direction, axis=-1, keepdims=True)
+    unit = direction / np.maximum(length, STRAIGHT_TOL)
+    ok = length[..., 0] >= STRAIGHT_TOL
+    for vector in (qd, qdd):
+        off = np.abs(vector - (vector * unit).sum(axis=-1, keepdims=True) * unit).max(axis=-1)
+        ok &= off <= STRAIGHT_TOL * (1.0 + np.abs(vector).max(axis=-1))
+    answer: np.ndarray = ok & ((qd * unit).sum(axis=-1) >= 0.0) & (travel <= np.abs(direction) + STRAIGHT_TOL).all(axis=-1)
+    return answer
 
 
 def _brake_bound(qd: Sequence[float], qdd: Sequence[float], amax: Sequence[float],
