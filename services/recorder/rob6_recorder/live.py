@@ -7,14 +7,17 @@ derived from the joint states), ``/driver/joint_state`` (mode, moving, link, lat
 every field, defaults included),
 ``/driver/link``, ``/gripper/state``, ``/log`` (``foxglove.Log``), the raw session and bus
 channels, and ``/commands``: every client line and its reply as a ``foxglove.Log``
-(``name`` = ``session <n>``, ``message`` = ``> line`` / ``< reply``) for the Log panel.
+(``name`` = ``session <n>``, ``message`` = ``> line`` / ``< reply``) for the Log panel. From
+the driver's ``/cell`` and ``/driver/clearance`` it draws the cell on ``/cell/scene``
+(``foxglove.SceneUpdate``, ``cell_scene``): the safety zones and the tool, the zone nearest
+the arm coloured by its distance.
 
 The recorder calls ``publish`` for each record it queues for its files (``Recorder.submit``):
 the live view is one more subscriber of the bus and costs the real-time path nothing. A
 message goes to the clients subscribed to its channel only; one without subscribers is
 dropped in the SDK. The WebSocket protocol has no latched topics, so the last message of
-``LATCHED`` topics (the URDF, gripper, link, joint state, ``/tf``) is sent again when a
-client subscribes to it: a panel opened later shows the robot at once.
+``LATCHED`` topics (the URDF, the cell and its scene, gripper, link, joint state, ``/tf``...)
+is sent again when a client subscribes to it: a panel opened later shows the robot at once.
 
 The URDF is also an asset (``package://rob6/robot.urdf``, ``fetchAsset``), for a 3D
 panel's URDF layer with a URL.
@@ -48,8 +51,10 @@ from rob6.errors import RefusedError
 from rob6.messages import JointState
 from rob6_recorder_native import ROBOT_DESCRIPTION_TOPIC, STATUS_TOPIC
 
+from .cell_scene import SCENE_TOPIC, CellScene
 from .payloads import as_dict, encode
 from .schemas import schema_for, stamp
+from .writer import CELL_TOPIC, CLEARANCE_TOPIC
 
 log = logging.getLogger("rob6.recorder.live")
 
@@ -57,9 +62,12 @@ DEFAULT_PORT = DEFAULT_LIVE_PORT
 COMMANDS_TOPIC = "/commands"
 URDF_ASSET = "package://rob6/robot.urdf"
 #: advertised from the start (a panel can subscribe before the first message)
-STANDARD_TOPICS = ("/tf", "/driver/joint_state", "/driver/link", "/gripper/state", "/log", COMMANDS_TOPIC)
+STANDARD_TOPICS = ("/tf", "/driver/joint_state", "/driver/link", "/gripper/state", "/log", COMMANDS_TOPIC,
+                   SCENE_TOPIC)
 LATCHED = frozenset({ROBOT_DESCRIPTION_TOPIC, "/tf", "/flange", "/driver/joint_state", "/driver/link",
-                     "/gripper/state", STATUS_TOPIC})
+                     "/gripper/state", STATUS_TOPIC, CELL_TOPIC, CLEARANCE_TOPIC, SCENE_TOPIC})
+#: the latched topics the view makes itself, never found in a recording
+OWN_LATCHED = frozenset({ROBOT_DESCRIPTION_TOPIC, SCENE_TOPIC})
 
 _encoder = msgspec.json.Encoder()
 _joint_state = msgspec.json.Decoder(JointState)
@@ -152,6 +160,7 @@ class LiveView:
         self._channels: dict[str, foxglove.Channel] = {}
         self._last: dict[str, tuple[bytes, int]] = {}
         self._lock = threading.Lock()  # channel creation and the latched messages
+        self.scene = CellScene()
         capabilities = [Capability.Time]
         if playback_time_range is not None:
             capabilities.append(Capability.PlaybackControl)
@@ -212,6 +221,10 @@ class LiveView:
             entry = command_log(topic, data, log_time) if commands.base.has_sinks() else None
             if entry is not None:
                 commands.base.log(_encoder.encode(entry), log_time)
+        elif topic in (CELL_TOPIC, CLEARANCE_TOPIC):
+            scene = self.scene.update(topic, payload, log_time)
+            if scene is not None:
+                self.publish(SCENE_TOPIC, log_time, scene)
 
     def resend(self, topic: str) -> None:
         """The last message of a latched topic again (a client just subscribed to it)."""
@@ -226,6 +239,7 @@ class LiveView:
         for topic in list(self._last):
             if topic != ROBOT_DESCRIPTION_TOPIC:
                 self._last.pop(topic, None)
+        self.scene = CellScene()
 
     def broadcast_time(self, ns: int) -> None:
         self.server.broadcast_time(ns)
@@ -271,5 +285,5 @@ def env_tls() -> tuple[str | None, str | None]:
     return os.environ.get("ROB6_LIVE_TLS_CERT") or None, os.environ.get("ROB6_LIVE_TLS_KEY") or None
 
 
-__all__: Sequence[str] = ("DEFAULT_PORT", "COMMANDS_TOPIC", "LATCHED", "LiveRefused", "LiveView",
+__all__: Sequence[str] = ("DEFAULT_PORT", "COMMANDS_TOPIC", "LATCHED", "OWN_LATCHED", "LiveRefused", "LiveView",
                           "command_log", "live_settings", "secure_bus", "start_live")
