@@ -1,13 +1,16 @@
-"""The recording tests' fixtures: a sample URDF, a scripted session and the fake server's
-answers from a dict (the fake server itself is ``harness.fake_server``)."""
+"""The recording tests' fixtures: a sample URDF, a scripted session, the fake server's
+answers from a dict (the fake server itself is ``harness.fake_server``) and a cell with a
+table to record and draw."""
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Any
 
 from harness.fake_server import GREETING, Handler
 from rob6_recorder.writer import Recorder
+from tests.cell.zone_rig import Rig, rig
 
 URDF = """<?xml version="1.0"?>
 <robot name="mini6">
@@ -108,3 +111,14 @@ def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = Non
         return reply.encode("latin-1"), line == "Quit\n"
 
     return handle
+
+
+def table_cell(directory: Path, robot: str = "kr16") -> tuple[Rig, Path]:
+    """A cell file with a table 200 mm below the tool tip at the rig's hover pose (``zone_rig``),
+    the tool, and no self-collision: what is recorded and drawn, without the cost of checking
+    the arm against itself on every path (not what these tests are about)."""
+    hover = rig(robot)
+    table = Rig(robot, hover.tool_mm, hover.tip_radius_mm, hover.table_z - 100.0)
+    path = directory / f"{robot}-table.yaml"
+    path.write_text(table.cell_yaml() + "arm:\n  self_collision: false\n")
+    return table, path

@@ -19,7 +19,8 @@ from harness.system import System, running
 from rob6.cell import load_cell
 from rob6.messages import Cell, Clearance
 from rob6_recorder.reader import read_records
-from tests.cell.zone_rig import HOVER_S, rig
+from tests.cell.zone_rig import HOVER_S
+from tests.recording.rec_helpers import table_cell
 
 SCRIPT = ["GetRobot", "ForwardCalc 10 -60 80 20 40 30", "MovePTPJoints 10 -60 80 20 40 30",
           "GetPositionJoints", "GetStatus", "BackwardCalc 1 0 0 1000 0 1 0 0 0 0 1 500 noflip up lefty",
@@ -100,8 +101,7 @@ def test_the_cell_and_a_refused_motion_are_in_the_recording(tmp_path: Path) -> N
     """The recorder asks the driver for its cell when it appears and records it on ``/cell``
     (schema ``rob6.Cell``) in the system file and in the session's; a PTP into the table is
     refused before anything moves, and the client's reply and the planner's say why."""
-    table = rig("kr16")
-    cell_file = table.write(tmp_path)
+    table, cell_file = table_cell(tmp_path)
     into_table = " ".join(f"{q:g}" for q in table.q(table.s_at(-20.0)))
     with running("kr16", log_dir=str(tmp_path / "rec"), extra_env={"ROB6_CELL": str(cell_file)}) as system, \
             system.client() as client:
