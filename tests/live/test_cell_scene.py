@@ -51,7 +51,7 @@ def _entities(scene: dict[str, Any]) -> dict[str, dict[str, Any]]:
 
 def _rotate(q: dict[str, float], v: list[float]) -> list[float]:
     w = (q["w"], q["x"], q["y"], q["z"])
-    r = quat_mul(quat_mul(w, (0.0, *v)), quat_conjugate(w))
+    r = quat_mul(quat_mul(w, (0.0, v[0], v[1], v[2])), quat_conjugate(w))
     return list(r[1:])
 
 
@@ -73,7 +73,7 @@ def _foxglove(cls: Any, fields: dict[str, Any]) -> Any:
             kwargs[name] = (fm.Timestamp if name == "timestamp" else fm.Duration)(value["sec"], value["nsec"])
         elif name == "type":  # an enum's number
             enum = fm.SceneEntityDeletionType if cls is fm.SceneEntityDeletion else fm.LinePrimitiveLineType
-            (kwargs[name],) = [m for m in vars(enum).values() if isinstance(m, enum) and int(m) == value]
+            (kwargs[name],) = [m for m in vars(enum).values() if isinstance(m, enum) and m.value == value]
         elif isinstance(value, list) and name in _CLASSES:
             kwargs[name] = [_foxglove(_CLASSES[name], item) for item in value]
         elif isinstance(value, dict):

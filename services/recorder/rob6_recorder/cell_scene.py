@@ -84,13 +84,12 @@ class CellScene:
         t = stamp(t_ns)
         entities = [self._zone(zone, t) for zone in self.cell.zones]
         if self.cell.tool:
-            entities.append(_entity("tool", FLANGE_FRAME, t, frame_locked=True,
-                                    **_tool(self.cell.tool)))
+            entities.append(_entity("tool", FLANGE_FRAME, t, _tool(self.cell.tool), frame_locked=True))
         return {"deletions": [{"timestamp": t, "type": 1, "id": ""}], "entities": entities}
 
     def _zone(self, zone: Zone, t: dict[str, int]) -> dict[str, Any]:
         assert self.cell is not None
-        metadata = {"keep": zone.keep}
+        metadata: dict[str, str] = {"keep": zone.keep}
         rgba = GREY
         near = self.nearest
         if near is not None and near.zone and near.other == zone.name:
@@ -102,11 +101,11 @@ class CellScene:
             shapes = {"cubes": [_box(zone, rgba)]}
         else:
             shapes = {"lines": [_edges(zone, rgba)]}
-        return _entity(f"zone:{zone.name}", BASE_FRAME, t, metadata=metadata, **shapes)
+        return _entity(f"zone:{zone.name}", BASE_FRAME, t, shapes, metadata=metadata)
 
 
-def _entity(entity_id: str, frame: str, t: dict[str, int], *, frame_locked: bool = False,
-            metadata: dict[str, str] | None = None, **shapes: list[dict[str, Any]]) -> dict[str, Any]:
+def _entity(entity_id: str, frame: str, t: dict[str, int], shapes: dict[str, list[dict[str, Any]]], *,
+            frame_locked: bool = False, metadata: dict[str, str] | None = None) -> dict[str, Any]:
     return {"timestamp": t, "frame_id": frame, "id": entity_id, "lifetime": {"sec": 0, "nsec": 0},
             "frame_locked": frame_locked,
             "metadata": [{"key": k, "value": v} for k, v in (metadata or {}).items()],

@@ -74,7 +74,8 @@ OWN_LATCHED = frozenset({ROBOT_DESCRIPTION_TOPIC, SCENE_TOPIC})
 _encoder = msgspec.json.Encoder()
 #: the driver's messages shown with every field (it leaves defaults out: ``mode`` idle,
 #: ``link`` connected, ``late`` 0, a clearance's ``zone`` true...), so a panel shows them at any time
-_COMPLETED = {JOINT_STATE_TOPIC: msgspec.json.Decoder(JointState), CLEARANCE_TOPIC: msgspec.json.Decoder(Clearance)}
+_COMPLETED: dict[str, msgspec.json.Decoder[Any]] = {JOINT_STATE_TOPIC: msgspec.json.Decoder(JointState),
+                                                     CLEARANCE_TOPIC: msgspec.json.Decoder(Clearance)}
 
 
 def _complete(topic: str, payload: bytes) -> bytes:
