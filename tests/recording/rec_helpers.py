@@ -4,9 +4,12 @@ table to record and draw."""
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 from typing import Any
+
+from ruamel.yaml import YAML
 
 from harness.fake_server import GREETING, Handler
 from rob6_recorder.writer import Recorder
@@ -114,11 +117,15 @@ def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = Non
 
 
 def table_cell(directory: Path, robot: str = "kr16") -> tuple[Rig, Path]:
-    """A cell file with a table 200 mm below the tool tip at the rig's hover pose (``zone_rig``),
-    the tool, and no self-collision: what is recorded and drawn, without the cost of checking
-    the arm against itself on every path (not what these tests are about)."""
+    """A cell file with the floor, a table 200 mm below the tool tip at the rig's hover pose
+    (``zone_rig``), the tool, and no self-collision: what is recorded and drawn, without the
+    cost of checking the arm against itself on every path (not what these tests are about)."""
     hover = rig(robot)
     table = Rig(robot, hover.tool_mm, hover.tip_radius_mm, hover.table_z - 100.0)
+    cell = YAML(typ="safe").load(table.cell_yaml())
+    cell["zones"].insert(0, {"name": "floor", "keep": "out", "ignore": ["link_1"],
+                             "half_space": {"point": [0, 0, 0], "normal": [0, 0, 1]}})
+    cell["arm"] = {"self_collision": False}
     path = directory / f"{robot}-table.yaml"
-    path.write_text(table.cell_yaml() + "arm:\n  self_collision: false\n")
+    path.write_text(json.dumps(cell, indent=1))  # JSON is YAML
     return table, path
