@@ -1,4 +1,4 @@
-"""The 78 commands of the rob6server protocol and what the gateway does with each.
+"""The 78 commands of the rob6server protocol, rob6's own GetCell, and what the gateway does with each.
 
 Every handler gets the parsed-on-demand argument cursor and returns the complete
 reply text (all lines, each ending in ``\\n``) or ``None`` for the few commands the
@@ -12,12 +12,15 @@ Command names are case-sensitive, extra arguments are ignored, as in the origina
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
+
+import msgspec
 
 from rob6 import logs
 from rob6.bus import Bus, BusError, BusTimeout, CallAbandoned
@@ -26,6 +29,7 @@ from rob6.messages import (
     Ack,
     AlterTarget,
     BackwardCalcRequest,
+    Cell,
     ClientExchange,
     ConfigChange,
     ConfigReply,
@@ -775,3 +779,24 @@ def direct_adept_cmd(gw: Gateway, session: Session, args: Args) -> str:
     return error("DirectAdeptCmd: raw V+ commands cannot reach the controller (neither the simulation "
                  "nor the simple_message link has a V+ command channel; only SIGNAL is carried); "
                  "nothing was sent")
+
+
+# ====================================================================== rob6's own
+@command("GetCell", value=True)
+def get_cell(gw: Gateway, session: Session, args: Args) -> str:
+    """The driver's cell (its safety zones, tool and self-collision settings, ``rob6.cell``)
+    as one line of JSON: the ``Cell`` message with every field, defaults included, so a
+    client needs no knowledge of them; ASCII (``\\u`` escapes), as every reply is latin-1.
+    The original has no such command (it answers ``ERROR: GetCell``)."""
+    cell: Cell = gw.call(session, "driver", "cell", Empty())
+    return json.dumps(_every_field(cell), separators=(",", ":")) + "\n"
+
+
+def _every_field(value: Any) -> Any:
+    """A message as plain JSON values, its fields at their defaults included (the bus's
+    encoding leaves those out)."""
+    if isinstance(value, msgspec.Struct):
+        return {name: _every_field(field) for name, field in msgspec.structs.asdict(value).items()}
+    if isinstance(value, list):
+        return [_every_field(item) for item in value]
+    return value
