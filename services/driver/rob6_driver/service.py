@@ -85,6 +85,7 @@ class DriverService:
         self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event,
                                zones=self.zones)
         self._clearance_t = -math.inf  # driver clock of the last clearance published
+        self._clearance_q: list[float] | None = None  # and the joints it was measured at
         self._published: tuple[object, ...] | None = None  # the last published state without t and cycle
         self._published_t = 0.0
         self._published_outputs: list[int] = []  # in the last published state
@@ -111,18 +112,19 @@ class DriverService:
                           outputs=link.outputs())
 
     def _publish(self, state: CoreState) -> None:
-        """Every cycle's state, except at rest (``REST_STATE_PERIOD_S``); with it, while the arm
-        moves, the clearance to the cell's zones every ``CLEARANCE_PERIOD_S``."""
+        """Every cycle's state, except at rest (``REST_STATE_PERIOD_S``); with it the clearance to
+        the cell's zones, while the arm moves every ``CLEARANCE_PERIOD_S``, and where it stops."""
         message = self.joint_state(state)
         content = (message.q, message.qd, message.moving, message.mode, message.missed, message.link,
                    message.late, message.q_actual, message.outputs)
         if content == self._published and 0.0 <= message.t - self._published_t < REST_STATE_PERIOD_S:
             return
-        moved = content[:2] != (self._published or ())[:2]
         self._published, self._published_t = content, message.t
         self.bus.publish_state("driver/state", message)
-        if moved and not 0.0 <= message.t - self._clearance_t < CLEARANCE_PERIOD_S:
-            self._clearance_t = message.t
+        # where the arm comes to rest too, whenever the period has not run out there
+        if message.q != self._clearance_q and (not message.moving
+                                               or not 0.0 <= message.t - self._clearance_t < CLEARANCE_PERIOD_S):
+            self._clearance_t, self._clearance_q = message.t, message.q
             clearance = self.zones.clearance(message.t, state.q)
             if clearance is not None:
                 self.bus.publish_state("driver/clearance", clearance)
