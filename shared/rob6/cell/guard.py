@@ -21,7 +21,6 @@ conservative: the arm may stop a little farther out than needed, never nearer.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,7 +134,7 @@ class Guard:
         if not qd.any() and not qdd.any():
             return None
         # (1) the brake's joint travel bounded from the state alone
-        bound = np.array(_brake_bound(qd.tolist(), qdd.tolist(), amax.tolist(), jmax.tolist()))
+        bound = _brake_bound(qd, qdd, amax, jmax)
         if room > self.model.travel(bound).max():
             return None
         if along is not None and _on_segment(q, qd, qdd, along, bound):
@@ -217,8 +216,7 @@ class Guard:
             first, found = breach
             return PathRefusal(found, first * dt, self._deepest(q, first, found.pair), moving=False)
         along = q[-1] if straight(q) else None  # a point-to-point move: a brake stays on the path
-        limits = amax.tolist(), jmax.tolist()
-        bounds = np.array([_brake_bound(v, a, *limits) for v, a in zip(qd.tolist(), qdd.tolist(), strict=True)])
+        bounds = _brake_bound(qd, qdd, amax, jmax)
         unsure = lower <= self.model.travel(bounds).max(axis=-1)
         if along is not None:
             unsure &= ~_on_segment(q, qd, qdd, along, bounds)
@@ -320,18 +318,16 @@ def _on_segment(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, end: np.ndarray,
     return answer
 
 
-def _brake_bound(qd: Sequence[float], qdd: Sequence[float], amax: Sequence[float],
-                 jmax: Sequence[float]) -> list[float]:
+def _brake_bound(qd: np.ndarray, qdd: np.ndarray, amax: np.ndarray, jmax: np.ndarray) -> np.ndarray:
     """Per joint, a bound of how far (deg) any jerk-limited brake with these limits travels,
     phase-synchronised ones included: at most the speed it can reach, for as long as the
     slowest joint's brake lasts (turn the acceleration round, brake at the limit, end it).
-    Plain floats: it runs for every setpoint, where numpy on six values costs more."""
-    peaks, longest = [], 0.0
-    for v, a0, a, j in zip(qd, qdd, amax, jmax, strict=True):
-        if a <= FROZEN or j <= FROZEN:
-            peaks.append(0.0)
-            continue
-        peak = abs(v) + a0 * a0 / (2.0 * j)
-        peaks.append(peak)
-        longest = max(longest, (abs(a0) + a) / j + peak / a + a / j)
-    return [peak * longest for peak in peaks]
+    ``qd``, ``qdd`` (..., 6) give (..., 6)."""
+    moving = (amax > FROZEN) & (jmax > FROZEN)
+    a = np.where(moving, amax, 1.0)
+    j = np.where(moving, jmax, 1.0)
+    a0 = np.abs(qdd)
+    peak = np.where(moving, np.abs(qd) + a0 * a0 / (2.0 * j), 0.0)
+    duration = np.where(moving, (a0 + a) / j + peak / a + a / j, 0.0)
+    travel: np.ndarray = peak * duration.max(axis=-1, keepdims=True)
+    return travel
