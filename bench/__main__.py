@@ -27,6 +27,7 @@ from .latency import cpu_seconds, echo_baseline, measure, measure_beside, percen
 from .links import links_table, live_realtime_table, ros_realtime_table
 from .tables import table
 from .transport import transport_table
+from .zones import zones_table
 
 COUNT = int(os.environ.get("ROB6_BENCH_COUNT", "3000"))
 
@@ -276,6 +277,7 @@ def main() -> int:
     idle_table()
     kinematics_tables()
     planner_table()
+    zones_table(table)
     alter_s = float(os.environ.get("ROB6_BENCH_ALTER_S", "60"))
     links_table(alter_s, table)
     adept_table(max(5.0, alter_s / 6), table)

@@ -102,6 +102,8 @@ class Ack(Struct):
     state: JointState | None = None
     #: refused because another kind of client owns the motion (a ROS 2 goal runs): shown to the client
     busy: str = ""
+    #: refused or stopped by the cell's safety zones (rob6.cell): shown to the client
+    zone: str = ""
 
 
 # ---------------------------------------------------------------- driver
@@ -148,6 +150,7 @@ class ExecuteReply(Struct):
     reason: str = ""
     error: str = ""  # the plant failed, not the command (robot not connected, link lost)
     state: JointState | None = None  # at the end of the motion (or where it stopped)
+    zone: str = ""  # stopped by the cell's safety zones (rob6.cell): shown to the client
 
 
 class LimitsUpdate(Struct):
@@ -214,6 +217,72 @@ class LinkEvent(Struct):
     late: int = 0  # late packets so far (all runs)
     start_pose: Joints | None = None  # ASPos (run_start, restart)
     q_actual: Joints | None = None  # AIPos at the event
+
+
+# ---------------------------------------------------------------- the cell (safety zones)
+class HalfSpace(Struct):
+    """Everything on one side of a plane (robot base frame, mm)."""
+
+    point: list[float]  # a point of the plane
+    normal: list[float]  # unit normal, pointing to the side the arm may be in
+
+
+class Box(Struct):
+    """A box: its corners before the rotation (robot base frame, mm), turned about its centre
+    by ``rpy_deg`` (URDF's roll, pitch, yaw: about x, then y, then z, fixed axes)."""
+
+    min: list[float]
+    max: list[float]
+    rpy_deg: list[float] = msgspec.field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+
+class Zone(Struct):
+    """A safety zone: ``keep`` "out" (no part of the arm or tool may enter it) or "in" (none
+    may leave it); one shape. ``ignore``: parts never checked against it (the first link
+    stands on the floor)."""
+
+    name: str
+    keep: Literal["out", "in"]
+    half_space: HalfSpace | None = None
+    box: Box | None = None
+    ignore: list[str] = []
+
+
+class ToolShape(Struct):
+    """One shape of the tool, in the flange frame (mm): a sphere (centre ``a``) or a capsule
+    (the segment ``a``-``b``), of ``radius``."""
+
+    name: str
+    radius: float
+    a: list[float]
+    b: list[float] | None = None
+
+
+class Cell(Struct):
+    """The robot's cell (``rob6.cell``): what the planner checks every path against and the
+    driver every setpoint. The driver loads it (``ROB6_CELL``) and serves it."""
+
+    source: str  # the file it was read from, or "default <robot>"
+    margin_mm: float  # kept clear of every zone, and between parts of the arm
+    zones: list[Zone] = []
+    tool: list[ToolShape] = []
+    self_collision: bool = True
+    arm_padding_mm: float = 0.0  # added to the radius of every capsule of the arm (cables, covers)
+    allowed_pairs: list[list[str]] = []  # pairs of parts that may touch, beyond the adjacent ones
+    #: the lab's own (ROB6_CELL), not the default: IsPossible then checks poses against it too
+    #: (with the default it answers as the original, whose transcripts ask about poses below the floor)
+    from_file: bool = True
+
+
+class Clearance(Struct):
+    """How near the arm is to the cell's zones and to itself: the closest pair, published by
+    the driver on ``rob6/<id>/driver/clearance`` while the arm moves (at most 10 Hz)."""
+
+    t: float  # driver clock, seconds
+    distance_mm: float  # < 0: inside
+    part: str  # a part of the arm or the tool
+    other: str  # the zone's name, or the other part (self-collision)
+    zone: bool = True  # other is a zone (False: a part of the arm)
 
 
 # ---------------------------------------------------------------- kinematics
@@ -307,6 +376,12 @@ class MoveRequest(Struct):
     session: str = ""  # the client session (SessionEnd.session): none of its motions starts after it ended
 
 
+class PoseCheck(Struct):
+    """IsPossible's question to the planner: may the arm be at these joints (the cell's zones)?"""
+
+    joints: Joints
+
+
 class SessionEnd(Struct):
     """The client left: its motion stops, and none of its motions starts any more."""
 
@@ -323,6 +398,9 @@ class MoveReply(Struct):
     #: client sees it as ``ERROR: <busy>``
     busy: str = ""
     invalid: bool = False  # follow: the trajectory was refused before anything moved (``reason`` says why)
+    #: refused (its path enters a zone) or stopped by the cell's safety zones (rob6.cell):
+    #: the client sees ``ERROR: <zone>`` and ``false``
+    zone: str = ""
 
 
 class FollowRequest(Struct):
@@ -430,6 +508,7 @@ OPS: dict[tuple[str, str], Op] = {
     ("driver", "stop"): Op(Empty, Ack, timeout=ANNOUNCE_S, waits=True),
     ("driver", "link"): Op(LinkQuery, LinkStatus),
     ("driver", "signal"): Op(SignalRequest, Ack, timeout=ANNOUNCE_S, waits=True),
+    ("driver", "cell"): Op(Empty, Cell),
     ("kinematics", "fk"): Op(FkRequest, FkReply, timeout=REMOTE_POSE_S, hedged=True),
     ("kinematics", "forward_calc"): Op(ForwardCalcRequest, ForwardCalcReply, timeout=REMOTE_POSE_S, hedged=True),
     ("kinematics", "backward_calc"): Op(BackwardCalcRequest, JointsReply, timeout=REMOTE_POSE_S, hedged=True),
@@ -442,6 +521,7 @@ OPS: dict[tuple[str, str], Op] = {
     ("planner", "session_end"): Op(SessionEnd, Ack, timeout=ANNOUNCE_S, waits=True),
     ("planner", "follow"): Op(FollowRequest, MoveReply, timeout=ANNOUNCE_S, waits=True),
     ("planner", "follow_stop"): Op(Empty, Ack, timeout=ANNOUNCE_S, waits=True),
+    ("planner", "pose_check"): Op(PoseCheck, Ack),
     ("gripper", "command"): Op(GripperCommand, GripperReply, timeout=ANNOUNCE_S, waits=True),
     ("gripper", "state"): Op(Empty, GripperState),
 }

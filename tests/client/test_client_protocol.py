@@ -8,7 +8,18 @@ import math
 
 import pytest
 
-from rob6_client import COMMANDS, AsyncRobot, Pose, Robot, Status, normalize_status, parse_reply
+from rob6_client import (
+    COMMANDS,
+    ROB6_ONLY,
+    AsyncRobot,
+    Pose,
+    Rob6Error,
+    Rob6ProtocolError,
+    Robot,
+    Status,
+    normalize_status,
+    parse_reply,
+)
 from rob6_client._stubgen import STUB, stub
 from rob6_client.protocol import StatusLike
 from rob6_gateway.args import Args
@@ -16,7 +27,8 @@ from rob6_gateway.commands import COMMANDS as GATEWAY_COMMANDS
 
 
 def test_every_protocol_command_has_a_method() -> None:
-    assert set(COMMANDS) == set(GATEWAY_COMMANDS) and len(COMMANDS) == 78
+    """The original's 78 commands and rob6's own GetCell: the gateway's table, one method each."""
+    assert set(COMMANDS) == set(GATEWAY_COMMANDS) and len(COMMANDS) == 79 and ROB6_ONLY == {"GetCell"}
     for command in COMMANDS.values():
         assert inspect.isfunction(getattr(Robot, command.method))
         assert inspect.iscoroutinefunction(getattr(AsyncRobot, command.method))
@@ -25,7 +37,8 @@ def test_every_protocol_command_has_a_method() -> None:
                                "GetPositionHomRowWise", "MoveRTHomRowWiseStatus")] == [
         "move_ptp_joints", "is_kr16", "cm_ping", "set_rt_speed_control",
         "get_position_hom_row_wise", "move_rt_hom_row_wise_status"]
-    assert len(set(names.values())) == 78
+    assert len(set(names.values())) == 79 and names["GetCell"] == "get_cell"
+    assert inspect.signature(Robot.get_cell).return_annotation == "dict[str, Any]"
 
 
 def test_generated_signatures_and_docs() -> None:
@@ -104,3 +117,14 @@ def test_reply_values() -> None:
     assert parse_reply("GetRTSpeedControl", "1\n") == 1
     assert parse_reply("GetTimestamp", "1795317178.341\n") == 1795317178.341
     assert parse_reply("Shutdown", "bye!\nshutting down ...\n") is None
+    assert parse_reply("GetCell", '{"margin_mm":5.0,"zones":[{"name":"t\\u00e4ble"}]}\n') == {
+        "margin_mm": 5.0, "zones": [{"name": "t\u00e4ble"}]}
+
+
+@pytest.mark.parametrize(("reply", "error"), [
+    ("[1, 2]\n", Rob6ProtocolError), ("{not json\n", Rob6ProtocolError), ("true\n", Rob6ProtocolError),
+    ("ERROR: driver unavailable\n", Rob6Error), ("ERROR: GetCell\n", Rob6Error),  # rob6 without a driver; the original
+])
+def test_get_cell_takes_a_json_object_only(reply: str, error: type[Exception]) -> None:
+    with pytest.raises(error):
+        parse_reply("GetCell", reply)

@@ -6,10 +6,15 @@ import asyncio
 import math
 import time
 from collections.abc import Iterator, Sequence
+from typing import Any
 
+import msgspec
 import pytest
 
 from harness.system import System, running
+from rob6.cell import default_cell
+from rob6.messages import Cell, Zone
+from rob6.robots import get_robot
 from rob6_client import COMMANDS, AsyncRobot, Rob6ConnectionError, Rob6Error, Rob6Timeout, Robot
 
 Q = (10.0, -60.0, 80.0, 20.0, 40.0, 30.0)  # kr16, noflip up lefty
@@ -21,6 +26,14 @@ def kr16() -> Iterator[System]:
     # Shutdown refused, as on a shared lab server: a rob6-only ERROR without `false`
     with running("kr16", dummy=True, extra_env={"ROB6_ALLOW_SHUTDOWN": "0"}) as system:
         yield system
+
+
+def is_default_cell(cell: dict[str, Any], robot: str) -> bool:
+    """GetCell's dict without ROB6_CELL: the default cell, with every field, defaults included
+    (a client needs no knowledge of them)."""
+    return (msgspec.convert(cell, Cell) == default_cell(get_robot(robot))
+            and set(cell) == set(Cell.__struct_fields__) and cell["source"] == f"default {robot}"
+            and all(set(zone) == set(Zone.__struct_fields__) for zone in cell["zones"]))
 
 
 def close_to(a: Sequence[float] | None, b: Sequence[float], tol: float = 1e-3) -> bool:
@@ -108,6 +121,15 @@ def test_lab_session(kr16: System) -> None:
         time.sleep(0.3)
         assert robot.move_ptp_joints(Q) is True
 
+        # rob6's own: the cell every motion is checked against (the default one), as a dict
+        cell = robot.get_cell()
+        assert is_default_cell(cell, "kr16") and cell["zones"][0]["name"] == "floor", cell
+        assert robot.get_status() == ("noflip", "up", "lefty")  # unchanged beside it
+        with pytest.raises(Rob6Error) as refused:  # the reason, not a bare False
+            robot.move_ptp_joints([0, 10, 110, 0, 60, 0])  # the flange below the floor
+        assert refused.value.message.startswith("path enters keep-out 'floor' at "), refused.value.message
+        assert robot.get_position_joints() == Q  # nothing moved
+
         # ERROR replies are exceptions and the session goes on
         with pytest.raises(Rob6Error) as caught:
             robot.shutdown()
@@ -160,6 +182,7 @@ def test_asyncio_twin(kr16: System) -> None:
             assert all(isinstance(fk, tuple) and abs(fk[0].r12 + math.sin(math.radians(k))) < 1e-5
                        for k, fk in enumerate(results[:5]))
             assert results[5] == "kr16"
+            assert is_default_cell(await robot.get_cell(), "kr16")
             with pytest.raises(Rob6Timeout):
                 await robot.ping_robot(40, 25, timeout=0.2)
             assert not robot.connected

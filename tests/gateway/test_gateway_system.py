@@ -1,17 +1,24 @@
-"""The gateway against real processes: client styles, one client at a time, failures, Shutdown."""
+"""The gateway against real processes: client styles, one client at a time, failures, Shutdown, GetCell."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
+import msgspec
 import pytest
 
 from harness.client import Client
 from harness.system import System, running
+from rob6.cell import default_cell, load_cell
+from rob6.messages import Cell
+from rob6.robots import get_robot
+from tests.motion.link_session import wait_until
 
 GATEWAY_AND_DRIVER = ("driver", "gateway")
 
@@ -114,6 +121,52 @@ def test_ping_robot_measures_the_driver(system: System) -> None:
         assert len(numbers) == 5
         assert 0 < float(numbers[0]) < 0.2  # seconds
         assert client.ask("PingRobot 0 0") == "-1\n"  # cannot be measured: the original's answer
+
+
+def test_get_cell_answers_the_drivers_cell_in_one_line_of_json(system: System) -> None:
+    with system.client() as client:
+        client.send(b"GetCell\nCM_PING\n")  # one line: the next reply is the next command's
+        line, pong = client.read_lines(2).split("\n")[:2]
+        assert pong == "PONG"
+        cell = json.loads(line)
+        assert msgspec.convert(cell, Cell) == default_cell(get_robot("kr16"))
+        assert set(cell) == set(Cell.__struct_fields__)  # every field, those at their default too
+        assert client.ask("GetStatus") == "noflip up lefty\n"  # GetStatus is what it was
+
+
+LAB_CELL = """\
+margin_mm: 8
+zones:
+  - name: Tisch (Gerät)
+    keep: out
+    box: {min: [600, -300, -50], max: [1200, 300, 120], rpy_deg: [0, 0, 15]}
+  - name: Zelle €
+    keep: in
+    box: {min: [-2000, -2000, -100], max: [2000, 2000, 2500]}
+tool:
+  - {name: Greifer, capsule: {from: [0, 0, 0], to: [0, 0, 140], radius: 30}}
+arm:
+  self_collision: false
+"""
+
+
+def test_get_cell_of_a_lab_cell_and_without_a_driver(tmp_path: Path) -> None:
+    """A lab's own cell comes back as the driver read it, names beyond latin-1 included (the
+    reply is ASCII JSON); without a driver GetCell answers the one line every value command
+    does, and the session goes on."""
+    path = tmp_path / "cell.yaml"
+    path.write_text(LAB_CELL, encoding="utf-8")
+    with running("kr16", services=GATEWAY_AND_DRIVER, extra_env={"ROB6_CELL": str(path)}) as system, \
+            system.client() as client:
+        line = client.ask("GetCell")
+        assert line.isascii() and line.count("\n") == 1
+        assert msgspec.convert(json.loads(line), Cell) == load_cell(path)
+        assert [z["name"] for z in json.loads(line)["zones"]] == ["Tisch (Gerät)", "Zelle €"]
+        os.kill(system.pids()["driver"], signal.SIGKILL)
+        wait_until(lambda: any("driver instance" in out and "went away" in out for out in system.output),
+                   10.0, "the gateway to see the driver gone")
+        assert client.ask("GetCell", timeout=3) == "ERROR: driver unavailable\n"  # one line, no false
+        assert client.ask("CM_PING") == "PONG\n"
 
 
 def test_a_killed_service_gives_an_error_reply_not_a_hang() -> None:

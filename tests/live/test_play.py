@@ -97,7 +97,8 @@ def test_play_seek_and_pause(recording: tuple[Path, int], live_port: int) -> Non
 
 
 def test_play_a_system_recording(tmp_path: Path, live_port: int) -> None:
-    """A file recorded by the real system plays back: the joints reach the commanded pose."""
+    """A file recorded by the real system plays back: the joints reach the commanded pose, and
+    the cell the session file starts with is drawn (the live view derives the scene)."""
     from harness.system import running
     with running("kr16", log_dir=str(tmp_path), extra_env={"ROB6_LIVE_PORT": "0"}) as system:
         assert not any("live view:" in line for line in system.output)
@@ -110,9 +111,11 @@ def test_play_a_system_recording(tmp_path: Path, live_port: int) -> None:
     process = serve(path, live_port, "--speed", "4", "--loop")
     try:
         with _connect(live_port, process) as fox:
-            fox.subscribe("/driver/joint_state", "/commands", "/tf")
+            fox.subscribe("/driver/joint_state", "/commands", "/tf", "/cell/scene")
             assert fox.wait(lambda: any(all(abs(a - b) < 1e-6 for a, b in zip(s["q"], TARGET, strict=True))
                                         for _, s in fox.received("/driver/joint_state")), timeout=15)
+            assert fox.wait(lambda: any("zone:floor" in {e["id"] for e in scene["entities"]}
+                                        for _, scene in fox.received("/cell/scene")))
             assert fox.wait(lambda: "> MovePTPJoints 10 -60 80 20 40 30" in
                             [m["message"] for _, m in fox.received("/commands")])
             assert fox.wait(lambda: fox.received("/tf"))

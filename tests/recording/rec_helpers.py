@@ -1,13 +1,19 @@
-"""The recording tests' fixtures: a sample URDF, a scripted session and the fake server's
-answers from a dict (the fake server itself is ``harness.fake_server``)."""
+"""The recording tests' fixtures: a sample URDF, a scripted session, the fake server's
+answers from a dict (the fake server itself is ``harness.fake_server``) and a cell with a
+table to record and draw."""
 
 from __future__ import annotations
 
+import json
 import time
+from pathlib import Path
 from typing import Any
+
+from ruamel.yaml import YAML
 
 from harness.fake_server import GREETING, Handler
 from rob6_recorder.writer import Recorder
+from tests.cell.zone_rig import Rig, rig
 
 URDF = """<?xml version="1.0"?>
 <robot name="mini6">
@@ -108,3 +114,18 @@ def dict_handler(replies: dict[str, str], overrides: dict[str, str] | None = Non
         return reply.encode("latin-1"), line == "Quit\n"
 
     return handle
+
+
+def table_cell(directory: Path, robot: str = "kr16") -> tuple[Rig, Path]:
+    """A cell file with the floor, a table 200 mm below the tool tip at the rig's hover pose
+    (``zone_rig``), the tool, and no self-collision: what is recorded and drawn, without the
+    cost of checking the arm against itself on every path (not what these tests are about)."""
+    hover = rig(robot)
+    table = Rig(robot, hover.tool_mm, hover.tip_radius_mm, hover.table_z - 100.0)
+    cell = YAML(typ="safe").load(table.cell_yaml())
+    cell["zones"].insert(0, {"name": "floor", "keep": "out", "ignore": ["link_1"],
+                             "half_space": {"point": [0, 0, 0], "normal": [0, 0, 1]}})
+    cell["arm"] = {"self_collision": False}
+    path = directory / f"{robot}-table.yaml"
+    path.write_text(json.dumps(cell, indent=1))  # JSON is YAML
+    return table, path

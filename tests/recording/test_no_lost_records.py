@@ -95,3 +95,6 @@ def test_recorder_killed_and_restarted_mid_session_loses_no_client_record(tmp_pa
     assert longest <= REST_STATE_PERIOD_S + cycle_s + 1e-9, f"no joint state for {longest:.3f} s"
     # what the recorder knew it missed is on its status channel: nothing here
     assert not [s for s in status if s.get("missed")], status
+    # the driver's cell in the killed recorder's file and in its successor's, which found the driver up
+    systems = sorted(tmp_path.glob("*_system_*.mcap"))
+    assert len(systems) >= 2 and all(len(list(read_records(p, ["/cell"]))) == 1 for p in systems), systems

@@ -1,6 +1,7 @@
 """Recording with the real system: a scripted session lands in MCAP with its correlation
 ids, replays against the same system without differences and against another robot
-type with differences, and survives a SIGKILL of the recorder."""
+type with differences, and survives a SIGKILL of the recorder; the cell the driver guards
+and a motion it refused are in the files."""
 
 from __future__ import annotations
 
@@ -11,10 +12,15 @@ import sys
 import time
 from pathlib import Path
 
+import msgspec
 from mcap.reader import make_reader
 
 from harness.system import System, running
+from rob6.cell import load_cell
+from rob6.messages import Cell, Clearance
 from rob6_recorder.reader import read_records
+from tests.cell.zone_rig import HOVER_S
+from tests.recording.rec_helpers import table_cell
 
 SCRIPT = ["GetRobot", "ForwardCalc 10 -60 80 20 40 30", "MovePTPJoints 10 -60 80 20 40 30",
           "GetPositionJoints", "GetStatus", "BackwardCalc 1 0 0 1000 0 1 0 0 0 0 1 500 noflip up lefty",
@@ -89,3 +95,32 @@ def test_recorder_killed_mid_session_leaves_a_readable_file(tmp_path: Path) -> N
         assert records, f"{path.name} has no readable records"
         last = max(r.log_time for r in records) / 1e9
         assert killed_at - last < 1.0, f"{path.name}: {killed_at - last:.2f} s lost"
+
+
+def test_the_cell_and_a_refused_motion_are_in_the_recording(tmp_path: Path) -> None:
+    """The recorder asks the driver for its cell when it appears and records it on ``/cell``
+    (schema ``rob6.Cell``) in the system file and in the session's; a PTP into the table is
+    refused before anything moves, and the client's reply and the planner's say why."""
+    table, cell_file = table_cell(tmp_path)
+    into_table = " ".join(f"{q:g}" for q in table.q(table.s_at(-20.0)))
+    with running("kr16", log_dir=str(tmp_path / "rec"), extra_env={"ROB6_CELL": str(cell_file)}) as system, \
+            system.client() as client:
+        assert client.ask("MovePTPJoints " + " ".join(f"{q:g}" for q in table.q(HOVER_S))) == "true\n"
+        refused = client.ask(f"MovePTPJoints {into_table}", 2)
+        assert refused.startswith("ERROR: path enters keep-out 'table' at ") and refused.endswith("\nfalse\n")
+        assert client.ask("Quit") == "bye!\n"
+    # read once the system stopped: the recorder stops last, every file finished
+    expected = load_cell(cell_file)
+    (session,) = (tmp_path / "rec").glob("*_session*.mcap")
+    for path in [session, *(tmp_path / "rec").glob("*_system_*.mcap")]:
+        records = list(read_records(path))
+        cells = [r for r in records if r.topic == "/cell"]
+        assert len(cells) == 1 and cells[0].schema == "rob6.Cell", path.name
+        assert msgspec.convert(cells[0].data, Cell) == expected
+        replies = [r.data["text"] for r in records if r.topic.endswith("/client_out")]
+        assert refused in replies, path.name
+        moves = [r.data["body"] for r in records if r.topic == "/bus/planner/move/reply"]
+        assert refused.split("\n")[0] == f"ERROR: {moves[-1]['zone']}" and moves[-1]["ok"] is False
+        clearances = [r for r in records if r.topic == "/driver/clearance"]  # while the arm moved to the table
+        assert clearances and {r.schema for r in clearances} == {"rob6.Clearance"}
+        assert all(msgspec.convert(r.data, Clearance).distance_mm > 0 for r in clearances)

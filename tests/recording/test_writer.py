@@ -8,6 +8,7 @@ import logging
 import math
 import re
 import time
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -161,6 +162,51 @@ def test_rotation_by_size_and_time(tmp_path: Path) -> None:
     files = _files(tmp_path / "time", "system")
     assert len(files) >= 2
     assert [r.data["message"] for p in files for r in read_records(p)] == [str(i) for i in range(8)]
+
+
+def test_a_latched_record_starts_every_file_opened_after_it(tmp_path: Path, urdf: str) -> None:
+    """The cell is what the robot is made of: recorded once, like any record, and again at the
+    start of every file opened after it (rotated system files, a session's), right after the
+    URDF; a newer one replaces it from then on. A file opened before it has none at its start."""
+    first = {"source": "cell-a.yaml", "margin_mm": 5.0, "zones": [{"name": "floor", "keep": "out"}]}
+    second = {"source": "cell-b.yaml", "margin_mm": 8.0}
+    with Recorder(tmp_path, "kr16", "robot1", urdf=urdf, rotate_seconds=0.2, rotate_bytes=0, chunk_interval=0.02,
+                  fsync=False) as rec:
+        t = time.time_ns()
+        tick = iter(range(1, 1 << 30))
+
+        def rotated_past(opened: int) -> bool:  # keeps the recording going until the writer rotated
+            rec.submit("/driver/joint_state", t + next(tick), {"cycle": 0})
+            return len(_files(tmp_path, "system")) >= opened
+
+        rec.submit("/driver/joint_state", t, {"cycle": 0})  # the first file opens before any cell
+        for cell in (first, second):
+            assert rec.submit("/cell", t + next(tick), cell, latched=True)
+            assert rec.flush()
+            opened = len(_files(tmp_path, "system")) + 2
+            wait_until(partial(rotated_past, opened), 20.0, "two rotations")
+        rec.submit("/session/7/client_in", time.time_ns(), {"session": 7, "cid": "a", "text": "GetCell\n"})
+    systems = _files(tmp_path, "system")
+    current: dict[str, Any] | None = None
+    started_with = []
+    recorded = []
+    for path in systems:
+        records = list(read_records(path))
+        assert records[0].topic == "/robot_description"
+        if current is not None:  # right after the URDF, at the file's start: the latest cell
+            assert (records[1].topic, records[1].data, records[1].log_time) == ("/cell", current, records[0].log_time)
+            assert records[1].schema == "rob6.Cell"
+            started_with.append(current)
+        cells = [r.data for r in records[2 if current is not None else 1:] if r.topic == "/cell"]
+        recorded += cells
+        current = cells[-1] if cells else current
+    assert recorded == [first, second]  # each recorded once where it came
+    assert started_with.count(first) >= 2 and started_with.count(second) >= 2, started_with
+    assert not any(r.topic == "/cell" for r in read_records(systems[0]) if r.log_time < t + 1)
+    (session,) = _files(tmp_path, "session")
+    assert [(r.topic, r.data) for r in read_records(session)][:2] == [("/robot_description", {"data": urdf}),
+                                                                    ("/cell", second)]
+    assert sum(r.topic == "/cell" for r in read_records(session)) == 1
 
 
 def test_backlog_bound_drops_are_counted_logged_and_recorded(tmp_path: Path, caplog: LogCaptureFixture) -> None:
@@ -431,15 +477,15 @@ def test_tf_chain_of_the_project_urdf_matches_the_kinematics_fk() -> None:
 
 
 def test_schemas_of_bus_messages_are_generated_from_their_structs() -> None:
-    """The joint state, link event and gripper state are recorded as the bus carries them:
-    their schemas come from the Structs and name every field (the hand-written one had
-    lost ``missed``)."""
+    """The joint state, link event, gripper state, clearance and cell are recorded as the bus
+    carries them: their schemas come from the Structs and name every field (the hand-written
+    one had lost ``missed``)."""
     import msgspec
 
-    from rob6.messages import GripperState, JointState, LinkEvent
+    from rob6.messages import Cell, Clearance, GripperState, JointState, LinkEvent
 
     for topic, struct in (("/driver/joint_state", JointState), ("/driver/link", LinkEvent),
-                          ("/gripper/state", GripperState)):
+                          ("/gripper/state", GripperState), ("/driver/clearance", Clearance), ("/cell", Cell)):
         spec = schema_for(topic)
         assert spec.name == f"rob6.{struct.__name__}"
         assert set(spec.schema["properties"]) == set(struct.__struct_fields__)

@@ -12,10 +12,20 @@ Standard library only. ``AsyncRobot`` is the asyncio twin with the same methods.
 from .aio import AsyncRobot
 from .client import DEFAULT_PORT, Robot
 from .errors import Rob6ConnectionError, Rob6Error, Rob6ProtocolError, Rob6Timeout
-from .protocol import ANY_STATUS, COMMANDS, Joints, PingResult, Pose, Status, normalize_status, parse_reply
+from .protocol import (
+    ANY_STATUS,
+    COMMANDS,
+    ROB6_ONLY,
+    Joints,
+    PingResult,
+    Pose,
+    Status,
+    normalize_status,
+    parse_reply,
+)
 
 __all__ = [
-    "ANY_STATUS", "AsyncRobot", "COMMANDS", "DEFAULT_PORT", "Joints", "PingResult", "Pose", "Robot",
+    "ANY_STATUS", "AsyncRobot", "COMMANDS", "DEFAULT_PORT", "Joints", "PingResult", "Pose", "ROB6_ONLY", "Robot",
     "Rob6ConnectionError", "Rob6Error", "Rob6ProtocolError", "Rob6Timeout", "Status",
     "normalize_status", "parse_reply",
 ]

@@ -13,6 +13,7 @@ matrix, row by row (``r11 r12 r13 x r21 ... z``), millimetres; joints in degrees
 from __future__ import annotations
 
 import inspect
+import json
 import logging
 import math
 import operator
@@ -298,6 +299,18 @@ def parse_ping(name: str) -> Exchange:
     return None if line == "-1" else PingResult(*_floats(name, line, 5))
 
 
+def parse_json_object(name: str) -> Exchange:
+    """One line of JSON, an object (rob6's ``GetCell``)."""
+    line = yield from _line(name)
+    try:
+        value = json.loads(line)
+    except ValueError:
+        raise _unexpected(name, line) from None
+    if not isinstance(value, dict):
+        raise _unexpected(name, line)
+    return value
+
+
 def parse_set_allowed_status(name: str) -> Exchange:
     """The server answers nothing on success and only ``ERROR: incorrect status`` on failure,
     so a CM_PING after it tells the two apart: lines before the ``PONG`` are its error."""
@@ -342,6 +355,7 @@ POSE = Reply(parse_pose, "Pose")
 STATUS = Reply(parse_status, "Status")
 FORWARD = Reply(parse_forward, "tuple[Pose, Status] | None")
 PING = Reply(parse_ping, "PingResult | None")
+JSON_OBJECT = Reply(parse_json_object, "dict[str, Any]")
 ALLOWED = Reply(parse_set_allowed_status, "None")
 BYE = Reply(_parse_bye("bye!"), "None", closes=True)
 SHUTDOWN = Reply(_parse_bye("bye!", "shutting down ..."), "None", closes=True)
@@ -519,7 +533,16 @@ COMMANDS: dict[str, Command] = _table(
     ("GripperMoveToPosition", "position:float", BOOL_INFO, "Move the gripper to an opening (m).", LONG),
     ("DirectAdeptCmd", "command:text", BOOL_INFO,
      "Run a V+ command on the Adept controller (rob6: only ``signal 5, -6``, V+ SIGNAL).", LONG),
+    # rob6's own (ROB6_ONLY)
+    ("GetCell", "", JSON_OBJECT,
+     "The robot's cell, what rob6 guards every motion against: ``margin_mm``, ``zones`` (each with "
+     "``name``, ``keep`` out/in, a ``half_space`` {point, normal} or a ``box`` {min, max, rpy_deg}, "
+     "``ignore``), the ``tool``'s spheres and capsules on the flange (``name``, ``radius``, ``a``, "
+     "``b``), ``self_collision``, ``arm_padding_mm``, ``allowed_pairs``, the ``source`` file and "
+     "``from_file`` (false: the default cell); lengths in mm, robot base frame."),
 )
+#: the commands rob6 has and the original rob6server has not
+ROB6_ONLY = frozenset({"GetCell"})
 
 # Where the original rob6server 0.1.01 (REFERENCE.md) differs from rob6 (docs/COMPATIBILITY.md)
 ORIGINAL: dict[str, str] = {
@@ -540,6 +563,7 @@ ORIGINAL: dict[str, str] = {
     "GripperGoHome": "ad850 in dummy mode never answers, nor anything after it: Rob6Timeout.",
     "DirectAdeptCmd": "ad850 in dummy mode never answers (Rob6Timeout). rob6 switches digital outputs "
                       "with ``signal n[, m ...]`` (True) and refuses every other V+ command with Rob6Error.",
+    "GetCell": "An unknown command: it answers ``ERROR: GetCell`` (Rob6Error).",
 }
 for _name in ("MoveRTHomRowWise", "MoveRTHomRowWiseStatus", "DoAlterJoint", "DoAlterCart"):
     ORIGINAL[_name] = ORIGINAL["MoveRTJoints"]

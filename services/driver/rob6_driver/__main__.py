@@ -14,6 +14,7 @@ import click
 
 from rob6 import service
 from rob6.bus import Bus
+from rob6.cell import CellError, default_cell, load_cell
 from rob6.config import LINKS, BusSettings, bus_options
 from rob6.ownership import EXIT_REFUSED
 from rob6.robots import get_robot
@@ -35,6 +36,9 @@ from .service import DriverService
 
 @click.command()
 @bus_options
+@click.option("--cell", envvar="ROB6_CELL", default=None, type=click.Path(dir_okay=False),
+              help="The robot's cell: safety zones, tool, self-collision (YAML, docs/SAFETY_ZONES.md); "
+                   "default: the floor at the base, self-collision on [env ROB6_CELL].")
 @click.option("--dummy/--real-time", envvar="ROB6_DUMMY", default=False, show_default=True,
               help="Instantaneous motion like the original's -d, or motion in real time [env ROB6_DUMMY=1].")
 @click.option("--link", envvar="ROB6_LINK", default="sim", show_default=True, type=click.Choice(LINKS),
@@ -71,11 +75,15 @@ from .service import DriverService
 @click.option("--kas-period", envvar="ROB6_KAS_PERIOD", default=DEFAULT_KAS_PERIOD_S, show_default=True,
               type=float, help="kawasaki: seconds between streamed points, rounded to controller cycles "
                                "[env ROB6_KAS_PERIOD].")
-def main(settings: BusSettings, log_level: str, dummy: bool, link: str, rsi_listen: str, rsi_sentype: str,
+def main(settings: BusSettings, log_level: str, cell: str | None, dummy: bool, link: str, rsi_listen: str, rsi_sentype: str,
          sm_host: str, sm_motion_port: int, sm_state_port: int, sm_io_port: int, sm_byte_order: str,
          sm_period: float, sm_outputs: str, kas_host: str, kas_port: int, kas_period: float) -> None:
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
+    try:
+        robot_cell = load_cell(cell) if cell else default_cell(robot)
+    except CellError as exc:
+        service.fail("driver", str(exc), EXIT_REFUSED)
     sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,
                        byte_order=sm_byte_order, period_s=sm_period, outputs=sm_outputs)
     kas = KawasakiSettings(host=kas_host, port=kas_port, period_s=kas_period)
@@ -90,7 +98,7 @@ def main(settings: BusSettings, log_level: str, dummy: bool, link: str, rsi_list
     def setup(bus: Bus) -> Callable[[], None]:
         try:
             driver = DriverService(bus, robot, dummy, link=link, rsi_listen=rsi_listen, rsi_sen_type=rsi_sentype,
-                                   sm=sm, kas=kas)
+                                   sm=sm, kas=kas, cell=robot_cell)
         except OSError as exc:
             raise service.StartupError(f"cannot listen for RSI on udp/{rsi_listen}: {exc.strerror or exc}; "
                                        "is another driver running? Set ROB6_RSI_LISTEN") from None

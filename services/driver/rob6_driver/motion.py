@@ -41,6 +41,13 @@ under the motion) becomes an acceleration-limited emergency brake (shortest stop
 distance). Alter targets use target velocity 0: the robot never runs past the last
 target it received.
 
+Safety zones: with a cell (``zones.ZoneGuard``), each next setpoint of a trajectory or
+of Alter is also asked whether a stop from it would keep the arm out of every zone; if
+not, it is not applied and the robot stops from its last setpoint (``ok`` False, the
+reason a ``ZoneReason`` the client is told). An Alter target whose pose is in a zone is
+refused, and the first target after such a stop is refused with that stop's reason, so
+a client streaming targets learns why the arm stopped.
+
 Limit changes while moving: new speed/acceleration limits drive the generator at
 once; the monitor keeps ``max(old, new)`` until the robot has settled within the new
 ones (a running trajectory keeps its old limits until it ends). New turn limits that
@@ -83,6 +90,7 @@ from rob6.robots import RobotModel, get_robot
 from rob6.units import accel_si, jerk_si, speed_si
 
 from .limits import MIN_LIMIT, Breach, LimitMonitor, Limits, within
+from .zones import ZoneGuard, ZoneReason, straight
 
 log = logging.getLogger(__name__)
 
@@ -118,7 +126,7 @@ class CoreState:
 class Violation:
     t: float
     cycle: int
-    kind: str  # turn | speed | acceleration | limits_changed | unavoidable
+    kind: str  # turn | speed | acceleration | limits_changed | unavoidable | zone
     joint: int  # 1..6 (0: not joint specific)
     value: float
     limit: float
@@ -183,7 +191,8 @@ class MotionCore:
     def __init__(self, robot: RobotModel | str, dt: float | None = None, *, dummy: bool = False,
                  q0: npt.ArrayLike | None = None, limits: Limits | None = None,
                  alter_timeout_s: float = 0.5, offline: str = "",
-                 on_event: Callable[[dict[str, Any]], None] | None = None, max_violations: int = 1000) -> None:
+                 on_event: Callable[[dict[str, Any]], None] | None = None, max_violations: int = 1000,
+                 zones: ZoneGuard | None = None) -> None:
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
         self._offline = offline  # why the plant cannot be reached ("": it can)
         self.dt = float(dt if dt is not None else self.robot.cycle_s)
@@ -234,6 +243,9 @@ class MotionCore:
         self._watchdog_fired = False
         self._stop_motion: Motion | None = None
         self._deferred: list[Callable[[], None]] = []
+        self._zones = zones if zones is not None and not zones.empty else None
+        self._zone_stop: ZoneReason | None = None  # why the cell stopped Alter: told with the next target
+        self._along: np.ndarray | None = None  # the end of the straight trajectory being followed
 
     # ------------------------------------------------------------------ queries
     @property
@@ -484,6 +496,8 @@ class MotionCore:
         motion = Motion("trajectory")
         with self._lock:
             reason = self._check_execute(q, dt, qd, qdd, check)
+            if not reason and self._zones is not None and check:
+                reason = self._zones.trajectory(np.asarray(q, float), self.dt) or ""
             if self._offline:
                 self._deferred += motion._finish(False, self._offline, self._state(), error=self._offline)
             elif reason:
@@ -497,6 +511,8 @@ class MotionCore:
             else:
                 arr = np.asarray(q, float)
                 self._samples = arr
+                # a brake on a straight trajectory stays on its poses, which the cell checked
+                self._along = arr[-1] if check and self._zones is not None and straight(arr) else None
                 self._samples_qd = None if qd is None else np.asarray(qd, float)
                 self._samples_qdd = None if qdd is None else np.asarray(qdd, float)
                 self._pos = 0.0
@@ -594,6 +610,10 @@ class MotionCore:
             if checked is None:
                 return False, reason
             target = np.array(checked)
+            refused = self._zone_stop or (self._zones.target(target) if self._zones is not None else None)
+            if refused:
+                self._zone_stop = None
+                return False, refused
             if synchronized is not None:
                 self._sync = bool(synchronized)
             self._watchdog_fired = False
@@ -794,7 +814,14 @@ class MotionCore:
         assert samples is not None  # following a trajectory
         wanted = self._next_feed(samples)
         for feed in dict.fromkeys((wanted, (wanted + self._feed) / 2, self._feed)):  # the monitor decides
-            bad = self._command(*self._sample_at(samples, self._pos + feed, feed))
+            qn, qd, qdd = self._sample_at(samples, self._pos + feed, feed)
+            why = self._zone_check(qn, qd, qdd, self._along)
+            if why is not None:  # the cell's guard: stop from here, the setpoint is not commanded
+                self._violation("zone", 0, 0.0, 0.0, "trajectory", f"trajectory at sample {self._pos + feed:g}: {why}")
+                self._begin_stop(why, force=True)
+                self._step_generator()
+                return
+            bad = self._command(qn, qd, qdd)
             if bad is None:
                 break
         if bad is not None:
@@ -894,6 +921,13 @@ class MotionCore:
         self._gen_t += self.dt
         pos, vel, acc = self._gen.at_time(self._gen_t)
         qn = np.asarray(pos, float)
+        if self._gen_kind == "alter" and (why := self._zone_check(qn, vel, acc)) is not None:
+            self._gen_t -= self.dt
+            self._violation("zone", 0, 0.0, 0.0, "alter", why)
+            self._zone_stop = why
+            self._begin_stop(why, force=True)
+            self._step_generator()
+            return
         bad = self._command(qn, np.asarray(vel, float), np.asarray(acc, float))
         if bad is not None:
             self._apply_clamped(qn, bad, self._gen_kind or "alter")
@@ -904,6 +938,17 @@ class MotionCore:
                 if self._alter and not self._target_pending:
                     self._target = self._q.copy()
             self._finish_stop_if_any()
+
+    def _zone_check(self, qn: np.ndarray, qd: npt.ArrayLike | None, qdd: npt.ArrayLike | None,
+                    along: np.ndarray | None = None) -> ZoneReason | None:
+        """The cell's word on the next setpoint (``ZoneGuard.setpoint``): why it may not be
+        commanded, or None. Without ``qd``/``qdd`` (a trajectory without them) the finite
+        differences from the last setpoint stand in."""
+        if self._zones is None:
+            return None
+        v = (qn - self._q) / self.dt if qd is None else np.asarray(qd, float)
+        a = (v - self._v_fd) / self.dt if qdd is None else np.asarray(qdd, float)
+        return self._zones.setpoint(qn, v, a, self._monitor.enforced, along=along)
 
     def _apply_clamped(self, qn: np.ndarray, breach: Breach, source: str) -> None:
         """Apply the admissible sample closest to qn (the monitor's last resort), then stop."""

@@ -19,16 +19,19 @@ an ordinary refusal (busy, limits) only has ``reason`` and the client sees ``fal
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from typing import Any
 
 from rob6.bus import Bus, Context
+from rob6.cell import default_cell
 from rob6.deadlines import arm_s
 from rob6.messages import (
     Ack,
     AlterMode,
     AlterTarget,
+    Cell,
     Empty,
     ExecuteReply,
     ExecuteRequest,
@@ -49,6 +52,7 @@ from .links.rsi import DEFAULT_LISTEN, DEFAULT_SEN_TYPE, RsiLink
 from .links.sim import SimLink
 from .links.simple_message import AdeptLink, AdeptSettings
 from .motion import CoreState, Motion, MotionCore, Offline
+from .zones import ZoneGuard, ZoneReason
 
 log = logging.getLogger("rob6.driver")
 
@@ -63,6 +67,8 @@ STOP_REQUESTED = "stop requested"
 #: is where the last one says. Well below the gateway's rob6.state.STATE_STALE_S (two states
 #: may go missing), so a silent driver is still told from a resting robot.
 REST_STATE_PERIOD_S = 0.1
+#: while the arm moves, the clearance to the cell's zones is published this often (driver clock)
+CLEARANCE_PERIOD_S = 0.1
 #: at most this long a switched output waits for the next cycle's state to carry it
 SIGNAL_PUBLISH_WAIT_S = 0.5
 #: a motion slowed to its arm's pace announces its longer bound each time it grew this much (s)
@@ -72,10 +78,16 @@ REANNOUNCE_S = 0.5
 class DriverService:
     def __init__(self, bus: Bus, robot: RobotModel, dummy: bool, alter_timeout_s: float = 0.5, *,
                  link: str = "sim", rsi_listen: str = DEFAULT_LISTEN, rsi_sen_type: str = DEFAULT_SEN_TYPE,
-                 sm: AdeptSettings | None = None, kas: KawasakiSettings | None = None) -> None:
+                 sm: AdeptSettings | None = None, kas: KawasakiSettings | None = None,
+                 cell: Cell | None = None) -> None:
         self.bus = bus
         self.robot = robot
-        self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event)
+        self.cell = cell or default_cell(robot)
+        self.zones = ZoneGuard(robot, self.cell)
+        self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event,
+                               zones=self.zones)
+        self._clearance_t = -math.inf  # driver clock of the last clearance published
+        self._clearance_q: list[float] | None = None  # and the joints it was measured at
         self._published: tuple[object, ...] | None = None  # the last published state without t and cycle
         self._published_t = 0.0
         self._published_outputs: list[int] = []  # in the last published state
@@ -102,7 +114,8 @@ class DriverService:
                           outputs=link.outputs())
 
     def _publish(self, state: CoreState) -> None:
-        """Every cycle's state, except at rest (``REST_STATE_PERIOD_S``)."""
+        """Every cycle's state, except at rest (``REST_STATE_PERIOD_S``); with it the clearance to
+        the cell's zones, while the arm moves every ``CLEARANCE_PERIOD_S``, and where it stops."""
         message = self.joint_state(state)
         content = (message.q, message.qd, message.moving, message.mode, message.missed, message.link,
                    message.late, message.q_actual, message.outputs)
@@ -110,6 +123,13 @@ class DriverService:
             return
         self._published, self._published_t = content, message.t
         self.bus.publish_state("driver/state", message)
+        # where the arm comes to rest too, whenever the period has not run out there
+        if message.q != self._clearance_q and (not message.moving
+                                               or not 0.0 <= message.t - self._clearance_t < CLEARANCE_PERIOD_S):
+            self._clearance_t, self._clearance_q = message.t, message.q
+            clearance = self.zones.clearance(message.t, state.q)
+            if clearance is not None:
+                self.bus.publish_state("driver/clearance", clearance)
         if message.outputs != self._published_outputs:
             with self._outputs_published:
                 self._published_outputs = message.outputs
@@ -122,7 +142,9 @@ class DriverService:
         self.bus.trace("driver/link", event)
 
     def _on_event(self, event: dict[str, Any]) -> None:
-        if event.get("type") == "violation":
+        if event.get("type") == "violation" and event.get("kind") == "zone":  # the guard did its job
+            log.warning("zones: %s", event.get("message"))
+        elif event.get("type") == "violation":
             log.error("limit monitor: %s", event.get("message"))
         else:
             log.info("driver event: %s", event)
@@ -157,8 +179,8 @@ class DriverService:
         elif not motion.ok:  # stopped on request (a client's Stop or its leaving, rob6 stopping) is no fault
             log.log(logging.INFO if motion.reason == STOP_REQUESTED else logging.WARNING,
                     "trajectory refused or stopped: %s", motion.reason)
-        return ExecuteReply(ok=bool(motion.ok), reason=motion.reason or "", error=motion.error,
-                            state=self.joint_state(final))
+        return ExecuteReply(ok=bool(motion.ok), reason=str(motion.reason or ""), error=motion.error,
+                            state=self.joint_state(final), zone=_zone(motion.reason))
 
     def _ended(self, motion: Motion, duration: float, ctx: Context) -> bool:
         """Wait for a trajectory of ``duration`` s to end, announced to the caller: its bound,
@@ -210,7 +232,11 @@ class DriverService:
             ok, reason = self.core.set_target(req.q, req.synchronized, req.relative)
         except Offline as exc:
             return Ack(ok=False, reason=str(exc), error=str(exc))
-        return Ack(ok=ok, reason=reason)
+        return Ack(ok=ok, reason=str(reason), zone=_zone(reason))
+
+    def get_cell(self, _req: Empty, _ctx: Context) -> Cell:
+        """The cell this driver guards (``ROB6_CELL``): the planner checks every path against it."""
+        return self.cell
 
     def stop(self, _req: Empty, ctx: Context) -> Ack:
         """Stop whatever runs (a trajectory, Alter) with the ramp; ``ok``: at rest."""
@@ -265,11 +291,16 @@ class DriverService:
         self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,
                         "limits": self.limits, "alter_mode": self.alter_mode,
                         "alter_target": self.alter_target, "stop": self.stop,
-                        "link": self.link_status, "signal": self.signal}, workers=4,
-                       inline=("ping", "state", "alter_target", "link"))
+                        "link": self.link_status, "signal": self.signal, "cell": self.get_cell}, workers=4,
+                       inline=("ping", "state", "alter_target", "link", "cell"))
 
     def shutdown(self) -> None:
         self.core.stop("driver shutting down").wait(arm_s(self.core.stop_bound_s()))
         self.link.stop()
         status = self.link.status()
         log.info("driver: %d cycles, %d missed, %d late", status.packets, status.missed, status.late)
+
+
+def _zone(reason: str | None) -> str:
+    """The reason again when the cell gave it (``ZoneReason``: the client is told), else ""."""
+    return str(reason) if isinstance(reason, ZoneReason) else ""

@@ -1,4 +1,4 @@
-"""The 78 commands of the rob6server protocol and what the gateway does with each.
+"""The 78 commands of the rob6server protocol, rob6's own GetCell, and what the gateway does with each.
 
 Every handler gets the parsed-on-demand argument cursor and returns the complete
 reply text (all lines, each ending in ``\\n``) or ``None`` for the few commands the
@@ -12,12 +12,15 @@ Command names are case-sensitive, extra arguments are ignored, as in the origina
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
+
+import msgspec
 
 from rob6 import logs
 from rob6.bus import Bus, BusError, BusTimeout, CallAbandoned
@@ -26,6 +29,7 @@ from rob6.messages import (
     Ack,
     AlterTarget,
     BackwardCalcRequest,
+    Cell,
     ClientExchange,
     ConfigChange,
     ConfigReply,
@@ -43,6 +47,7 @@ from rob6.messages import (
     MoveReply,
     MoveRequest,
     PingReply,
+    PoseCheck,
     SessionEnd,
     SessionEvent,
     SignalRequest,
@@ -509,7 +514,12 @@ def backward_calc(gw: Gateway, session: Session, args: Args) -> str:
 
 @command("IsPossible")
 def is_possible(gw: Gateway, session: Session, args: Args) -> str:
-    return boolean(_backward(gw, session, args) is not None)
+    """Reachable, and not in the way of the cell's safety zones (the planner checks the pose)."""
+    joints = _backward(gw, session, args)
+    if joints is None:
+        return FALSE
+    reply: Ack = gw.call(session, "planner", "pose_check", PoseCheck(joints=joints))
+    return error(reply.zone) if reply.zone else boolean(reply.ok)
 
 
 # ====================================================================== motion
@@ -530,6 +540,8 @@ def _move(gw: Gateway, session: Session, kind: MotionKind, **fields: Any) -> str
         return error(reply.busy)
     if not reply.ok and reply.error:  # the robot failed (not connected, link lost), not the command
         return error(f"driver: {reply.error}")
+    if not reply.ok and reply.zone:  # the cell's safety zones: the client is told why
+        return error(reply.zone)
     if not reply.ok and reply.reason:
         log.warning("%s refused: %s", kind, reply.reason)
     return boolean(reply.ok)
@@ -582,7 +594,7 @@ def _routetest(gw: Gateway, session: Session, request: MoveRequest) -> str:
     reply: MoveReply = gw.call(session, "planner", "move", request)
     if reply.ok and reply.joints is not None:
         session.routetest = list(reply.joints)
-    return boolean(reply.ok)
+    return error(reply.zone) if reply.zone else boolean(reply.ok)
 
 
 @command("RoutetestJoints")
@@ -656,6 +668,8 @@ def _alter_joints(relative: bool) -> Handler:
             q=joints, synchronized=config.rt_speed_control == 0, relative=relative))
         if not reply.ok and reply.error:  # the robot failed (not connected, link lost)
             return error(f"driver: {reply.error}")
+        if not reply.ok and reply.zone:  # the cell's safety zones: the client is told why
+            return error(reply.zone)
         if not reply.ok:
             log.warning("Alter target refused: %s", reply.reason)
         return boolean(reply.ok)
@@ -765,3 +779,24 @@ def direct_adept_cmd(gw: Gateway, session: Session, args: Args) -> str:
     return error("DirectAdeptCmd: raw V+ commands cannot reach the controller (neither the simulation "
                  "nor the simple_message link has a V+ command channel; only SIGNAL is carried); "
                  "nothing was sent")
+
+
+# ====================================================================== rob6's own
+@command("GetCell", value=True)
+def get_cell(gw: Gateway, session: Session, args: Args) -> str:
+    """The driver's cell (its safety zones, tool and self-collision settings, ``rob6.cell``)
+    as one line of JSON: the ``Cell`` message with every field, defaults included, so a
+    client needs no knowledge of them; ASCII (``\\u`` escapes), as every reply is latin-1.
+    The original has no such command (it answers ``ERROR: GetCell``)."""
+    cell: Cell = gw.call(session, "driver", "cell", Empty())
+    return json.dumps(_every_field(cell), separators=(",", ":")) + "\n"
+
+
+def _every_field(value: Any) -> Any:
+    """A message as plain JSON values, its fields at their defaults included (the bus's
+    encoding leaves those out)."""
+    if isinstance(value, msgspec.Struct):
+        return {name: _every_field(field) for name, field in msgspec.structs.asdict(value).items()}
+    if isinstance(value, list):
+        return [_every_field(item) for item in value]
+    return value

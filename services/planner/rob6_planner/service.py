@@ -4,8 +4,9 @@ The motion planner service: owns the motion configuration, validates and plans e
 motion with Ruckig, and hands sampled trajectories (or Alter targets) to the driver.
 
 Configuration choice for Cartesian targets is the kinematics service's ``select``
-(the original's rule); this service never computes kinematics itself, so it needs
-neither pinocchio nor a kinematics replica on its machine.
+(the original's rule); this service computes no inverse kinematics itself. It checks every
+sampled path against the driver's cell (safety zones, ``zones.PathCheck``) before it hands
+the path over: a path that would enter a zone is refused, naming the zone, and nothing moves.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from rob6.messages import (
     MotionKind,
     MoveReply,
     MoveRequest,
+    PoseCheck,
     SelectRequest,
     SessionEnd,
     Trajectory,
@@ -54,6 +56,7 @@ from .config import MotionSettings
 from .follow import FollowRefused, sample
 from .lin_planner import plan_lin
 from .trajectory import JointLimits, SampledTrajectory, TrajectoryPlanner
+from .zones import CellUnknown, PathCheck
 
 log = logging.getLogger("rob6.planner")
 
@@ -106,6 +109,7 @@ class PlannerService:
         self._owner: str | None = None  # CLIENT or ROS while a motion of that kind runs
         self._owner_count = 0
         self._follow_stopped = threading.Event()  # follow_stop asked for the running goal
+        self.cell = PathCheck(bus, robot)
         bus.on_liveliness(self._on_liveliness)
 
     # ------------------------------------------------------------------ configuration
@@ -152,10 +156,14 @@ class PlannerService:
             log.warning("could not update the driver's limits: %s", exc.message)
 
     def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:
-        if service == "driver" and alive:  # a (re)started driver gets the current limits
-            threading.Thread(target=self._push_limits, daemon=True).start()
+        if service == "driver" and alive:  # a (re)started driver gets the current limits; its cell is asked
+            threading.Thread(target=self._driver_appeared, daemon=True).start()
         if service == "gateway" and alive:
             self.bus.publish("planner/config", self._message(), reliable=True)
+
+    def _driver_appeared(self) -> None:
+        self._push_limits()
+        self.cell.fetch()
 
     def _planning_config(self) -> MotionSettings:
         """The configuration with the Adept's speed/acceleration percentages applied."""
@@ -283,6 +291,10 @@ class PlannerService:
                 except FollowRefused as exc:
                     log.info("trajectory refused: %s", exc)
                     return MoveReply(ok=False, reason=str(exc), invalid=True, state=state)
+                zone = self._zone(trajectory)
+                if zone:
+                    log.info("trajectory refused: %s", zone)
+                    return MoveReply(ok=False, reason=zone, zone=zone, invalid=True, state=state)
                 if req.dry_run:
                     return MoveReply(ok=True, joints=trajectory.q[-1].tolist(), state=state)
                 self._follow_stopped.clear()
@@ -334,14 +346,25 @@ class PlannerService:
         else:
             raise MotionRefused(f"unknown motion {req.kind}")
         pattern = req.pattern if req.kind == "MovePTPJointsStatus" else None
-        plan = self.planner.plan_ptp(start, target, self._planning_config(), pattern=pattern,
-                                     sample=not req.dry_run)
+        plan = self.planner.plan_ptp(start, target, self._planning_config(), pattern=pattern)
         if not plan.ok:
             raise MotionRefused(plan.reason)
+        assert plan.trajectory is not None  # a sampled plan that is ok has one
+        zone = self._zone(plan.trajectory)  # route tests too: a route through a zone is no route
+        if zone:
+            log.info("%s refused: %s", req.kind, zone)
+            return MoveReply(ok=False, reason=zone, zone=zone)
         if req.dry_run:
             return MoveReply(ok=True, joints=target)
-        assert plan.trajectory is not None  # a sampled plan that is ok has one
         return self._execute(plan.trajectory, req.session, ctx)
+
+    def _zone(self, trajectory: SampledTrajectory) -> str:
+        """Why the cell's safety zones refuse ``trajectory`` (the limits the driver brakes
+        with are the configuration's own, without the Adept's percentages), or ""."""
+        try:
+            return self.cell.path(trajectory, JointLimits.from_config(self.config))
+        except CellUnknown as exc:
+            raise MotionRefused(str(exc)) from None
 
     def _select(self, pose: Sequence[float], pattern: Sequence[str], current: list[float], cid: str) -> list[float]:
         c = self.config
@@ -372,7 +395,8 @@ class PlannerService:
         finally:
             self._handed_over()
         joints = reply.state.q if reply.state is not None else None
-        return MoveReply(ok=reply.ok, joints=joints, reason=reply.reason, error=reply.error, state=reply.state)
+        return MoveReply(ok=reply.ok, joints=joints, reason=reply.reason, error=reply.error, state=reply.state,
+                         zone=reply.zone)
 
     def _lin(self, req: MoveRequest, start: list[float], ctx: Context) -> MoveReply:
         cid = ctx.cid
@@ -395,6 +419,10 @@ class PlannerService:
         if not plan.ok:
             raise MotionRefused(plan.reason)
         assert plan.trajectory is not None  # a LIN plan that is ok has one
+        zone = self._zone(plan.trajectory)
+        if zone:
+            log.info("MoveLINHomRowWise refused: %s", zone)
+            return MoveReply(ok=False, reason=zone, zone=zone)
         return self._execute(plan.trajectory, req.session, ctx)
 
     def _alter_move(self, req: MoveRequest, cid: str) -> MoveReply:
@@ -419,7 +447,16 @@ class PlannerService:
                 target = self._select(req.pose, pattern, current, cid)
         reply: Ack = self.bus.request("driver", "alter_target", AlterTarget(
             q=target, synchronized=self.config.rt_speed_control == 0, relative=relative), cid=cid)
-        return MoveReply(ok=reply.ok, joints=None if relative else target, reason=reply.reason, error=reply.error)
+        return MoveReply(ok=reply.ok, joints=None if relative else target, reason=reply.reason, error=reply.error,
+                         zone=reply.zone)
+
+    def pose_check(self, req: PoseCheck, _ctx: Context) -> Ack:
+        """IsPossible: may the arm be at ``req.joints`` (the cell's zones and margin)?"""
+        try:
+            zone = self.cell.pose(req.joints)
+        except CellUnknown as exc:
+            return Ack(ok=False, reason=str(exc), zone=str(exc))
+        return Ack(ok=not zone, reason=zone, zone=zone)
 
     def _pose(self, joints: list[float], cid: str) -> list[float]:
         reply: FkReply = self.bus.request("kinematics", "fk", FkRequest(joints=[joints]), cid=cid)
@@ -428,10 +465,10 @@ class PlannerService:
     def serve(self) -> None:
         self.bus.serve({"config": self.get_config, "config_change": self.config_change, "move": self.move,
                         "mode": self.mode, "session_end": self.session_end, "follow": self.follow,
-                        "follow_stop": self.follow_stop}, workers=4)
+                        "follow_stop": self.follow_stop, "pose_check": self.pose_check}, workers=4)
         self.bus.publish("planner/config", self._message(), reliable=True)
         if self.bus.instances("driver"):  # otherwise the driver's token arriving triggers it
-            threading.Thread(target=self._push_limits, daemon=True).start()
+            threading.Thread(target=self._driver_appeared, daemon=True).start()
 
 
 def _shifted_pose(pose12: Sequence[float], step: Sequence[float]) -> list[float]:

@@ -4,17 +4,20 @@
 as the MCAP files (``schemas.schema_for``), so a layout made for a recording works live:
 ``/robot_description`` (the URDF, ``std_msgs/String``), ``/tf`` (``foxglove.FrameTransforms``,
 derived from the joint states), ``/driver/joint_state`` (mode, moving, link, late packets;
-every field, defaults included),
+every field, defaults included, as ``/driver/clearance``),
 ``/driver/link``, ``/gripper/state``, ``/log`` (``foxglove.Log``), the raw session and bus
 channels, and ``/commands``: every client line and its reply as a ``foxglove.Log``
-(``name`` = ``session <n>``, ``message`` = ``> line`` / ``< reply``) for the Log panel.
+(``name`` = ``session <n>``, ``message`` = ``> line`` / ``< reply``) for the Log panel. From
+the driver's ``/cell`` and ``/driver/clearance`` it draws the cell on ``/cell/scene``
+(``foxglove.SceneUpdate``, ``cell_scene``): the safety zones and the tool, the zone nearest
+the arm coloured by its distance.
 
 The recorder calls ``publish`` for each record it queues for its files (``Recorder.submit``):
 the live view is one more subscriber of the bus and costs the real-time path nothing. A
 message goes to the clients subscribed to its channel only; one without subscribers is
 dropped in the SDK. The WebSocket protocol has no latched topics, so the last message of
-``LATCHED`` topics (the URDF, gripper, link, joint state, ``/tf``) is sent again when a
-client subscribes to it: a panel opened later shows the robot at once.
+``LATCHED`` topics (the URDF, the cell and its scene, gripper, link, joint state, ``/tf``...)
+is sent again when a client subscribes to it: a panel opened later shows the robot at once.
 
 The URDF is also an asset (``package://rob6/robot.urdf``, ``fetchAsset``), for a 3D
 panel's URDF layer with a URL.
@@ -45,11 +48,13 @@ from foxglove.websocket import (
 
 from rob6.config import DEFAULT_LIVE_PORT, BusSettings
 from rob6.errors import RefusedError
-from rob6.messages import JointState
+from rob6.messages import Clearance, JointState
 from rob6_recorder_native import ROBOT_DESCRIPTION_TOPIC, STATUS_TOPIC
 
+from .cell_scene import SCENE_TOPIC, CellScene
 from .payloads import as_dict, encode
 from .schemas import schema_for, stamp
+from .writer import CELL_TOPIC, CLEARANCE_TOPIC, JOINT_STATE_TOPIC
 
 log = logging.getLogger("rob6.recorder.live")
 
@@ -57,19 +62,29 @@ DEFAULT_PORT = DEFAULT_LIVE_PORT
 COMMANDS_TOPIC = "/commands"
 URDF_ASSET = "package://rob6/robot.urdf"
 #: advertised from the start (a panel can subscribe before the first message)
-STANDARD_TOPICS = ("/tf", "/driver/joint_state", "/driver/link", "/gripper/state", "/log", COMMANDS_TOPIC)
+STANDARD_TOPICS = ("/tf", "/driver/joint_state", "/driver/link", "/gripper/state", "/log", COMMANDS_TOPIC,
+                   SCENE_TOPIC)
+#: a latched topic's last message goes out this long after a client subscribed to it (s)
+RESEND_DELAY_S = 0.05
 LATCHED = frozenset({ROBOT_DESCRIPTION_TOPIC, "/tf", "/flange", "/driver/joint_state", "/driver/link",
-                     "/gripper/state", STATUS_TOPIC})
+                     "/gripper/state", STATUS_TOPIC, CELL_TOPIC, CLEARANCE_TOPIC, SCENE_TOPIC})
+#: the latched topics the view makes itself, never found in a recording
+OWN_LATCHED = frozenset({ROBOT_DESCRIPTION_TOPIC, SCENE_TOPIC})
 
 _encoder = msgspec.json.Encoder()
-_joint_state = msgspec.json.Decoder(JointState)
+#: the driver's messages shown with every field (it leaves defaults out: ``mode`` idle,
+#: ``link`` connected, ``late`` 0, a clearance's ``zone`` true...), so a panel shows them at any time
+_COMPLETED: dict[str, msgspec.json.Decoder[Any]] = {JOINT_STATE_TOPIC: msgspec.json.Decoder(JointState),
+                                                     CLEARANCE_TOPIC: msgspec.json.Decoder(Clearance)}
 
 
-def _complete_joint_state(payload: bytes) -> bytes:
-    """A joint state with every field (the driver leaves defaults out: ``mode`` idle, ``link``
-    connected, ``late`` 0...), so a panel shows the driver/link state at any time."""
+def _complete(topic: str, payload: bytes) -> bytes:
+    """The record as a panel gets it: a driver's message with every field, the rest as it is."""
+    decoder = _COMPLETED.get(topic)
+    if decoder is None:
+        return payload
     try:
-        return _encoder.encode(msgspec.structs.asdict(_joint_state.decode(payload)))
+        return _encoder.encode(msgspec.structs.asdict(decoder.decode(payload)))
     except (msgspec.DecodeError, msgspec.ValidationError):
         return payload
 
@@ -128,10 +143,11 @@ class _Listener(ServerListener):
 
     def on_subscribe(self, client: Client, channel: ChannelView) -> None:
         if channel.topic in LATCHED:
-            # after the SDK registered the subscription (the callback runs before it does)
-            timer = threading.Timer(0.05, self.view.resend, (channel.topic,))
-            timer.daemon = True
-            timer.start()
+            # after the SDK registered the subscription (the callback runs before it does). A
+            # daemon thread named so from the start: a Timer would ask this thread, the SDK's,
+            # for its Python thread, and the dummy one Python makes for it cannot be joined
+            # when the recorder stops (rob6.service.end_threads: exit code 1)
+            threading.Thread(target=self.view.resend, args=(channel.topic, RESEND_DELAY_S), daemon=True).start()
 
     def on_playback_control_request(self, request: PlaybackControlRequest) -> PlaybackState | None:
         handler = self.view.playback_handler
@@ -152,6 +168,7 @@ class LiveView:
         self._channels: dict[str, foxglove.Channel] = {}
         self._last: dict[str, tuple[bytes, int]] = {}
         self._lock = threading.Lock()  # channel creation and the latched messages
+        self.scene = CellScene()
         capabilities = [Capability.Time]
         if playback_time_range is not None:
             capabilities.append(Capability.PlaybackControl)
@@ -201,31 +218,33 @@ class LiveView:
         ch = self._channels.get(topic) or self.channel(topic)
         if topic in LATCHED:
             self._last[topic] = (payload, log_time)
-        if not ch.base.has_sinks():  # nobody watches it: no work beyond this check
-            pass
-        elif topic == "/driver/joint_state":
-            ch.base.log(_complete_joint_state(payload), log_time)
-        else:
-            ch.base.log(payload, log_time)
+        if ch.base.has_sinks():  # nobody watching: no work beyond this check
+            ch.base.log(_complete(topic, payload), log_time)
         if topic.startswith("/session/"):
             commands = self._channels.get(COMMANDS_TOPIC) or self.channel(COMMANDS_TOPIC)
             entry = command_log(topic, data, log_time) if commands.base.has_sinks() else None
             if entry is not None:
                 commands.base.log(_encoder.encode(entry), log_time)
+        elif topic in (CELL_TOPIC, CLEARANCE_TOPIC):
+            scene = self.scene.update(topic, payload, log_time)
+            if scene is not None:
+                self.publish(SCENE_TOPIC, log_time, scene)
 
-    def resend(self, topic: str) -> None:
-        """The last message of a latched topic again (a client just subscribed to it)."""
+    def resend(self, topic: str, after_s: float = 0.0) -> None:
+        """The last message of a latched topic again, ``after_s`` from now (a client just subscribed to it)."""
+        time.sleep(after_s)
         last = self._last.get(topic)
         ch = self._channels.get(topic)
         if last is not None and ch is not None and not self.closed:
             payload, log_time = last
-            ch.base.log(_complete_joint_state(payload) if topic == "/driver/joint_state" else payload, log_time)
+            ch.base.log(_complete(topic, payload), log_time)
 
     def clear_latched(self) -> None:
         """Forget the latched messages (playback seeks), the URDF excepted."""
         for topic in list(self._last):
             if topic != ROBOT_DESCRIPTION_TOPIC:
                 self._last.pop(topic, None)
+        self.scene = CellScene()
 
     def broadcast_time(self, ns: int) -> None:
         self.server.broadcast_time(ns)
@@ -271,5 +290,5 @@ def env_tls() -> tuple[str | None, str | None]:
     return os.environ.get("ROB6_LIVE_TLS_CERT") or None, os.environ.get("ROB6_LIVE_TLS_KEY") or None
 
 
-__all__: Sequence[str] = ("DEFAULT_PORT", "COMMANDS_TOPIC", "LATCHED", "LiveRefused", "LiveView",
+__all__: Sequence[str] = ("DEFAULT_PORT", "COMMANDS_TOPIC", "LATCHED", "OWN_LATCHED", "LiveRefused", "LiveView",
                           "command_log", "live_settings", "secure_bus", "start_live")

@@ -6,7 +6,8 @@ recording: the 3D panel moves the arm (``/tf`` as recorded, or derived from the 
 when the file has none), the Log panel shows ``/commands`` and ``/log``. The server offers
 Foxglove's playback control (``playback_time_range``): play, pause, speed and seeking on
 the app's timeline. After a seek the last state before the new position (URDF, ``/tf``,
-joint state, gripper, link) is sent at once, so the picture is right before the next record.
+joint state, gripper, link, the cell and its clearance) is sent at once, so the picture is
+right before the next record.
 
 Works on unfinished files (``reader.scan``): a recording cut by a crash plays up to its
 last complete chunk.
@@ -34,7 +35,7 @@ from rob6.config import DEFAULT_LIVE_PORT
 from rob6_recorder_native import ROBOT_DESCRIPTION_TOPIC
 
 from .derived_channels import TF_TOPIC, JointStateDerivation
-from .live import COMMANDS_TOPIC, LATCHED, LiveView
+from .live import COMMANDS_TOPIC, LATCHED, OWN_LATCHED, LiveView
 from .reader import RecordingReader
 from .writer import JOINT_STATE_TOPIC
 
@@ -200,7 +201,7 @@ class Player:
         for item in reversed(self.items[:index]):
             if item.topic in LATCHED and item.topic not in found:
                 found[item.topic] = item
-                if len(found) == len(LATCHED) - 1:  # the URDF is the view's own
+                if len(found) == len(LATCHED - OWN_LATCHED):
                     break
         for item in sorted(found.values(), key=lambda i: i.log_time):
             self.view.publish(item.topic, item.log_time, item.payload, item.payload)

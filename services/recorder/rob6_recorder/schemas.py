@@ -22,7 +22,7 @@ from typing import Any
 
 import msgspec
 
-from rob6.messages import GripperState, JointState, LinkEvent
+from rob6.messages import Cell, Clearance, GripperState, JointState, LinkEvent
 
 _TIME = {
     "type": "object",
@@ -93,6 +93,56 @@ FOXGLOVE_POSES_IN_FRAME = {
         "poses": {"type": "array", "items": {
             "title": "foxglove.Pose", "type": "object",
             "properties": {"position": _VEC3, "orientation": _QUAT}}},
+    },
+}
+
+_POSE = {"title": "foxglove.Pose", "type": "object", "properties": {"position": _VEC3, "orientation": _QUAT}}
+_COLOR = {"title": "foxglove.Color", "type": "object",
+          "properties": {"r": {"type": "number"}, "g": {"type": "number"}, "b": {"type": "number"},
+                         "a": {"type": "number"}}}
+
+
+def _primitive(title: str, **properties: Any) -> dict[str, Any]:
+    return {"title": title, "type": "object", "properties": {"pose": _POSE, **properties, "color": _COLOR}}
+
+
+#: the 3D panel's scene (live view: the cell's zones and tool, ``cell_scene``); the primitives rob6 draws
+FOXGLOVE_SCENE_UPDATE = {
+    "title": "foxglove.SceneUpdate",
+    "description": "An update to the entities displayed in a 3D scene",
+    "type": "object",
+    "properties": {
+        "deletions": {"type": "array", "items": {
+            "title": "foxglove.SceneEntityDeletion", "type": "object",
+            "properties": {"timestamp": _TIME, "id": {"type": "string"}, "type": {
+                "title": "foxglove.SceneEntityDeletionType",
+                "oneOf": [{"title": "MATCHING_ID", "const": 0}, {"title": "ALL", "const": 1}]}}}},
+        "entities": {"type": "array", "items": {
+            "title": "foxglove.SceneEntity", "type": "object",
+            "properties": {
+                "timestamp": _TIME,
+                "frame_id": {"type": "string"},
+                "id": {"type": "string"},
+                "lifetime": {**_TIME, "title": "duration"},
+                "frame_locked": {"type": "boolean"},
+                "metadata": {"type": "array", "items": {
+                    "title": "foxglove.KeyValuePair", "type": "object",
+                    "properties": {"key": {"type": "string"}, "value": {"type": "string"}}}},
+                "cubes": {"type": "array", "items": _primitive("foxglove.CubePrimitive", size=_VEC3)},
+                "spheres": {"type": "array", "items": _primitive("foxglove.SpherePrimitive", size=_VEC3)},
+                "cylinders": {"type": "array", "items": _primitive(
+                    "foxglove.CylinderPrimitive", size=_VEC3, bottom_scale={"type": "number"},
+                    top_scale={"type": "number"})},
+                "lines": {"type": "array", "items": _primitive(
+                    "foxglove.LinePrimitive",
+                    type={"title": "foxglove.LineType", "oneOf": [
+                        {"title": "LINE_STRIP", "const": 0}, {"title": "LINE_LOOP", "const": 1},
+                        {"title": "LINE_LIST", "const": 2}]},
+                    thickness={"type": "number"}, scale_invariant={"type": "boolean"},
+                    points={"type": "array", "items": {**_VEC3, "title": "foxglove.Point3"}},
+                    colors={"type": "array", "items": _COLOR},
+                    indices={"type": "array", "items": {"type": "integer", "minimum": 0}})},
+            }}},
     },
 }
 
@@ -199,6 +249,11 @@ JOINT_STATE = struct_schema(JointState, "rob6.JointState")
 #: An event of the driver's link to the robot (``/driver/link``).
 LINK_EVENT = struct_schema(LinkEvent, "rob6.LinkEvent")
 GRIPPER_STATE = struct_schema(GripperState, "rob6.GripperState")
+#: The driver's cell (``/cell``): its safety zones, tool and self-collision settings, recorded
+#: when the driver appears and again at the start of every file (mm, robot base frame).
+CELL = struct_schema(Cell, "rob6.Cell")
+#: The nearest pair while the arm moves (``/driver/clearance``, at most 10 Hz): plot distance_mm.
+CLEARANCE = struct_schema(Clearance, "rob6.Clearance")
 
 RECORDER_STATUS = {
     "title": "rob6.RecorderStatus",
@@ -246,6 +301,9 @@ TOPIC_SCHEMAS: list[tuple[re.Pattern[str], SchemaSpec]] = [
     (re.compile(r"^/driver/joint_state$"), SchemaSpec("rob6.JointState", JOINT_STATE)),
     (re.compile(r"^/driver/link$"), SchemaSpec("rob6.LinkEvent", LINK_EVENT)),
     (re.compile(r"^/gripper/state$"), SchemaSpec("rob6.GripperState", GRIPPER_STATE)),
+    (re.compile(r"^/driver/clearance$"), SchemaSpec("rob6.Clearance", CLEARANCE)),
+    (re.compile(r"^/cell$"), SchemaSpec("rob6.Cell", CELL)),
+    (re.compile(r"^/cell/scene$"), SchemaSpec("foxglove.SceneUpdate", FOXGLOVE_SCENE_UPDATE)),  # live view
     (re.compile(r"^/log$"), SchemaSpec("foxglove.Log", FOXGLOVE_LOG)),
     (re.compile(r"^/commands$"), SchemaSpec("foxglove.Log", FOXGLOVE_LOG)),  # live view: client lines, replies
     (re.compile(r"^/tf$"), SchemaSpec("foxglove.FrameTransforms", FOXGLOVE_FRAME_TRANSFORMS)),

@@ -8,6 +8,10 @@ served (``trace/<service>/<op>``), the gateway a copy of each client line and re
 state they publish (``Bus.publish_state``). ``Recorder.submit`` never blocks, so the
 Zenoh callback stays short.
 
+What the robot is made of is recorded too: when a driver appears the recorder asks it for
+its cell (the safety zones, ``rob6.cell``) and records it on ``/cell``, latched: at the start
+of every file opened later as well, as the URDF is (``Recorder.submit``).
+
 With ``live_port`` (not 0) the recorder also feeds the live view (``live.LiveView``, a
 Foxglove WebSocket server): the same records, as they are queued for the files.
 """
@@ -16,16 +20,18 @@ from __future__ import annotations
 
 import logging
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
 
 import rob6
-from rob6.bus import LIVE_TOPICS, Bus
+from rob6.bus import LIVE_TOPICS, Bus, BusError
+from rob6.messages import Cell, Empty
 from rob6.robots import RobotModel
 
 from .live import LiveView, start_live
-from .writer import Recorder
+from .writer import CELL_TOPIC, CLEARANCE_TOPIC, JOINT_STATE_TOPIC, Recorder
 
 log = logging.getLogger("rob6.recorder")
 
@@ -34,7 +40,8 @@ URDF_DIR = Path(rob6.__file__).parent / "urdf"
 # bus key (after rob6/<id>/) -> recording topic, for the streams recorded as they are; they
 # are recorded from the trace batches (``Bus.publish_state``, ``Bus.trace``), never from their
 # live copies, which are dropped under congestion and not kept for a recorder that was away
-TOPICS = {"driver/state": "/driver/joint_state", "driver/link": "/driver/link", "gripper/state": "/gripper/state"}
+TOPICS = {"driver/state": JOINT_STATE_TOPIC, "driver/link": "/driver/link", "gripper/state": "/gripper/state",
+          "driver/clearance": CLEARANCE_TOPIC}
 
 
 class RecorderService:
@@ -49,11 +56,16 @@ class RecorderService:
         self.recorder = Recorder(directory, robot.name, bus.settings.robot_id, urdf=urdf,
                                  live=self.live.publish if self.live is not None else None, **options)
         self._prefix = len(bus.prefix) + 1
+        self._cell: Cell | None = None  # the last one recorded
+        self._cell_lock = threading.Lock()
 
     def start(self) -> None:
         self.recorder.start()
         self._subscribers = [self.bus.subscribe(suffix, self.on_sample)
                              for suffix in sorted(LIVE_TOPICS - TOPICS.keys())]
+        self.bus.on_liveliness(self._on_liveliness)
+        if self.bus.instances("driver"):  # up before the recorder: its liveliness came before the listener
+            self._on_liveliness("driver", "", True)
         self.bus.announce()
         # trace batches with what their publishers kept for a recorder that was away
         # (partitioned, restarted): a separate, advanced subscriber; the live topics' get the rest
@@ -74,6 +86,24 @@ class RecorderService:
             lost = f", {stats.dropped} records dropped" if stats.dropped else ""
             print(f"rob6-recorder: recordings closed: {stats.written} records in {len(stats.files)} files "
                   f"in {self.recorder.directory}{lost}", file=sys.stderr, flush=True)
+
+    def _on_liveliness(self, service: str, _instance: str, alive: bool) -> None:
+        if service == "driver" and alive:  # not on Zenoh's thread: the request waits for a reply
+            threading.Thread(target=self._driver_appeared, name="recorder-cell", daemon=True).start()
+
+    def _driver_appeared(self) -> None:
+        """Ask the driver for its cell and record it on ``/cell`` (latched) when it is new."""
+        try:
+            cell: Cell = self.bus.request("driver", "cell", Empty())
+        except BusError as exc:
+            log.warning("could not get the driver's cell (safety zones) for the recording: %s", exc.message)
+            return
+        with self._cell_lock:
+            if cell == self._cell:
+                return
+            self._cell = cell
+            self.recorder.submit(CELL_TOPIC, time.time_ns(), cell, latched=True)
+        log.info("recording the cell %s: %d zones, %d tool shapes", cell.source, len(cell.zones), len(cell.tool))
 
     def on_sample(self, key: str, payload: bytes) -> None:
         """A live publication (a control message, the planner's settings)."""

@@ -55,6 +55,9 @@ log = logging.getLogger("rob6.recorder")
 
 JOINT_STATE_TOPIC = "/driver/joint_state"
 LOG_TOPIC = "/log"
+#: the driver's cell (safety zones), latched; the nearest pair while the arm moves
+CELL_TOPIC = "/cell"
+CLEARANCE_TOPIC = "/driver/clearance"
 
 #: a chunk is compressed when it holds this much (or at the writer's next flush): 32 KiB
 #: keeps each compression to a fraction of a millisecond, where 1 MiB took milliseconds
@@ -157,10 +160,13 @@ class Recorder:
 
     # ----------------------------------------------------------------- hot path
     def submit(self, topic: str, log_time: int, data: Any,
-               publish_time: int | None = None) -> bool:
+               publish_time: int | None = None, *, latched: bool = False) -> bool:
         """Queue one record; never blocks. False if it had to be dropped (counted, logged).
 
-        ``data``: a JSON-serialisable dict/list, a msgspec Struct, or JSON bytes.
+        ``data``: a JSON-serialisable dict/list, a msgspec Struct, or JSON bytes. ``latched``:
+        what the robot is made of (the cell): the latest such record of its topic is written
+        again at the start of every file opened after it (a rotated system file, a session's),
+        as the URDF is.
         """
         if topic == LOG_TOPIC:
             data = as_dict(data)
@@ -170,7 +176,7 @@ class Recorder:
         if topic not in self._topics:
             self._schema(topic)
         accepted: bool = self._writer.submit(topic, log_time, log_time if publish_time is None else publish_time,
-                                             payload)
+                                             payload, latched)
         if self._live is not None or (topic == JOINT_STATE_TOPIC and self._derived.active):
             with self._lock:
                 self._after(topic, log_time, data, payload)

@@ -25,8 +25,8 @@ log = logging.getLogger("rob6.bus")
 #: every suffix published live on ``rob6/<id>/<suffix>`` (``publish``), and nothing else may
 #: be: a subscriber that wants them all (the recorder) subscribes to these, not to ``**``,
 #: which would also bring it each state at 250 Hz and each trace batch a second time
-LIVE_TOPICS = frozenset({"driver/state", "gripper/state", "control/verbosity", "control/shutdown",
-                         "planner/config"})
+LIVE_TOPICS = frozenset({"driver/state", "driver/clearance", "gripper/state", "control/verbosity",
+                         "control/shutdown", "planner/config"})
 
 T = TypeVar("T")
 

@@ -143,7 +143,13 @@ class Serving(Tracing):
             log.exception("%s.%s failed (cid %s)", self.service, op, cid)
             reply = ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance, error=ErrorBody(
                 code="internal", message=f"{self.service}.{op}: {type(exc).__name__}: {exc}"))
-        payload = _encoder.encode(reply)
+        try:
+            payload = _encoder.encode(reply)
+        except (TypeError, msgspec.EncodeError) as exc:  # a handler's reply the schema cannot carry
+            log.exception("%s.%s: the reply cannot be encoded (cid %s)", self.service, op, cid)
+            payload = _encoder.encode(ReplyEnvelope(v=SCHEMA_VERSION, cid=cid, ok=False, instance=self.instance,
+                                                    error=ErrorBody(code="internal", message=(
+                                                        f"{self.service}.{op}: the reply cannot be encoded: {exc}"))))
         query.reply(query.key_expr, payload)
         query.drop()
         self.trace(f"trace/{self.service}/{op}", b'{"t":%.6f,"dt":%.6f,"instance":"%s","request":%s,"reply":%s}' % (

@@ -19,8 +19,13 @@
 //!
 //! File names: `<UTC start %Y%m%dT%H%M%SZ>_<robot>_<robot_id>_session<n>.mcap` and
 //! `..._system_<part>.mcap` (part 001, 002, ... counts the rotations of this recorder run; a
-//! `-2`, `-3` suffix if the name exists anyway). Every file has the URDF as an attachment and on
-//! `/robot_description`, and `rob6` metadata at its start and `rob6.end` at its end.
+//! `-2`, `-3` suffix if the name exists anyway). Every file has the URDF as an attachment, and
+//! `rob6` metadata at its start and `rob6.end` at its end.
+//!
+//! Latched records: what the robot is made of, not what it does (the URDF on `/robot_description`,
+//! the cell on `/cell`). Such a record is written where it belongs, like any other, and the latest
+//! one of each latched topic again at the start of every file opened after it (a rotated system
+//! file, a new session's), so every file can be read on its own.
 //!
 //! Crash safety: every `chunk_interval` the writer closes the open chunks and hands them to the
 //! OS (and the disk, with `fsync`), so after a SIGKILL a file holds every record up to then.
@@ -159,6 +164,8 @@ struct Record {
     payload: Vec<u8>,
     /// the record is its session's close event
     closing: bool,
+    /// written again at the start of every file opened later (see the module's text)
+    latched: bool,
 }
 
 /// A command for the writer thread, queued in order with the records.
@@ -362,7 +369,6 @@ struct Settings {
     robot: String,
     robot_id: String,
     urdf: Option<String>,
-    urdf_record: Option<Vec<u8>>,
     metadata: BTreeMap<String, String>,
     system: bool,
     sessions: bool,
@@ -385,6 +391,8 @@ struct Files {
     closing: HashMap<String, Instant>,
     recent: VecDeque<(Instant, Record)>,
     part: u32,
+    /// the latest record of each latched topic, (topic, payload), in the order first latched
+    latched: Vec<(String, Vec<u8>)>,
     /// what to log once the record is written: (level, message); errors are counted
     notes: Vec<(u8, String)>,
 }
@@ -423,6 +431,7 @@ impl Files {
             publish_time,
             payload,
             closing,
+            latched,
         } = &record;
         if let Some(session) = session_of(topic) {
             let is_line = topic.ends_with("/client_in") || (topic.ends_with("/event") && !closing);
@@ -463,8 +472,20 @@ impl Files {
             }
         }
         drop(schemas);
-        if self.settings.sessions && session_of(&record.topic).is_none() {
+        if *latched {
+            // after the writing: a file this record opened has it once, not twice
+            self.latch(record);
+        } else if self.settings.sessions && session_of(&record.topic).is_none() {
             self.remember(record);
+        }
+    }
+
+    /// A latched record becomes the one every file opened from now on starts with (a session
+    /// file that opens later gets it from here, not from the records kept for it).
+    fn latch(&mut self, record: Record) {
+        match self.latched.iter_mut().find(|(topic, _)| *topic == record.topic) {
+            Some(entry) => entry.1 = record.payload,
+            None => self.latched.push((record.topic, record.payload)),
         }
     }
 
@@ -562,9 +583,10 @@ impl Files {
         for (k, v) in &s.metadata {
             metadata.insert(k.clone(), v.clone());
         }
+        let latched = &self.latched;
         let opened = McapFile::create(&path, &s.file, start_ns, s.urdf.as_deref(), metadata).and_then(|mut f| {
-            if let Some(record) = &s.urdf_record {
-                f.write(schemas, ROBOT_DESCRIPTION_TOPIC, start_ns, start_ns, record)?;
+            for (topic, payload) in latched {
+                f.write(schemas, topic, start_ns, start_ns, payload)?;
             }
             f.flush(false)?;
             Ok(f)
@@ -793,6 +815,7 @@ impl WriterThread {
             publish_time: now,
             payload: serde_json::to_vec(&status).unwrap_or_default(),
             closing: false,
+            latched: false,
         });
         self.report();
     }
@@ -893,7 +916,8 @@ impl Writer {
 #[pymethods]
 impl Writer {
     /// `metadata`: what every file's `rob6` metadata holds beside robot, robot_id, kind, started,
-    /// start_ns and session; `urdf_record`: the JSON of `/robot_description` in every file.
+    /// start_ns and session; `urdf_record`: the JSON of `/robot_description`, the first latched
+    /// record (in every file).
     #[new]
     #[pyo3(signature = (directory, robot, robot_id, *, urdf, urdf_record, metadata, system, sessions,
                         rotate_bytes, rotate_seconds, chunk_interval, chunk_size, compression, zstd_level,
@@ -951,7 +975,6 @@ impl Writer {
             robot,
             robot_id,
             urdf,
-            urdf_record,
             metadata,
             system,
             sessions,
@@ -976,6 +999,9 @@ impl Writer {
             closing: HashMap::new(),
             recent: VecDeque::new(),
             part: 0,
+            latched: urdf_record
+                .map(|record| vec![(ROBOT_DESCRIPTION_TOPIC.to_string(), record)])
+                .unwrap_or_default(),
             notes: Vec::new(),
         };
         Ok(Writer {
@@ -1025,6 +1051,8 @@ impl Writer {
 
     /// Queue one record; never blocks. False if it had to be dropped (counted, logged). A
     /// `/session/<n>/event` record whose event ends the session closes its file (after the linger).
+    /// `latched`: the record is also written at the start of every file opened after it.
+    #[pyo3(signature = (topic, log_time, publish_time, payload, latched=false))]
     fn submit(
         &self,
         py: Python<'_>,
@@ -1032,6 +1060,7 @@ impl Writer {
         log_time: u64,
         publish_time: u64,
         payload: &Bound<'_, PyBytes>,
+        latched: bool,
     ) -> bool {
         let payload = payload.as_bytes().to_vec();
         let closing = session_of(topic).is_some() && topic.ends_with("/event") && event_closes(&payload);
@@ -1041,6 +1070,7 @@ impl Writer {
             publish_time,
             payload,
             closing,
+            latched,
         };
         self.push(py, vec![record]) == 1
     }
@@ -1089,6 +1119,7 @@ impl Writer {
             publish_time: b.publish_time,
             payload: b.payload,
             closing: b.closing,
+            latched: false,
         });
         self.push(py, records.collect());
         let others = split
