@@ -213,7 +213,7 @@ def certs(tmp_path_factory: TempPathFactory) -> tuple[Path, Path]:
 def test_images_offline_minimal_non_root(built: None) -> None:
     heavy = {"numpy", "pinocchio", "ruckig", "mcap", "serial"}
     needs = {"router": set(), "gateway": set(), "kinematics": {"numpy", "pinocchio"},
-             "planner": {"numpy", "ruckig"}, "driver": {"numpy", "ruckig"},
+             "planner": {"numpy", "ruckig", "pinocchio"}, "driver": {"numpy", "ruckig", "pinocchio"},
              "gripper": {"serial"}, "recorder": {"mcap", "zstandard"}, "ros": set()}
     for name, mods in needs.items():
         image = f"rob6/{name}:{TAG}"
