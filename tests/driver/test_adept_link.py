@@ -230,7 +230,11 @@ def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig: R
     # the hold point: where the robot rests, for one period plus the lead
     assert points[0].sequence == 0 and points[0].q.tolist() == [0.0] * 6 and points[0].velocity == 0.0
     assert points[0].duration == pytest.approx(2 * link.period_s)
-    assert [p.sequence for p in points[1:-1]] == list(range(1, len(points) - 1))
+    # numbered as made: a point whose answer came late is merged into the next one (a busy
+    # machine, not an error), and its number is skipped; the wire's numbers only ever rise
+    numbers = [p.sequence for p in points[1:-1]]
+    assert numbers == sorted(set(numbers)) and numbers[0] >= 1
+    assert len(set(range(1, numbers[-1] + 1)) - set(numbers)) <= link.late
     assert points[-1].sequence == -3 and np.allclose(points[-1].q, target, atol=1e-4)
     # the durations add up to the trajectory (plus the hold point's own): the controller's timing is rob6's
     assert sum(p.duration for p in points) == pytest.approx((samples - 1) * core.dt + link.period_s + link.lead_s + core.dt,
@@ -241,7 +245,7 @@ def test_waiting_then_a_streamed_ptp_that_returns_when_the_robot_is_there(rig: R
         assert point.velocity == pytest.approx(min(1.0, np.max(step / point.duration / RATED_SPEED_DEG_S)),
                                                rel=1e-3, abs=1e-6)
         assert np.all(point.q >= ROBOT.hw_min) and np.all(point.q <= ROBOT.hw_max)
-    assert link.packets == len(points) and link.late == 0
+    assert link.packets == len(points)
     assert [e.event for e in events][:2] == ["waiting", "connected"]
 
 
