@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +20,8 @@ import pytest
 
 from harness.client import Client
 from harness.system import System, running
-from rob6_recorder.reader import read_records
 from tests.cell.zone_rig import HOVER_S, Rig, rig
+from tests.motion.test_realtime_system import joint_states
 
 pytestmark = pytest.mark.slow
 
@@ -102,6 +102,18 @@ def test_a_self_colliding_target_is_refused(lab: tuple[System, Rig, Path]) -> No
         assert _move(client, r.q(HOVER_S)) == "true\n"
 
 
+def _recorded_through(logs: Path, rest: Sequence[float], last: Sequence[float], timeout: float = 30.0) -> np.ndarray:
+    """The recorded joint states, once the recording holds the arm at ``rest`` and ends at
+    ``last`` (the recorder writes in batches, a little after the replies)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        _, states = joint_states(logs)
+        if len(states) and np.abs(states - rest).max(axis=1).min() < 1e-4 and np.abs(states[-1] - last).max() < 1e-4:
+            return states
+        assert time.monotonic() < deadline, f"the recording lacks the rest at {rest} or the end at {last} after {timeout} s"
+        time.sleep(0.2)
+
+
 def test_an_alter_stream_aimed_50_mm_into_the_table_stops_outside_it(lab: tuple[System, Rig, Path]) -> None:
     """Targets every 4 ms from above the table to 50 mm inside it, over 2 s, as a client's
     real-time loop sends them: the ones within the margin are refused with the reason, the
@@ -117,9 +129,8 @@ def test_an_alter_stream_aimed_50_mm_into_the_table_stops_outside_it(lab: tuple[
             client.send(f"MoveRTJoints {_fmt((start + (end - start) * k / 500).tolist())}\n")
             first = client.read_lines(1)
             answers.append(first + (client.read_lines(1) if first.startswith("ERROR") else ""))
-            time.sleep(max(0.0, t0 + 0.004 * k - time.monotonic()))
-        time.sleep(1.0)  # at rest where the last target taken was
-        assert client.ask("DisableAlter") == "true\n"
+            time.sleep(max(0.0, t0 + 0.004 * k - time.monotonic()))  # the client's 4 ms loop
+        assert client.ask("DisableAlter") == "true\n"  # answers once the arm is at rest
         rest = _joints(client)
         assert _move(client, r.q(HOVER_S)) == "true\n"
     refused = [a for a in answers if a != "true\n"]
@@ -127,9 +138,7 @@ def test_an_alter_stream_aimed_50_mm_into_the_table_stops_outside_it(lab: tuple[
     assert all(re.match(r"^ERROR: target refused: tool tip \d+ mm (from|inside) keep-out 'table'.*\nfalse\n$", a)
                for a in refused), refused[:3]
     assert 0.0 < r.tip_clearance(np.array(rest))[0] < 20.0  # it came close, and stayed out
-    time.sleep(1.5)  # the recorder's files hold the states
-    states = np.array([rec.data["q"] for f in sorted(logs.glob("*_system_*.mcap"))
-                       for rec in read_records(f) if rec.topic == "/driver/joint_state"])
+    states = _recorded_through(logs, rest, r.q(HOVER_S))
     assert len(states) > 250
     clearance = r.tip_clearance(states)
     print(f"{system.robot}: {len(states)} recorded states, the tool tip at least {clearance.min():.1f} mm "

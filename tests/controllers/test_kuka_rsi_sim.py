@@ -320,7 +320,7 @@ def test_a_block_selection_to_rsi_on_is_kss01443(pc: Responder) -> None:
 def test_t1_each_rsi_on_waits_for_the_warning_to_be_confirmed(pc: Responder) -> None:
     with sim(pc, "--t1") as kuka:
         st = kuka.wait_for(lambda s: s["program"] == "waiting for confirmation", what="the warning")
-        time.sleep(0.1)
+        time.sleep(0.1)  # a quiet window: a packet sent before the confirmation would show in it
         assert pc.packets == [] and kuka.status()["runs"] == 0
         kuka.confirm()
         pc.wait(lambda p: len(p) >= 3)
@@ -415,7 +415,7 @@ def stop_and_restart(pc: Responder, kuka: RsiController, follow: Follow, run: in
     assert st["state"] == "stopped" and st["stop_reason"] == "RSI_OFF" and st["trips"] == []
     assert st["messages"] == [] and st["delay"] == 0  # every packet up to RSI_OFF answered
     n = len(pc.packets)
-    time.sleep(0.2)
+    time.sleep(0.2)  # a quiet window of many cycles: an RSI_ON after the end would send in it
     assert len(pc.packets) == n, "no RSI_ON after the program ended"
     follow.stopping = False
     assert kuka.restart()["program"] == "running"
