@@ -98,11 +98,7 @@ class Program:
 def parse_program(src: str, dat: str, name: str) -> Program:
     data = _parse_dat(dat, name)
     lines = _lines(src)
-    i = 0
-    while i < len(lines) and lines[i][1].startswith("&"):
-        i += 1
-    if i >= len(lines) or not re.fullmatch(rf"DEF\s+{re.escape(name)}\s*\(\s*\)", lines[i][1], re.I):
-        raise KrlError(f"{name}.src: the program must start with DEF {name}( )")
+    i = _opening(lines, rf"DEF\s+{re.escape(name)}\s*\(\s*\)", f"{name}.src: the program must start with DEF {name}( )")
     body, i, end = _block(lines, i + 1, ("END",))
     if end != "END":
         raise KrlError(f"{name}.src: no END")
@@ -166,13 +162,20 @@ def _condition(text: str, number: int) -> tuple[str, ...]:
     raise KrlError(f"line {number}: condition {text!r} is not one the stand-in's KRL knows")
 
 
-def _parse_dat(text: str, name: str) -> dict[str, Any]:
-    lines = _lines(text)
+def _opening(lines: list[tuple[int, str]], pattern: str, error: str) -> int:
+    """The index of a file's opening line (after the editor's ``&`` header lines), which must
+    match ``pattern``; else ``error``."""
     i = 0
     while i < len(lines) and lines[i][1].startswith("&"):
         i += 1
-    if i >= len(lines) or not re.fullmatch(rf"DEFDAT\s+{re.escape(name)}(\s+PUBLIC)?", lines[i][1], re.I):
-        raise KrlError(f"{name}.dat: the data list must start with DEFDAT {name}")
+    if i >= len(lines) or not re.fullmatch(pattern, lines[i][1], re.I):
+        raise KrlError(error)
+    return i
+
+
+def _parse_dat(text: str, name: str) -> dict[str, Any]:
+    lines = _lines(text)
+    i = _opening(lines, rf"DEFDAT\s+{re.escape(name)}(\s+PUBLIC)?", f"{name}.dat: the data list must start with DEFDAT {name}")
     data: dict[str, Any] = {}
     chars: dict[str, int] = {}
     for number, code in lines[i + 1:]:
