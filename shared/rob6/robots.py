@@ -14,9 +14,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from .status import Status, status_flags, status_words
+
+#: the arms' URDFs, one per geometry (written by rob6_kinematics.urdf)
+URDF_DIR = Path(__file__).resolve().parent / "urdf"
 
 # Standard DH chain shared by all robots (robots.md "Kinematic chain"):
 # theta_i = s_i * q_i + o_i, twists alpha_i; T = A1..A6 * Ry(180 deg).
@@ -98,6 +102,11 @@ class RobotModel:
         }
 
     # ---- identity answers of the protocol ----------------------------------
+    @property
+    def urdf(self) -> str:
+        """The arm's URDF: the live view's drawing, ROS 2's robot_description, the cell's model."""
+        return (URDF_DIR / f"{self.geometry}.urdf").read_text()
+
     @property
     def is_adept(self) -> bool:
         return self.vendor == "adept"

@@ -16,7 +16,6 @@ from harness.system import running
 from rob6.cell import load_cell
 from rob6.robots import get_robot
 from rob6_recorder.cell_scene import AMBER, FLANGE_FRAME, GREEN, GREY, colour
-from rob6_recorder.service import URDF_DIR
 from tests.cell.zone_rig import HOVER_S
 from tests.recording.rec_helpers import table_cell
 
@@ -28,7 +27,7 @@ SCHEMAS = {"/robot_description": "std_msgs/String", "/tf": "foxglove.FrameTransf
 
 def _links(robot: str) -> tuple[str, set[str]]:
     """The URDF's root link and every other link (a 3D panel needs a transform to each)."""
-    root = ET.fromstring((URDF_DIR / f"{get_robot(robot).geometry}.urdf").read_text())
+    root = ET.fromstring(get_robot(robot).urdf)
     links = {link.attrib["name"] for link in root.iter("link")}
     children = {child.attrib["link"] for child in root.iterfind(".//joint/child")}
     (base,) = links - children

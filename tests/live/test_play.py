@@ -12,7 +12,6 @@ import pytest
 
 from harness.foxglove_client import FoxgloveClient
 from rob6.robots import get_robot
-from rob6_recorder.service import URDF_DIR
 from rob6_recorder.writer import Recorder
 
 TARGET = [10.0, -60.0, 80.0, 20.0, 40.0, 30.0]
@@ -21,7 +20,7 @@ STEPS = 250  # 1 s at 4 ms
 
 def _recording(directory: Path) -> tuple[Path, int]:
     """A session: a line, its reply, the arm moving 0 -> TARGET over a second."""
-    urdf = (URDF_DIR / f"{get_robot('kr16').geometry}.urdf").read_text()
+    urdf = get_robot("kr16").urdf
     t0 = time.time_ns()
     with Recorder(directory, "kr16", "robot1", urdf=urdf, system=False, fsync=False) as rec:
         rec.submit("/session/1/client_in", t0, {"session": 1, "cid": "c1", "text": "MovePTPJoints 10 -60 80 20 40 30\n"})

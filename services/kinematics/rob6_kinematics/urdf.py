@@ -32,7 +32,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from rob6.robots import RobotModel
+from rob6.robots import URDF_DIR, RobotModel
 
 from .opw import DH_ALPHA, DH_OFFSETS, DH_SIGNS, FloatArray
 
@@ -48,9 +48,7 @@ _DARK = ("joint_grey", "0.25 0.25 0.28 1.0")
 
 
 def urdf_dir() -> Path:
-    import rob6
-
-    return Path(rob6.__file__).resolve().parent / "urdf"
+    return URDF_DIR
 
 
 def _f(x: float) -> str:

@@ -22,10 +22,8 @@ import logging
 import sys
 import threading
 import time
-from pathlib import Path
 from typing import Any
 
-import rob6
 from rob6.bus import LIVE_TOPICS, Bus, BusError
 from rob6.messages import Cell, Empty
 from rob6.robots import RobotModel
@@ -35,7 +33,6 @@ from .writer import CELL_TOPIC, CLEARANCE_TOPIC, JOINT_STATE_TOPIC, Recorder
 
 log = logging.getLogger("rob6.recorder")
 
-URDF_DIR = Path(rob6.__file__).parent / "urdf"
 
 # bus key (after rob6/<id>/) -> recording topic, for the streams recorded as they are; they
 # are recorded from the trace batches (``Bus.publish_state``, ``Bus.trace``), never from their
@@ -49,7 +46,7 @@ class RecorderService:
                  live_bind: str = "0.0.0.0", live_tls: tuple[str | None, str | None] = (None, None),
                  **options: Any) -> None:
         self.bus = bus
-        urdf = (URDF_DIR / f"{robot.geometry}.urdf").read_text()
+        urdf = robot.urdf
         self.live: LiveView | None = start_live(
             urdf, port=live_port, bind=live_bind, settings=bus.settings, tls_cert=live_tls[0],
             tls_key=live_tls[1], name=f"rob6 {robot.name} {bus.settings.robot_id}")

@@ -21,10 +21,8 @@ import math
 import threading
 import time
 import xml.etree.ElementTree as ET
-from pathlib import Path
 from typing import Any
 
-import rob6
 from rob6.bus import Bus, decode
 from rob6.messages import JointState
 from rob6.robots import RobotModel
@@ -34,7 +32,6 @@ from .rmw import LATCHED_QOS, Node
 
 log = logging.getLogger("rob6.ros")
 
-URDF_DIR = Path(rob6.__file__).parent / "urdf"
 #: joint_states while the arm moves: at most this often (the driver's cycle is 4-16 ms)
 MAX_RATE_HZ = 100.0
 
@@ -57,7 +54,7 @@ class RosService:
                  action: str = "follow_joint_trajectory",
                  start_tolerance: float = DEFAULT_START_TOLERANCE_DEG):
         self.bus, self.robot = bus, robot
-        self.urdf = (URDF_DIR / f"{robot.geometry}.urdf").read_text()
+        self.urdf = robot.urdf
         self.joint_names = urdf_joint_names(self.urdf)
         if len(self.joint_names) != 6:
             raise ValueError(f"{robot.geometry}.urdf has {len(self.joint_names)} movable joints, expected 6")

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import coal
 import numpy as np
@@ -29,7 +28,6 @@ from ..messages import Cell, Zone
 from ..robots import RobotModel
 from .file import ARM_PARTS
 
-URDF_DIR = Path(__file__).resolve().parents[1] / "urdf"
 N_JOINTS = 6
 #: the joint a part rides on: base 0, link_k k, the tool 6 (on the flange)
 TOOL_JOINT = 6
@@ -59,7 +57,7 @@ class CellModel:
 
     def __init__(self, robot: RobotModel, cell: Cell) -> None:
         self.robot, self.cell = robot, cell
-        urdf = (URDF_DIR / f"{robot.geometry}.urdf").read_text()
+        urdf = robot.urdf
         self.model = pin.buildModelFromXML(urdf)
         self.data = self.model.createData()
         self.geometry = pin.GeometryModel()
