@@ -254,19 +254,23 @@ class Guard:
         floor = self.margins if floors is None else floors
         if (d - floor > needed).all():
             return None
-        # (3) the brake's path, sampled where (2) left pairs short: each sample's room for them,
-        # the motion between samples bounded; the reaction's travel comes off every room
+        # (3) the reaction (the arm goes on at its speed, a straight line in joint space), then
+        # the brake from there: its path sampled where (2) left pairs short, each sample's room
+        # for them measured and the motion between samples bounded
+        delta = qd * self.reaction_s
+        d_late = self.model.distances(q + delta) if delta.any() else d
+        if delta.any() and self._between(q, q + delta, d, d_late, floor) is not None:
+            return self._worst(d, needed, floors)
         short = np.flatnonzero(d - floor <= needed)
-        slack = self.model.travel(react)[short]
         budget = [MEASURES_MAX]
         for brake in brakes:
             count = min(BRAKE_SAMPLES_MAX, max(2, math.ceil(brake.duration / BRAKE_SAMPLE_S)))
             times = [brake.duration * k / count for k in range(count + 1)]
-            rooms = [d[short] - floor[short] - slack]
-            rooms += [self._room(self._at(brake, t), short, floor, budget) - slack for t in times[1:]]
+            rooms = [d_late[short] - floor[short]]
+            rooms += [self._room(self._at(brake, t) + delta, short, floor, budget) for t in times[1:]]
             for k in range(count):
                 if not self._segment_clear(brake, times[k], times[k + 1], rooms[k], rooms[k + 1], short, floor,
-                                           slack, budget):
+                                           delta, budget):
                     return self._worst(d, needed, floors)
         return None
 
@@ -300,20 +304,21 @@ class Guard:
         return room
 
     def _segment_clear(self, brake: ruckig.Trajectory, t0: float, t1: float, room0: np.ndarray, room1: np.ndarray,
-                       pairs: np.ndarray, floor: np.ndarray, slack: np.ndarray, budget: list[int]) -> bool:
-        """Does the brake keep ``pairs`` apart between ``t0`` and ``t1``, whose rooms are
-        measured? A point between is no nearer than both ends allow: it holds when ``room0 +
-        room1`` exceeds how much nearer each pair can come on the way (half of it from each
-        end); else the segment is halved while the budget of measurements lasts (a setpoint the
-        guard cannot clear within it is refused: the arm stops a little early, never late)."""
+                       pairs: np.ndarray, floor: np.ndarray, delta: np.ndarray, budget: list[int]) -> bool:
+        """Does the brake (shifted by ``delta``, the reaction's travel) keep ``pairs`` apart
+        between ``t0`` and ``t1``, whose rooms are measured? A point between is no nearer than
+        both ends allow: it holds when ``room0 + room1`` exceeds how much nearer each pair can
+        come on the way (half of it from each end); else the segment is halved while the budget
+        of measurements lasts (a setpoint the guard cannot clear within it is refused: the arm
+        stops a little early, never late)."""
         if (room0 <= 0).any() or (room1 <= 0).any():
             return False
         if (room0 + room1 > self.model.travel(self._at(brake, t1) - self._at(brake, t0))[pairs]).all():
             return True
         mid = (t0 + t1) / 2
-        room = self._room(self._at(brake, mid), pairs, floor, budget) - slack
-        return (self._segment_clear(brake, t0, mid, room0, room, pairs, floor, slack, budget)
-                and self._segment_clear(brake, mid, t1, room, room1, pairs, floor, slack, budget))
+        room = self._room(self._at(brake, mid) + delta, pairs, floor, budget)
+        return (self._segment_clear(brake, t0, mid, room0, room, pairs, floor, delta, budget)
+                and self._segment_clear(brake, mid, t1, room, room1, pairs, floor, delta, budget))
 
     @staticmethod
     def _at(brake: ruckig.Trajectory, t: float) -> np.ndarray:
