@@ -287,8 +287,9 @@ class DriverService:
 
     def start(self) -> None:
         cell = self.cell
-        log.info("cell %s: %d zones, %d tool shapes, margin %g mm, sha256 %s", cell.source, len(cell.zones),
-                 len(cell.tool), cell.margin_mm, cell.sha256 or "(none)")
+        # shown at the default level, as the gateway's and the router's start lines: which cell this run guards
+        log.warning("cell %s: %d zones, %d tool shapes, margin %g mm, sha256 %s", cell.source, len(cell.zones),
+                    len(cell.tool), cell.margin_mm, cell.sha256 or "(none)")
         self.bus.on_liveliness(self._on_liveliness)
         self.link.start()
         self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,
