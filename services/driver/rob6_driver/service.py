@@ -286,6 +286,10 @@ class DriverService:
             self.core.stop("planner went away")
 
     def start(self) -> None:
+        cell = self.cell
+        # shown at the default level, as the gateway's and the router's start lines: which cell this run guards
+        log.warning("cell %s: %d zones, %d tool shapes, margin %g mm, sha256 %s", cell.source, len(cell.zones),
+                    len(cell.tool), cell.margin_mm, cell.sha256 or "(none)")
         self.bus.on_liveliness(self._on_liveliness)
         self.link.start()
         self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,
