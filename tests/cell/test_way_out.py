@@ -107,3 +107,15 @@ def test_a_driver_started_within_the_margin_says_where_in_one_line(robot: str, t
     where = zones.observe(np.array(start))
     assert where.startswith("tool tip 2 mm from keep-out 'table', within the 5 mm margin")
     assert where.endswith(f"it may only move away from it, at {ESCAPE_SPEED_MM_S:g} mm/s at most")
+
+
+def test_a_zone_that_asks_for_more_room_gets_it(tmp_path: Path) -> None:
+    """A zone's own ``margin_mm`` (a controller's stopping distance) is the room kept from it."""
+    r = rig("kr16")
+    text = r.cell_yaml().replace("    keep: out\n", "    keep: out\n    margin_mm: 40\n", 1)
+    path = tmp_path / "cell.yaml"
+    path.write_text(text)
+    guard = Guard(CellModel(get_robot("kr16"), load_cell(path)))
+    assert guard.pose(np.array(r.q(r.s_at(45.0)))) is None
+    stop = guard.pose(np.array(r.q(r.s_at(30.0))))
+    assert stop is not None and stop.describe().startswith("tool tip 30 mm from keep-out 'table', within the 40 mm margin")

@@ -73,7 +73,7 @@ ESCAPE_SPEED_MM_S = 250.0
 def pair_margins(model: CellModel) -> np.ndarray:
     """(pairs,) the margin of each pair (mm): its zone's own ``margin_mm`` where the file
     gives one (say, a controller's stopping distance), else the cell's."""
-    own = {zone.name: zone.margin_mm for zone in model.cell.zones if getattr(zone, "margin_mm", None) is not None}  # type: ignore[attr-defined]
+    own = {zone.name: zone.margin_mm for zone in model.cell.zones if zone.margin_mm is not None}
     return np.array([float(own.get(p.other, model.cell.margin_mm)) if p.zone else model.cell.margin_mm
                      for p in model.pairs], float)
 
