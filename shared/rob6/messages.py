@@ -280,6 +280,9 @@ class Cell(Struct):
     #: SHA-256 of the file's bytes (hex; the default cell's file too): a changed cell shows in
     #: the driver's log, GetCell and every recording. "": a recording made before it was carried
     sha256: str = ""
+    #: the pairs of parts not measured, each with why (near in the chain, allowed by the file,
+    #: touching at the zero position): filled by the driver from its model
+    unchecked: list[str] = []
 
 
 class Clearance(Struct):

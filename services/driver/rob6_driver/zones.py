@@ -13,17 +13,22 @@ driver publishes for the live view and the recording.
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 
-from rob6.cell import CellModel, Guard
-from rob6.cell.guard import ESCAPE_DIP_MM, ESCAPE_SPEED_MM_S, straight
+from rob6.cell import CellError, CellModel, Guard
+from rob6.cell.guard import ESCAPE_DIP_MM, ESCAPE_SPEED_MM_S, MEASURES_MAX, straight
 from rob6.messages import Cell, Clearance
 from rob6.robots import RobotModel
 
 from .limits import Limits
 
 __all__ = ["ZoneGuard", "ZoneReason", "straight"]
+
+
+#: the share of the controller's cycle one setpoint's check may take at worst (measured at start)
+CHECK_SHARE = 0.5
 
 
 class ZoneReason(str):
@@ -37,12 +42,35 @@ class ZoneGuard:
     for well under a millisecond; a model per thread cost each new thread of Zenoh's a
     model's build, some 100 ms, on the real-time path)."""
 
-    def __init__(self, robot: RobotModel, cell: Cell) -> None:
+    def __init__(self, robot: RobotModel, cell: Cell, budget_s: float | None = None) -> None:
         self.robot, self.cell = robot, cell
         self._lock = threading.Lock()
         # built now: a cell Pinocchio cannot take fails the start, not the first motion
         self._guard = Guard(CellModel(robot, cell))
+        self.unchecked, self.warnings = self._guard.model.unchecked, self._guard.model.warnings
+        self.worst_check_s = self._time_worst_check()
+        budget = CHECK_SHARE * robot.cycle_s if budget_s is None else budget_s
+        if self.worst_check_s > budget:
+            raise CellError(f"cell file {cell.source}: one setpoint's check takes up to {self.worst_check_s * 1e3:.2f} ms "
+                            f"here, more than {budget * 1e3:.2f} ms ({CHECK_SHARE:.0%} of the {robot.name}'s "
+                            f"{robot.cycle_s * 1e3:g} ms cycle): fewer zones or tool shapes, or self_collision off")
         self._floors: np.ndarray | None = None  # on a way out: how near each pair may come (Guard.floors)
+
+    def _time_worst_check(self) -> float:
+        """How long one setpoint's check takes at worst here (s): every distance measurement
+        the guard may make for one setpoint (the pose, the way from the last, the reaction,
+        the brake's samples: ``MEASURES_MAX`` and four more), timed on this machine, the
+        median of five."""
+        if self.empty:
+            return 0.0
+        model, runs = self._guard.model, []
+        q = np.zeros(6)
+        for _ in range(5):
+            start = time.perf_counter()
+            for _ in range(MEASURES_MAX + 4):
+                model.distances(q)
+            runs.append(time.perf_counter() - start)
+        return float(np.median(runs))
 
     @property
     def empty(self) -> bool:

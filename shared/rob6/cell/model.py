@@ -26,7 +26,7 @@ import pinocchio as pin
 
 from ..messages import Cell, Zone
 from ..robots import RobotModel
-from .file import ARM_PARTS
+from .file import ARM_PARTS, CellError
 
 N_JOINTS = 6
 #: the joint a part rides on: base 0, link_k k, the tool 6 (on the flange)
@@ -73,7 +73,11 @@ class CellModel:
                 part = f"link_{N_JOINTS}"
             self._add(part, obj.parentJoint, obj.placement, _covering(obj.geometry, pad))
         flange = self.model.frames[self.model.getFrameId("flange")]
+        self.warnings: list[str] = []  # said at start (the driver's log)
         for shape in cell.tool:
+            if max(shape.a[2], shape.b[2] if shape.b is not None else -math.inf) > 0.0:
+                self.warnings.append(f"tool shape {shape.name!r} reaches z > 0 of the flange frame, inside the wrist: "
+                                     f"a tool sticks out along -z (docs/SAFETY_ZONES.md)")
             geometry, local = _tool_shape(shape.radius, shape.a, shape.b)
             self._add(shape.name, TOOL_JOINT, flange.placement * local, geometry)
         self.parts = list(dict.fromkeys(self._part_of))
@@ -84,6 +88,7 @@ class CellModel:
                 zone_objects.append((zone, self.geometry.addGeometryObject(
                     pin.GeometryObject(f"zone:{zone.name}", 0, placement, geometry))))
         self.pairs: list[Pair] = []
+        self.unchecked: list[str] = []  # pairs of parts not measured, each with why (GetCell lists them)
         self._pair_parts: list[tuple[int, int]] = []  # indices into parts; -1: a zone
         parts_index = {name: i for i, name in enumerate(self.parts)}
         for k in range(first_zone):
@@ -115,9 +120,12 @@ class CellModel:
 
     def _self_pairs(self, count: int, parts_index: dict[str, int]) -> None:
         """Every two parts' objects, but those within ``NEAR_IN_CHAIN`` of each other along
-        the chain, parts touching at the zero position and the file's allowed pairs."""
+        the chain, two links of the arm touching at the zero position and the file's allowed
+        pairs: each of those is listed in ``unchecked`` with why. A tool shape touching a link
+        at the zero position is refused (``CellError``) unless the file allows the pair."""
         allowed = {frozenset(pair) for pair in self.cell.allowed_pairs}
         tool = {shape.name for shape in self.cell.tool}
+        skipped: dict[frozenset[str], str] = {}
 
         def place(part: str) -> int:  # along the chain: the base 0, link_k k, the tool after link_6
             return N_JOINTS + 1 if part in tool else self._joint[part]
@@ -129,7 +137,13 @@ class CellModel:
         for a in range(count):
             for b in range(a + 1, count):
                 pa, pb = self._part_of[a], self._part_of[b]
-                if frozenset((pa, pb)) in allowed or abs(place(pa) - place(pb)) <= NEAR_IN_CHAIN:
+                if pa == pb:
+                    continue
+                if frozenset((pa, pb)) in allowed:
+                    skipped[frozenset((pa, pb))] = "allowed by the cell file"
+                    continue
+                if abs(place(pa) - place(pb)) <= NEAR_IN_CHAIN:
+                    skipped[frozenset((pa, pb))] = "near in the chain: the joint between them keeps them apart"
                     continue
                 candidates.append((a, b))
                 probe.addCollisionPair(pin.CollisionPair(a, b))
@@ -138,12 +152,23 @@ class CellModel:
         touching = {frozenset((self._part_of[a], self._part_of[b]))
                     for (a, b), result in zip(candidates, probe_data.distanceResults, strict=True)
                     if result.min_distance <= self.cell.margin_mm / 1000.0}
+        for names in touching:
+            shape = next((name for name in sorted(names) if name in tool), None)
+            if shape is not None:
+                other = next(iter(names - {shape}), shape)
+                raise CellError(f"cell file {self.cell.source}: tool shape {shape!r} touches {other} at the zero "
+                                f"position (within the {self.cell.margin_mm:g} mm margin), so the pair cannot be "
+                                f"checked: move or shrink the shape, or add [{other}, {shape}] to arm: allowed_pairs "
+                                f"if they may touch")
+            skipped[names] = "touching at the zero position (the model's shapes overlap there)"
         for pair in candidates:
             # the one further along the chain first: "tool tip with base"
             a, b = sorted(pair, key=lambda k: -place(self._part_of[k]))
             pa, pb = self._part_of[a], self._part_of[b]
             if frozenset((pa, pb)) not in touching:
                 self._pair(a, b, Pair(pa, pb, ""), parts_index[pa], parts_index[pb])
+        self.unchecked = [f"{' with '.join(sorted(pair, key=lambda p: -place(p)))}: {why}"
+                          for pair, why in sorted(skipped.items(), key=lambda item: sorted(item[0]))]
 
     def _levers(self) -> np.ndarray:
         """(parts, 6): how far (mm) a point of the part can move per radian of each joint, in
