@@ -16,7 +16,8 @@ The format (all lengths in mm, robot base frame; docs/SAFETY_ZONES.md)::
       - {name: tool tip, sphere: {center: [0, 0, 150], radius: 10}}
     arm:
       self_collision: true
-      padding_mm: 0                  # added to every capsule of the arm
+      padding_mm: 0                  # added around every shape of the arm, or per part:
+                                     # {link_3: 20, link_6: 30, default: 0}
       allowed_pairs: [[link_2, gripper]]   # may touch, beyond the adjacent parts
 
 A keep-in zone is a box. Parts are the arm's links ``link_1`` ... ``link_6`` (and
@@ -87,7 +88,7 @@ def parse_cell(text: str, source: str) -> Cell:
     _unique(reader, [(zone.name, line) for zone, (_, line) in zip(zones, reader.items(top, "zones"), strict=True)],
             "zone", reserved=set())
     self_collision = reader.boolean(arm, "self_collision", True)
-    padding = reader.number(arm, "padding_mm", 0.0, minimum=0.0)
+    padding, part_padding = reader.padding(arm)
     pairs = []
     for item, line in reader.items(arm, "allowed_pairs"):
         pair = reader.names(item, line, "an allowed pair", parts)
@@ -95,7 +96,7 @@ def parse_cell(text: str, source: str) -> Cell:
             raise reader.error(line, f"an allowed pair names two different parts, not {pair}")
         pairs.append(pair)
     return Cell(source=source, margin_mm=margin, zones=zones, tool=tool, self_collision=self_collision,
-                arm_padding_mm=padding, allowed_pairs=pairs)
+                arm_padding_mm=padding, arm_padding_parts=part_padding, allowed_pairs=pairs)
 
 
 def _unique(reader: _Reader, named: list[tuple[str, int | None]], what: str, reserved: set[str]) -> None:
@@ -162,6 +163,15 @@ class _Reader:
             bound = "above 0" if positive else f"at least {minimum:g}"
             raise self.error(line, f"{key} must be {bound}, not {value}")
         return float(value)
+
+    def padding(self, arm: dict[str, Any]) -> tuple[float, dict[str, float]]:
+        """``padding_mm``: one number for every part, or a mapping of parts (and ``default``) to numbers."""
+        value = arm.get("padding_mm")
+        if not isinstance(value, dict):
+            return self.number(arm, "padding_mm", 0.0, minimum=0.0), {}
+        parts = self.mapping(value, self.line_of(arm, "padding_mm"), "padding_mm", ("default", *ARM_PARTS))
+        own = {str(part): self.number(parts, str(part), minimum=0.0) for part in parts if part != "default"}
+        return self.number(parts, "default", 0.0, minimum=0.0), own
 
     def boolean(self, mapping: dict[str, Any], key: str, default: bool) -> bool:
         value = mapping.get(key, default)
