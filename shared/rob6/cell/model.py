@@ -67,8 +67,8 @@ class CellModel:
         self._joint: dict[str, int] = {}  # part -> the joint it rides on
         for part, shapes in arm_shapes(robot.geometry).items():
             joint = 0 if part == "base" else self.model.getJointId(f"joint_{part.removeprefix('link_')}")
-            for shape in shapes:
-                geometry, placement = _arm_shape(shape, arm_padding(cell, part))
+            for piece in shapes:
+                geometry, placement = _arm_shape(piece, arm_padding(cell, part))
                 self._add(part, joint, placement, geometry)
         flange = self.model.frames[self.model.getFrameId("flange")]
         for shape in cell.tool:
