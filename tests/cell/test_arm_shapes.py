@@ -3,13 +3,14 @@ part, and the docs' example cells usable on every robot type."""
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from rob6.cell import CellError, CellModel, Guard
+from rob6.cell import CellError, CellModel, Guard, default_cell
 from rob6.cell.arms import ArmShape, arm_shapes
 from rob6.cell.file import ARM_PARTS, parse_cell
 from rob6.messages import Cell
@@ -167,3 +168,22 @@ zones:
 """, "keep-in.yaml")
     assert Guard(CellModel(get_robot(robot), cell)).pose(np.zeros(6)) is None
 
+
+
+@pytest.mark.parametrize("robot", ROBOT_TYPES)
+def test_every_pose_the_original_reports_is_admitted_by_the_default_cell(robot: str) -> None:
+    """The shapes are not fatter than the arm the original drove: each ``GetPositionJoints``
+    answer of its transcripts is a pose it reached, and the default cell admits it."""
+    guard = Guard(CellModel(get_robot(robot), default_cell(get_robot(robot))))
+    transcripts = Path(__file__).resolve().parents[1] / "transcripts" / robot
+    poses = set()
+    for path in transcripts.glob("*.jsonl"):
+        for line in path.read_text().splitlines():
+            step = json.loads(line)
+            if step.get("send", "").startswith("GetPositionJoints") and "reply" in step:
+                numbers = step["reply"].split()
+                if len(numbers) == 6 and all(re.fullmatch(r"-?[0-9.]+", n) for n in numbers):
+                    poses.add(tuple(float(n) for n in numbers))
+    assert poses
+    refused = {q: stop.describe() for q in poses if (stop := guard.pose(np.array(q))) is not None}
+    assert not refused, refused
