@@ -272,7 +272,8 @@ class Cell(Struct):
     zones: list[Zone] = []
     tool: list[ToolShape] = []
     self_collision: bool = True
-    arm_padding_mm: float = 0.0  # added to the radius of every capsule of the arm (cables, covers)
+    arm_padding_mm: float = 0.0  # added around every shape of the arm (cables, covers); the default of every part
+    arm_padding_parts: dict[str, float] = {}  # a part's own padding, where the file gives one (mm)
     allowed_pairs: list[list[str]] = []  # pairs of parts that may touch, beyond the adjacent ones
     #: the lab's own (ROB6_CELL), not the default: IsPossible then checks poses against it too
     #: (with the default it answers as the original, whose transcripts ask about poses below the floor)

@@ -17,7 +17,8 @@ The format (all lengths in mm; docs/SAFETY_ZONES.md)::
       - {name: tool tip, sphere: {center: [0, 0, -150], radius: 10}}
     arm:
       self_collision: true
-      padding_mm: 0                  # added to every capsule of the arm
+      padding_mm: 0                  # added around every shape of the arm, or per part:
+                                     # {link_3: 20, link_6: 30, default: 0}
       allowed_pairs: [[link_2, gripper]]   # may touch, beyond the adjacent parts
 
 A keep-in zone is a box. Parts are the arm's links ``link_1`` ... ``link_6`` (and
@@ -95,7 +96,7 @@ MAX_ANGLE_DEG = 360.0
 #: of room all round is already more than any stopping distance of the arms rob6 drives
 MAX_LENGTH_MM = 1_000.0
 #: the keys whose number is a length bounded by MAX_LENGTH_MM, wherever they appear
-_LENGTH_KEYS = ("margin_mm", "padding_mm", "radius")
+_LENGTH_KEYS = ("margin_mm", "padding_mm", "radius", "default", *ARM_PARTS)
 
 
 class CellError(InputError):
@@ -158,7 +159,7 @@ def parse_cell(text: str, source: str, sha256: str | None = None) -> Cell:
             "zone", reserved={**dict.fromkeys(ARM_PARTS, "a part of the arm"),
                               **{shape.name: "a tool shape" for shape in tool}})
     self_collision = reader.boolean(arm, "self_collision", True)
-    padding = reader.number(arm, "padding_mm", 0.0, minimum=0.0)
+    padding, part_padding = reader.padding(arm)
     pairs = []
     for item, line in reader.items(arm, "allowed_pairs"):
         pair = reader.names(item, line, "an allowed pair", parts)
@@ -166,7 +167,7 @@ def parse_cell(text: str, source: str, sha256: str | None = None) -> Cell:
             raise reader.error(line, f"an allowed pair names two different parts, not {pair}")
         pairs.append(pair)
     return Cell(source=source, margin_mm=margin, zones=zones, tool=tool, self_collision=self_collision,
-                arm_padding_mm=padding, allowed_pairs=pairs,
+                arm_padding_mm=padding, arm_padding_parts=part_padding, allowed_pairs=pairs,
                 sha256=sha256 if sha256 is not None else hashlib.sha256(text.encode("utf-8")).hexdigest())
 
 
@@ -278,6 +279,15 @@ class _Reader:
         if abs(value) > most:
             raise self.error(line, f"{key} must be at most {most:g} mm, not {_plain(value)}")
         return float(value)
+
+    def padding(self, arm: dict[str, Any]) -> tuple[float, dict[str, float]]:
+        """``padding_mm``: one number for every part, or a mapping of parts (and ``default``) to numbers."""
+        value = arm.get("padding_mm")
+        if not isinstance(value, dict):
+            return self.number(arm, "padding_mm", 0.0, minimum=0.0), {}
+        parts = self.mapping(value, self.line_of(arm, "padding_mm"), "padding_mm", ("default", *ARM_PARTS))
+        own = {str(part): self.number(parts, str(part), minimum=0.0) for part in parts if part != "default"}
+        return self.number(parts, "default", 0.0, minimum=0.0), own
 
     def boolean(self, mapping: dict[str, Any], key: str, default: bool) -> bool:
         value = mapping.get(key, default)

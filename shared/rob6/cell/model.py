@@ -1,8 +1,9 @@
 """The cell as Pinocchio/coal geometry: the arm's capsules, the tool, the zones, and their distances.
 
-The arm's parts are the links of the robot's URDF (``rob6/urdf``, the live view's drawing):
-each visual cylinder becomes the capsule that covers it (radius plus the cell's
-``arm_padding_mm``), the base box stays a box. The tool's spheres and capsules ride on the
+The arm's parts are the links of the robot's URDF (``rob6/urdf``), each made of the shapes
+that enclose the real arm (``rob6.cell.arms``: capsules, spheres, the base's box), grown by
+the cell's padding for that part (``arm_padding``); the URDF's cylinders are the live view's
+drawing only. The tool's spheres and capsules ride on the
 flange frame. A keep-out half-space is a coal ``Halfspace``, a keep-out box a ``Box``, a
 keep-in box the six half-spaces outside its faces. The pairs measured: every moving part
 against every zone it does not ignore (the base never: it cannot move), and, with
@@ -26,7 +27,8 @@ import pinocchio as pin
 
 from ..messages import Cell, Zone
 from ..robots import RobotModel
-from .file import ARM_PARTS, CellError
+from .arms import ArmShape, arm_shapes
+from .file import CellError
 
 N_JOINTS = 6
 #: the joint a part rides on: base 0, link_k k, the tool 6 (on the flange)
@@ -64,14 +66,11 @@ class CellModel:
         self._part_of: list[str] = []  # geometry object -> its part
         self._extent: dict[str, float] = {}  # part -> farthest point from its joint's origin (m)
         self._joint: dict[str, int] = {}  # part -> the joint it rides on
-        visual = pin.buildGeomFromUrdfString(self.model, urdf, pin.GeometryType.VISUAL)
-        pad = cell.arm_padding_mm / 1000.0
-        for obj in visual.geometryObjects:
-            link = obj.name.rsplit("_", 1)[0]
-            part = "base" if link == "base_link" else link
-            if part not in ARM_PARTS:  # the flange plate: part of link_6
-                part = f"link_{N_JOINTS}"
-            self._add(part, obj.parentJoint, obj.placement, _covering(obj.geometry, pad))
+        for part, shapes in arm_shapes(robot.geometry).items():
+            joint = 0 if part == "base" else self.model.getJointId(f"joint_{part.removeprefix('link_')}")
+            for piece in shapes:
+                geometry, placement = _arm_shape(piece, arm_padding(cell, part))
+                self._add(part, joint, placement, geometry)
         flange = self.model.frames[self.model.getFrameId("flange")]
         self.warnings: list[str] = []  # said at start (the driver's log)
         for shape in cell.tool:
@@ -224,13 +223,18 @@ class CellModel:
         return needed
 
 
-def _covering(geometry: coal.CollisionGeometry, pad: float) -> coal.CollisionGeometry:
-    """The capsule that covers a URDF cylinder (padded), or the box itself."""
-    if isinstance(geometry, coal.Cylinder):
-        return coal.Capsule(geometry.radius + pad, 2.0 * geometry.halfLength)
-    if isinstance(geometry, coal.Box):
-        return coal.Box(*(2.0 * geometry.halfSide + 2.0 * pad))
-    raise ValueError(f"the URDF has a {type(geometry).__name__}: only cylinders and boxes are expected")
+def arm_padding(cell: Cell, part: str) -> float:
+    """The padding (mm) the cell adds around ``part`` of the arm: its own, or the cell's default."""
+    return cell.arm_padding_parts.get(part, cell.arm_padding_mm)
+
+
+def _arm_shape(shape: ArmShape, pad_mm: float) -> tuple[coal.CollisionGeometry, pin.SE3]:
+    """A shape of the arm (``rob6.cell.arms``), grown by ``pad_mm`` on every side, in its joint's frame (m)."""
+    if shape.kind == "box":
+        assert shape.size is not None
+        size = (np.array(shape.size) + 2.0 * pad_mm) / 1000.0
+        return coal.Box(*size), pin.SE3(np.eye(3), np.array(shape.a) / 1000.0)
+    return _tool_shape(shape.radius + pad_mm, list(shape.a), None if shape.b is None else list(shape.b))
 
 
 def _tool_shape(radius_mm: float, a_mm: list[float], b_mm: list[float] | None) -> tuple[coal.CollisionGeometry, pin.SE3]:
