@@ -57,6 +57,7 @@ import numpy as np
 
 from rob6.messages import LinkEvent, LinkStatus
 from rob6.robots import RobotModel
+from rob6.units import speed_si
 
 from ..motion import MotionCore
 from . import Link, Publish
@@ -71,6 +72,9 @@ LOST_AFTER_CYCLES = 25
 #: a time stamp this many cycles older than the last one starts a new run (a
 #: controller restart), a smaller step back is a reordered packet
 STALE_WINDOW_CYCLES = 1000
+#: an arm reported this much (deg) beyond what its axes can travel since the last packet has
+#: been moved by another program: a new run (AIPos has 4 decimals)
+JUMP_TOL_DEG = 1e-3
 #: consecutive unexplained late packets before saying that our answers do not arrive
 NOT_ARRIVING = 10
 LATENCY_BIN_US = 5
@@ -112,6 +116,7 @@ class RsiLink(Link):
         self.on_event = on_event
         self.sen_type = sen_type.encode("ascii")
         self.cycle_s = core.dt
+        self._rated = speed_si(robot.speed_bound)  # deg/s: the fastest the axes go
         self.lost_after_s = lost_after_s if lost_after_s is not None else LOST_AFTER_CYCLES * core.dt
         host, port = parse_address(listen)
         family, kind, proto, _, sockaddr = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
@@ -281,7 +286,8 @@ class RsiLink(Link):
                              f"{_peer(self.peer)}", logging.WARNING)
             return
         stamp_gone_back = pkt.stamp < self._stamp - STALE_WINDOW_CYCLES * self._stamp_step
-        new_run = self._aspos is None or pkt.aspos != self._aspos or pkt.delay < self._delay or stamp_gone_back
+        new_run = (self._aspos is None or pkt.aspos != self._aspos or pkt.delay < self._delay or stamp_gone_back
+                   or self._jumped(pkt))
         hold = False
         if new_run:
             self._begin_run(pkt, addr)
@@ -340,6 +346,17 @@ class RsiLink(Link):
             self._report("stop_sent", "driver: RSI Stop sent: the correction run ends", logging.INFO, pkt)
         if state is not None:
             self.publish(state)
+
+    def _jumped(self, pkt: RobPacket) -> bool:
+        """Has the arm moved farther since the last packet than its axes can (twice its rated
+        speeds)? Then the controller ran another program in between (the operator jogged it
+        and restarted RSI at the same start pose, with no late packet in the run before): a
+        new run, not a correction to continue."""
+        if not self.q_actual:
+            return False
+        seconds = max(1.0, (pkt.stamp - self._stamp) / self._stamp_step) * self.cycle_s
+        return any(abs(a - b) > 2.0 * v * seconds + JUMP_TOL_DEG
+                   for a, b, v in zip(pkt.aipos, self.q_actual, self._rated, strict=True))
 
     def _begin_run(self, pkt: RobPacket, addr: tuple[str, int]) -> None:
         """A new RSI run: the core at rest where the arm stands (AIPos), AK = AIPos - ASPos."""
