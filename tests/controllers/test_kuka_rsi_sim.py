@@ -450,20 +450,25 @@ def test_aspos_stays_the_programmed_pose(pc: Responder) -> None:
 
 
 # ---------------------------------------------------------------------------- every wire, both generations
-#: a target per axis, each its own value, so that a correction wired to another axis shows
-SIX = [3.0, -4.0, 5.0, -3.5, 4.5, -5.5]
+#: a correction per axis, each its own value (a correction wired to another axis shows), each
+#: more than the axis moves in one 40 ms cycle (kr16: 6.24 deg on A1..A3, 13.2 on A4, A5, 24.6
+#: on A6 (+2 %)): dropping one to 0 (HOLDON 0) or adding it again each cycle (#RELATIVE) is a
+#: jump the controller stops with Command velocity
+HELD = [7.0, -7.5, 8.0, 14.0, -14.5, 26.0]
 
 
 @pytest.mark.parametrize("kss", ["8.3", "8.6"])
 def test_a_ramp_on_all_six_axes_moves_each_axis_by_its_own_correction(pc: Responder, kss: str) -> None:
     """AK.A<n> moves axis n and no other: the wiring of each AXISCORR input in the context of
-    that generation (an OutIdx moved to the next axis moves the wrong one)."""
-    pc.policy = Follow(target=SIX, step=0.5)
-    target = [h + t for h, t in zip(HOME, SIX, strict=True)]
+    that generation (an OutIdx moved to the next axis moves the wrong one). #RELATIVE for
+    #ABSOLUTE in the program: the corrections pile up and the stand-in stops the arm with
+    Command velocity."""
+    pc.policy = Follow(target=HELD, step=2.0)
+    target = [h + t for h, t in zip(HOME, HELD, strict=True)]
     with sim(pc, *SLOW, kss=kss, robot=robot_for(kss)) as kuka:
-        pc.wait(lambda p: len(p) > 3 and all(q["aipos"] == target for q in p[-3:]), what="all six at target")
-        st = kuka.status()
-        assert st["trips"] == [] and st["state"] == "running" and st["ak"] == SIX
+        st = kuka.wait_for(lambda s: s["aipos"] == target or s["state"] != "running", what="all six at target")
+        assert st["trips"] == [] and st["state"] == "running", st["trips"]  # #RELATIVE: Command velocity
+        assert st["aipos"] == target and st["ak"] == HELD
 
 
 @pytest.mark.parametrize(("kss", "pattern", "replacement", "why"), [
@@ -512,10 +517,6 @@ def late_and_lost(follow: Follow, at: list[float]) -> Policy:
 
     return policy
 
-
-#: the correction on every axis: more than an axis moves in one 40 ms cycle (kr16: 6.24 deg
-#: on A1..A3, 13.2 on A4, A5, 24.6 on A6), so dropping any of them to 0 would be a jump
-HELD = [7.0, -7.0, 7.0, 14.0, -14.0, 25.0]
 
 
 @pytest.mark.parametrize("kss", ["8.3", "8.6"])
