@@ -2,8 +2,8 @@
 
 The stand-in runs the program and loads the contexts (test_kuka_rsi_sim); these checks
 are about the files as files: the single-byte code page and CRLF the controller's editors
-use, the two context formats carrying the same signal flow, and windows wide enough for
-every robot the README names."""
+use, the two context formats carrying the same signal flow and the same wires, and windows
+wide enough for every robot the README names."""
 
 from __future__ import annotations
 
@@ -48,6 +48,53 @@ def test_both_formats_carry_the_same_signal_flow() -> None:
         for name, value in params.items():
             other = rsi3[obj][name]
             assert value == other or float(value) == float(other), (obj, name, value, other)
+
+
+def wires(fmt: str) -> dict[tuple[str, int], str]:
+    """(object type, input from 0) -> the RECEIVE element's TAG feeding it, in one format"""
+    receive = {int(e.attrib["INDX"]): e.attrib["TAG"]
+               for e in ET.parse(DEPLOY / "rob6_rsi_ethernet.xml").getroot().iter("ELEMENT")
+               if e.attrib["INDX"] != "INTERNAL"}
+    if fmt == "rsix":
+        objects, base = ET.parse(DEPLOY / "rob6_rsi.rsix").getroot().iter("{RsiDriver}RsiObject"), 0
+        input_tag, out_obj = "{RsiDriver}Input", "OutObjId"
+    else:
+        objects, base = ET.parse(DEPLOY / "rsi3" / "rob6_rsi.rsi.xml").getroot().iter("RSIObject"), 1
+        input_tag, out_obj = "Input", "OutObjID"
+    out: dict[tuple[str, int], str] = {}
+    for obj in objects:
+        for i in obj.iter(input_tag):
+            assert i.attrib[out_obj].upper().replace("_", "") == "ETHERNET1", i.attrib
+            out[(obj.attrib["ObjType"].upper(), int(i.attrib["InIdx"]) - base)] = \
+                receive[int(i.attrib["OutIdx"]) - base + 1]
+    return out
+
+
+@pytest.mark.parametrize("fmt", ["rsix", "rsi3"])
+def test_each_format_wires_stop_to_stop_and_ak_an_to_axis_n(fmt: str) -> None:
+    """The wires by name: the Stop element to the Stop object's input, AK.A<n> to AXISCORR's
+    input of axis n, nothing else (an index slipped by one in either format shows here)."""
+    expected = {("STOP", 0): "Stop", **{("AXISCORR", n): f"AK.A{n + 1}" for n in range(6)}}
+    assert wires(fmt) == expected
+
+
+def test_every_correction_holds_its_value_when_an_answer_is_late() -> None:
+    """HOLDON 1 on each AK element: with 0 a late answer drops that axis' correction to 0,
+    a jump the controller stops with Command velocity (test_kuka_rsi_sim shows both)."""
+    receive = ET.parse(DEPLOY / "rob6_rsi_ethernet.xml").getroot().find("RECEIVE")
+    assert receive is not None
+    holdon = {e.attrib["TAG"]: e.attrib.get("HOLDON") for e in receive.iter("ELEMENT")}
+    assert {tag: holdon[tag] for tag in holdon if tag.startswith("AK.")} == {f"AK.A{n}": "1" for n in range(1, 7)}
+
+
+@pytest.mark.parametrize("name", ["rsi3/rob6_rsi.rsi.xml", "rsi3/rob6_rsi.rsi"])
+def test_the_rsi3_stop_object_carries_no_channel(name: str) -> None:
+    """Channel is left out of the RSI 3.x files: rsi-pi (a KR 16-2, KSS 8.3, RSI 3.x) found a
+    Channel parameter on its STOP object disabling every correction; kx's RSI 3.x files carry
+    one. The evidence is contested, so the files keep the default the object has without it.
+    The stand-in does not model Channel: this test is what sees it."""
+    text = (DEPLOY / name).read_bytes().decode("ascii")
+    assert not re.search(r'(?i)name="Channel"', text), name
 
 
 @pytest.mark.parametrize("machine", sorted(MACHINES))

@@ -30,6 +30,7 @@ from tests.controllers.rsi_controller import RSI3_KSS, RsiController, RsiControl
 from tests.controllers.sim_process import Status
 
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
+OVERALL_TRIP = "KSS29000 AXISCORR Permissible overall correction exceeded: RSI is stopped"
 SLOW = ("--cycle-ms", "40")  # for tests that need every answer on time
 
 # ---------------------------------------------------------------------------- PC side
@@ -178,6 +179,17 @@ def close(a: Sequence[float], b: Sequence[float], tol: float = 1e-4) -> bool:
     return all(abs(x - y) <= tol for x, y in zip(a, b, strict=True))
 
 
+def robot_for(kss: str) -> str:
+    """The KR 16 as deploy/kuka/README.md runs it on that KSS: on RSI 3.x only #IPO_FAST
+    corrects in RSI_MOVECORR (kr16rt, 4 ms), elsewhere the 12 ms kr16 (#IPO)."""
+    return "kr16rt" if kss in RSI3_KSS else "kr16"
+
+
+def halted(kuka: RsiController) -> Status:
+    """The program HALTed (after an RSI_CREATE that failed): the status."""
+    return kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
+
+
 def ended(st: Status) -> bool:
     """RSI is off and the program no longer runs."""
     return bool(st["state"] == "stopped" and st["program"] != "running")
@@ -188,8 +200,9 @@ def ended(st: Status) -> bool:
 def test_the_shipped_files_run_on_each_kss(pc: Responder, kss: str) -> None:
     """Installed as the README says for that KSS, the program runs: RSI_CREATE loads the
     context of that RSI generation, RSI_ON starts the packets, zero correction holds the arm."""
-    with sim(pc, kss=kss) as kuka:
-        assert kuka.cycle_ms == 12  # kr16: rob6IpoFast FALSE, RSI_ON(#ABSOLUTE, #IPO)
+    with sim(pc, kss=kss, robot=robot_for(kss)) as kuka:
+        # kr16: rob6IpoFast FALSE, RSI_ON(#ABSOLUTE, #IPO), 12 ms; kr16rt: TRUE, #IPO_FAST, 4 ms
+        assert kuka.cycle_ms == (4 if kss in RSI3_KSS else 12)
         pkts = pc.wait(lambda p: len(p) >= 20)
         first = pkts[0]
         assert first["aspos"] == HOME and first["aipos"] == HOME and first["D"] == 0
@@ -197,7 +210,7 @@ def test_the_shipped_files_run_on_each_kss(pc: Responder, kss: str) -> None:
         assert close(first["rist"], [1088.0, 0.0, 1320.0, 0.0, 0.0, 0.0])
         assert first["rsol"] == first["rist"]
         steps = [b["IPOC"] - a["IPOC"] for a, b in pairwise(pkts[:20])]
-        assert all(s > 0 and s % 12 == 0 for s in steps), steps  # a time stamp, ms, by the cycle
+        assert all(s > 0 and s % kuka.cycle_ms == 0 for s in steps), steps  # a time stamp, ms, by the cycle
         st = kuka.status()
         assert st["state"] == "running" and st["program"] == "running" and st["runs"] == 1
         assert st["trips"] == [] and st["messages"] == [] and st["timeout"] == 100
@@ -250,6 +263,25 @@ def test_an_attribute_no_reference_shows_fails_rsi_create(pc: Responder, tmp_pat
     with sim(pc, kss=kss, files=files) as kuka:
         st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
         assert "attribute(s) ['Visible']" in st["messages"][0] and st["runs"] == 0
+
+
+def test_is_public_fails_rsi_create_on_rsi3(pc: Responder, tmp_path: Path) -> None:
+    """IsPublic is RSI 4.x's ([notes]: RSI_CREATE fails on RSI 3.x; contested: kx's RSI 3.x files carry it)."""
+    files = installed(tmp_path, "8.3", "kr16rt")
+    edit(context_file(files), r'(Name="Mode")', r'IsPublic="false" \1')
+    with sim(pc, kss="8.3", robot="kr16rt", files=files) as kuka:
+        assert "attribute(s) ['IsPublic']" in halted(kuka)["messages"][0]
+
+
+def test_a_receive_element_with_indx_internal_is_accepted(pc: Responder, tmp_path: Path) -> None:
+    """ri's and rsi-pi's configurations read DEF_EStr (a text for the smartHMI) with INDX INTERNAL."""
+    files = installed(tmp_path)
+    edit(files[1] / "rob6_rsi_ethernet.xml", r'(\s*)(<ELEMENT TAG="Stop")',
+         r'\1<ELEMENT TAG="DEF_EStr" TYPE="STRING" INDX="INTERNAL" HOLDON="1" />\1\2')
+    with sim(pc, files=files) as kuka:
+        pc.wait(lambda p: len(p) >= 3)
+        st = kuka.status()
+        assert st["state"] == "running" and st["messages"] == []
 
 
 def test_the_ethernet_configuration_is_read_strictly(pc: Responder, tmp_path: Path) -> None:
@@ -315,6 +347,17 @@ def test_a_block_selection_to_rsi_on_is_kss01443(pc: Responder) -> None:
         st = kuka.restart(line=line)
         assert st["program"].startswith("stopped: KSS01443 Impermissible start motion")
         assert kuka.status()["state"] == "stopped"
+
+
+def test_t1_monitors_the_flange_at_250_mm_s(pc: Responder) -> None:
+    """In T1 the controller keeps the flange below 250 mm/s (ri README): A1 at 1 deg per 40 ms
+    moves the KR 16's flange (1088 mm from A1) at 475 mm/s, though A1 may turn that fast."""
+    pc.policy = Follow(target=[10, 0, 0, 0, 0, 0], step=1.0)
+    with sim(pc, "--t1", *SLOW) as kuka:
+        kuka.wait_for(lambda s: s["program"] == "waiting for confirmation", what="the warning")
+        kuka.confirm()
+        st = kuka.wait_for(ended, what="the trip")
+        assert st["trips"] == ["T1: Cartesian velocity 250 mm/s exceeded"] and st["aipos"] == HOME
 
 
 def test_t1_each_rsi_on_waits_for_the_warning_to_be_confirmed(pc: Responder) -> None:
@@ -389,13 +432,13 @@ def test_axiscorr_clamps_the_correction_to_its_window(pc: Responder, tmp_path: P
 
 
 def test_axiscorrmon_stops_rsi_beyond_its_window(pc: Responder, tmp_path: Path) -> None:
-    files = installed(tmp_path, "8.3")
+    files = installed(tmp_path, "8.3", "kr16rt")
     edit(context_file(files), r'(Name="MaxA6" ParamID="6" ParamValue=")700.0', r"\g<1>1.5")
     edit(files[1] / "rob6_rsi.rsi", r'(name="MaxA6" value=")700.0', r"\g<1>1.5")
     pc.policy = Follow(target=[0, 0, 0, 0, 0, -3], step=0.5)
-    with sim(pc, kss="8.3", files=files) as kuka:
+    with sim(pc, *SLOW, kss="8.3", robot="kr16rt", files=files) as kuka:
         st = kuka.wait_for(ended, what="trip")
-        assert st["trips"] == ["AXISCORRMON: correction limit A6 exceeded"]
+        assert st["trips"] == [OVERALL_TRIP]
         assert min(p["aipos"][5] for p in pc.packets) >= -1.5
 
 
@@ -404,6 +447,154 @@ def test_aspos_stays_the_programmed_pose(pc: Responder) -> None:
     with sim(pc, *SLOW) as kuka:
         last = pc.wait(lambda p: p[-1]["aipos"][0] == 2.0, what="A1 at 2")[-1]
         assert last["aspos"] == HOME and kuka.status()["aspos"] == HOME
+
+
+# ---------------------------------------------------------------------------- every wire, both generations
+#: a correction per axis, each its own value (a correction wired to another axis shows), each
+#: more than the axis moves in one 40 ms cycle (kr16: 6.24 deg on A1..A3, 13.2 on A4, A5, 24.6
+#: on A6 (+2 %)): dropping one to 0 (HOLDON 0) or adding it again each cycle (#RELATIVE) is a
+#: jump the controller stops with Command velocity
+HELD = [7.0, -7.5, 8.0, 14.0, -14.5, 26.0]
+
+
+@pytest.mark.parametrize("kss", ["8.3", "8.6"])
+def test_a_ramp_on_all_six_axes_moves_each_axis_by_its_own_correction(pc: Responder, kss: str) -> None:
+    """AK.A<n> moves axis n and no other: the wiring of each AXISCORR input in the context of
+    that generation (an OutIdx moved to the next axis moves the wrong one). #RELATIVE for
+    #ABSOLUTE in the program: the corrections pile up and the stand-in stops the arm with
+    Command velocity."""
+    pc.policy = Follow(target=HELD, step=2.0)
+    target = [h + t for h, t in zip(HOME, HELD, strict=True)]
+    with sim(pc, *SLOW, kss=kss, robot=robot_for(kss)) as kuka:
+        st = kuka.wait_for(lambda s: s["aipos"] == target or s["state"] != "running", what="all six at target")
+        assert st["trips"] == [] and st["state"] == "running", st["trips"]  # #RELATIVE: Command velocity
+        assert st["aipos"] == target and st["ak"] == HELD
+
+
+@pytest.mark.parametrize(("kss", "pattern", "replacement", "why"), [
+    ("8.3", r'(<Input InIdx=")1(" OutObjID="ETHERNET1" OutIdx="1")', r"\g<1>2\2",
+     "STOP1: Invalid index - signal input: InIdx 2 (STOP inputs: 1..1)"),
+    ("8.3", r'(<Input InIdx=")1(" OutObjID="ETHERNET1" OutIdx="1")', r"\g<1>0\2",
+     "STOP1: Invalid index - signal input: InIdx 0 (STOP inputs: 1..1)"),
+    ("8.6", r'(<Input InIdx=")0(" OutObjId="Ethernet_1" OutIdx="0")', r"\g<1>1\2",
+     "Stop_1: Invalid index - signal input: InIdx 1 (Stop inputs: 0..0)"),
+    ("8.3", r'(<Input InIdx=")6(" OutObjID="ETHERNET1" OutIdx="7")', r"\g<1>5\2",
+     "AXISCORR1: Invalid index - signal input: InIdx 5 is wired twice"),
+    ("8.6", r'(<Input InIdx=")5(" OutObjId="Ethernet_1" OutIdx="6")', r"\g<1>6\2",
+     "AxisCorr_1: Invalid index - signal input: InIdx 6 (AxisCorr inputs: 0..5)"),
+    ("8.3", r'(<Input InIdx="6" OutObjID="ETHERNET1" OutIdx=")7', r"\g<1>8",
+     "AXISCORR1: Invalid index - signal output: input 6 is ETHERNET1 output 8, which no RECEIVE element feeds"),
+    ("8.6", r'(<Input InIdx="5" OutObjId="Ethernet_1" OutIdx=")6', r"\g<1>7",
+     "AxisCorr_1: Invalid index - signal output: input 5 is Ethernet_1 output 7, which no RECEIVE element feeds"),
+], ids=["rsi3-stop-in+1", "rsi3-stop-in-1", "rsix-stop-in+1", "rsi3-corr-twice", "rsix-corr-in+1",
+        "rsi3-corr-out+1", "rsix-corr-out+1"])
+def test_rsi_create_refuses_an_invalid_input_or_output_index(pc: Responder, tmp_path: Path, kss: str, pattern: str,
+                                                             replacement: str, why: str) -> None:
+    """RSI_CREATE checks every wire: an input index the object does not have, an input wired
+    twice, an output no RECEIVE element feeds (rsi-pi: "Invalid index - signal output")."""
+    files = installed(tmp_path, kss, robot_for(kss))
+    edit(context_file(files), pattern, replacement)
+    with sim(pc, kss=kss, robot=robot_for(kss), files=files) as kuka:
+        st = halted(kuka)
+        assert why in st["messages"][0] and st["runs"] == 0 and pc.packets == []
+
+
+def late_and_lost(follow: Follow, at: list[float]) -> Policy:
+    """The PC answers as ``follow``; once the axes stand at ``at`` it answers one packet with
+    the IPOC before (a late answer) and, two packets later, one not at all (a lost one)."""
+    seen = 0
+
+    def policy(pkt: Packet) -> bytes | None:
+        nonlocal seen
+        answer = follow(pkt)
+        if pkt["aipos"] == at:
+            seen += 1
+            if seen == 3:
+                return sen(pkt["IPOC"] - 1, follow.sent or [0.0] * 6)
+            if seen == 6:
+                return None
+        return answer
+
+    return policy
+
+
+
+@pytest.mark.parametrize("kss", ["8.3", "8.6"])
+def test_a_late_and_a_lost_answer_hold_the_correction_on_every_axis(pc: Responder, kss: str) -> None:
+    """HOLDON 1 on every correction: a late and a lost answer keep each axis where it is
+    (with HOLDON 0 the controller would drop that correction to 0: a jump, Command velocity)."""
+    at = [h + t for h, t in zip(HOME, HELD, strict=True)]
+    pc.policy = late_and_lost(Follow(target=HELD, step=2.0), at)
+    with sim(pc, *SLOW, kss=kss, robot=robot_for(kss)) as kuka:
+        pc.wait(lambda p: sum(q["aipos"] == at for q in p) >= 10, what="ten packets at the target")
+        st = kuka.status()
+        assert st["trips"] == [] and st["state"] == "running", st["trips"]
+        assert st["delay"] >= 2 and st["ak"] == HELD
+        first = next(k for k, q in enumerate(pc.packets) if q["aipos"] == at)
+        assert all(q["aipos"] == at for q in pc.packets[first:])  # no axis left it
+
+
+def test_holdon_0_drops_a_correction_on_a_late_answer(pc: Responder, tmp_path: Path) -> None:
+    """The stand-in's HOLDON 0: a late answer drops that output to 0, the axis would jump back."""
+    files = installed(tmp_path, "8.6", "kr16")
+    edit(files[1] / "rob6_rsi_ethernet.xml", r'(TAG="AK.A4" TYPE="DOUBLE" INDX="5" HOLDON=")1', r"\g<1>0")
+    at = [h + t for h, t in zip(HOME, HELD, strict=True)]
+    pc.policy = late_and_lost(Follow(target=HELD, step=2.0), at)
+    with sim(pc, *SLOW, files=files) as kuka:
+        st = kuka.wait_for(ended, what="the trip")
+        assert st["trips"] == ["Command velocity A4"]
+
+
+def test_relative_corrections_pile_up_and_trip_command_velocity(pc: Responder, tmp_path: Path) -> None:
+    """RSI_ON(#RELATIVE) adds each answer's AK to the overall correction: rob6's absolute AK,
+    ramping, piles up until the step exceeds what A1 can do in a cycle."""
+    files = installed(tmp_path, "8.6", "kr16")
+    edit(files[0], r"RSI_ON\(#ABSOLUTE", "RSI_ON(#RELATIVE")
+    pc.policy = Follow(target=[10, 0, 0, 0, 0, 0], step=0.5)
+    with sim(pc, *SLOW, files=files) as kuka:
+        st = kuka.wait_for(ended, what="the trip")
+        assert st["trips"] == ["Command velocity A1"]
+        assert st["aipos"][0] > 10.0  # it ran past rob6's target before the monitor stopped it
+
+
+def test_without_axiscorrmon_the_overall_correction_stops_at_6_degrees(pc: Responder, tmp_path: Path) -> None:
+    """With no AXISCORRMON object RSI monitors the overall correction at 6 deg (rsi-pi)."""
+    files = installed(tmp_path, "8.6", "kr16")
+    edit(context_file(files), r'(?s)\s*<RsiObject ObjTypeId="82".*?</RsiObject>', "")
+    pc.policy = Follow(target=[8, 0, 0, 0, 0, 0], step=0.5)
+    with sim(pc, *SLOW, files=files) as kuka:
+        st = kuka.wait_for(ended, what="the trip")
+        assert st["trips"] == [OVERALL_TRIP] and st["aipos"][0] <= HOME[0] + 6.0
+
+
+def test_kr16_on_ipo_with_rsi3_applies_no_correction(pc: Responder) -> None:
+    """RSI 3.x with RSI_ON(#IPO) (rob6IpoFast FALSE, kr16): corrections act on path motions
+    only, so RSI_MOVECORR moves nothing although packets flow (rsi-pi, RSI 3.3 manual)."""
+    pc.policy = Follow(target=[2, 0, 0, 0, 0, 0], step=0.5)
+    with sim(pc, kss="8.3", robot="kr16") as kuka:
+        pc.wait(lambda p: len(p) >= 20)
+        st = kuka.status()
+        assert st["state"] == "running" and st["cycle_ms"] == 12 and st["trips"] == []
+        assert all(q["aipos"] == HOME for q in pc.packets) and st["ak"] == [0.0] * 6
+        assert any("RSI_MOVECORR applies none" in line for line in kuka.stderr_lines)
+
+
+def test_stop_acts_on_its_rising_edge(pc: Responder, tmp_path: Path) -> None:
+    """A Stop already 1 before RSI_MOVECORR does not end it; the next 0 -> 1 does."""
+    files = installed(tmp_path, "8.6", "kr16")
+    edit(files[0], r"\r\nRSI_MOVECORR\(\)", "\r\nWAIT SEC 0.3\r\nRSI_MOVECORR()")
+    stop = threading.Event()
+    stop.set()
+    pc.policy = lambda pkt: sen(pkt["IPOC"], stop=stop.is_set())
+    with sim(pc, *SLOW, files=files) as kuka:
+        pc.wait(lambda p: len(p) >= 15, what="RSI_MOVECORR running with Stop 1")
+        assert kuka.status()["program"] == "running"
+        stop.clear()
+        n = len(pc.packets)
+        pc.wait(lambda p: len(p) >= n + 2)
+        stop.set()
+        st = kuka.wait_for(lambda s: s["program"] == "ended", what="the program to end")
+        assert st["trips"] == [] and st["stop_reason"] == "RSI_OFF"
 
 
 # ---------------------------------------------------------------------------- Stop and restart
@@ -423,12 +614,14 @@ def stop_and_restart(pc: Responder, kuka: RsiController, follow: Follow, run: in
     return pc.wait(lambda p: len(p) > n + 2)[n:]
 
 
-def test_stop_ends_the_program_cleanly_twice_in_a_row(pc: Responder) -> None:
-    """The stop and restart cycle the README describes, twice: no fault, and each new run
-    starts where the arm stands, with ASPos = AIPos (the program's PTP $AXIS_ACT)."""
+@pytest.mark.parametrize("kss", ["8.3", "8.6"])
+def test_stop_ends_the_program_cleanly_twice_in_a_row(pc: Responder, kss: str) -> None:
+    """The stop and restart cycle the README describes, twice, on both RSI generations: no
+    fault, and each new run starts where the arm stands, with ASPos = AIPos (the program's
+    PTP $AXIS_ACT). A Stop wired to another output than the Stop element never ends it."""
     follow = Follow(target=[2, 0, 0, 0, 0, 0], step=0.5)
     pc.policy = follow
-    with sim(pc, *SLOW) as kuka:
+    with sim(pc, *SLOW, kss=kss, robot=robot_for(kss)) as kuka:
         pc.wait(lambda p: p[-1]["aipos"][0] == 2.0, what="A1 at 2")
         new = stop_and_restart(pc, kuka, follow, 1)
         assert new[0]["aspos"] == new[0]["aipos"] == [2.0, -90, 90, 0, 0, 0] and new[0]["D"] == 0

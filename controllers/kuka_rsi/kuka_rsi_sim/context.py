@@ -34,15 +34,22 @@ PARAMETERS: dict[int, dict[str, tuple[int, int, str | None]]] = {
     18: {"Mode": (1, 0, "4"), "Channel": (2, 1, "0")},
     33: {**{f"LowerLim{a}": (1 + n, n, "-5") for n, a in enumerate(_AXES)},
          **{f"UpperLim{a}": (13 + n, 6 + n, "5") for n, a in enumerate(_AXES)}},
-    82: {**{f"Max{a}": (1 + n, n, "5") for n, a in enumerate(_AXES)},
-         **{f"MaxE{n + 1}": (7 + n, 6 + n, "5") for n in range(6)}},
+    82: {**{f"Max{a}": (1 + n, n, "6") for n, a in enumerate(_AXES)},
+         **{f"MaxE{n + 1}": (7 + n, 6 + n, "6") for n in range(6)}},
 }
+#: the inputs of each object type, as RSI_CREATE checks them: an Input's InIdx must be one of
+#: them (counted from the format's base), each used once. STOP: its one input; AXISCORR:
+#: CorrA1..CorrA6. ETHERNET's inputs (values sent with INDX n) and AXISCORRMON's are not
+#: modelled: the stand-in refuses them.
+INPUTS = {64: 0, 18: 1, 33: 6, 82: 0}
+#: the overall correction RSI allows per axis when the context has no AXISCORRMON
+DEFAULT_OVERALL_LIMIT = 6.0
 TYPE_NAMES = {"3": {64: "ETHERNET", 18: "STOP", 33: "AXISCORR", 82: "AXISCORRMON"},
               "4": {64: "Ethernet", 18: "Stop", 33: "AxisCorr", 82: "AxisCorrMon"}}
 #: the attributes each element carries in the reference files of a generation's format
 ATTRIBUTES = {
     "3": {"RSIObject": {"ObjType", "ObjTypeID", "ObjID"}, "Input": {"InIdx", "OutObjID", "OutIdx"},
-          "Parameter": {"Name", "ParamID", "ParamValue", "IsRuntime", "IsPublic"}},
+          "Parameter": {"Name", "ParamID", "ParamValue", "IsRuntime"}},
     "4": {"RsiObject": {"ObjTypeId", "ObjType", "ObjId"}, "Input": {"InIdx", "OutObjId", "OutIdx"},
           "Parameter": {"IsRuntime", "IsPublic", "Name", "ParamId", "ParamValue"}},
 }
@@ -68,7 +75,8 @@ class SignalFlow:
     corr_outputs: tuple[int | None, ...]  # per axis, the ETHERNET output feeding AXISCORR (None: 0)
     lower: tuple[float, ...]  # AXISCORR: each axis' correction is clamped to lower..upper
     upper: tuple[float, ...]
-    monitor: tuple[float, ...] | None  # AXISCORRMON: |correction| above this stops RSI
+    monitor: tuple[float, ...]  # |overall correction| above this stops RSI (AXISCORRMON, else the default)
+    monitor_object: str | None  # the AXISCORRMON object's id (None: the default monitor)
 
 
 @dataclass
@@ -76,7 +84,7 @@ class _Object:
     obj_id: str
     type_id: int
     params: dict[str, str]  # name -> value
-    inputs: dict[int, tuple[str, int]]  # input index (file base) -> (object id, output index)
+    inputs: dict[int, tuple[str, int]]  # input index (0-based) -> (object id, output index, 0-based)
     given: set[str]  # the parameters the file sets (the others have their default)
 
 
@@ -229,12 +237,21 @@ def _object(element: ET.Element, family: str, fname: str, type_attr: str, id_att
                                        f"expected {pid}")
                 params[pname] = p.get("ParamValue", "")
         elif stag == "Inputs":
+            base = 1 if family == "3" else 0
             for i in section:
                 _attributes(i, allowed["Input"], fname, f"{obj_id} Input")
                 try:
-                    inputs[int(i.get("InIdx", ""))] = (i.get(out_obj_attr, ""), int(i.get("OutIdx", "")))
+                    in_idx, out_idx = int(i.get("InIdx", "")) - base, int(i.get("OutIdx", "")) - base
                 except ValueError:
                     raise ContextError(f"{fname}: {obj_id}: an Input's InIdx/OutIdx is not a number") from None
+                if not 0 <= in_idx < INPUTS[type_id]:
+                    have = f"{base}..{INPUTS[type_id] - 1 + base}" if INPUTS[type_id] else "none"
+                    raise ContextError(f"{fname}: {obj_id}: Invalid index - signal input: InIdx {in_idx + base} "
+                                       f"({TYPE_NAMES[family][type_id]} inputs: {have})")
+                if in_idx in inputs:
+                    raise ContextError(f"{fname}: {obj_id}: Invalid index - signal input: InIdx {in_idx + base} "
+                                       f"is wired twice")
+                inputs[in_idx] = (i.get(out_obj_attr, ""), out_idx)
         else:
             raise ContextError(f"{fname}: {obj_id}: unknown element <{stag}>")
     given = set(params)
@@ -254,6 +271,7 @@ def _attributes(element: ET.Element, allowed: set[str], fname: str, what: str) -
 
 
 def _signal_flow(objects: dict[str, _Object], base: int, family: str, sensor_dir: Path) -> SignalFlow:
+    """The signal flow of the loaded objects; ``base`` is the format's first index (for messages)."""
     by_type: dict[int, list[_Object]] = {}
     for obj in objects.values():
         by_type.setdefault(obj.type_id, []).append(obj)
@@ -263,8 +281,6 @@ def _signal_flow(objects: dict[str, _Object], base: int, family: str, sensor_dir
     if 64 not in by_type:
         raise ContextError("the context has no ETHERNET object")
     eth = by_type[64][0]
-    if eth.inputs:
-        raise ContextError(f"{eth.obj_id}: inputs (values sent with INDX n) are not modelled by the stand-in")
     try:
         config = load_ethernet(sensor_dir / eth.params["ConfigFile"])
     except ConfigError as e:
@@ -275,7 +291,7 @@ def _signal_flow(objects: dict[str, _Object], base: int, family: str, sensor_dir
 
     def source(obj: _Object, index: int) -> int | None:
         """The ETHERNET output (1-based, as INDX) feeding ``obj``'s input ``index`` (0-based)."""
-        wired = obj.inputs.get(index + base)
+        wired = obj.inputs.get(index)
         if wired is None:
             return None
         src, out = wired
@@ -284,10 +300,10 @@ def _signal_flow(objects: dict[str, _Object], base: int, family: str, sensor_dir
         if src != eth.obj_id:
             raise ContextError(f"{obj.obj_id}: input {index + base} comes from {src}: the stand-in models inputs "
                                f"fed by {eth.obj_id} only")
-        indx = out - base + 1
+        indx = out + 1
         if config.output(indx) is None:
-            raise ContextError(f"{obj.obj_id}: input {index + base} is {eth.obj_id} output {out}, which no "
-                               f"RECEIVE element feeds (INDX {indx})")
+            raise ContextError(f"{obj.obj_id}: Invalid index - signal output: input {index + base} is "
+                               f"{eth.obj_id} output {out + base}, which no RECEIVE element feeds (INDX {indx})")
         return indx
 
     stop_output = None
@@ -304,17 +320,19 @@ def _signal_flow(objects: dict[str, _Object], base: int, family: str, sensor_dir
     corr_outputs = tuple(source(corr, n) for n in range(6))
     lower = tuple(_real(corr, f"LowerLim{a}", None, 0.0) for a in _AXES)
     upper = tuple(_real(corr, f"UpperLim{a}", 0.0) for a in _AXES)
-    monitor = None
+    monitor: tuple[float, ...] = (DEFAULT_OVERALL_LIMIT,) * 6
+    monitor_object = None
     if 82 in by_type:
         mon = by_type[82][0]
-        monitor = tuple(_real(mon, f"Max{a}", 0.0) for a in _AXES)
+        monitor, monitor_object = tuple(_real(mon, f"Max{a}", 0.0) for a in _AXES), mon.obj_id
         for n in range(6):
             _real(mon, f"MaxE{n + 1}", 0.0)
     for n, indx in enumerate(corr_outputs):
         element = None if indx is None else config.output(indx)
         if element is not None and element.type != "DOUBLE":
             raise ContextError(f"{corr.obj_id} input {n + base} is fed by {element.tag}, a {element.type}")
-    return SignalFlow(eth.obj_id, config, timeout, precision, stop_output, corr_outputs, lower, upper, monitor)
+    return SignalFlow(eth.obj_id, config, timeout, precision, stop_output, corr_outputs, lower, upper, monitor,
+                      monitor_object)
 
 
 def _real(obj: _Object, name: str, lo: float | None = None, hi: float | None = None) -> float:

@@ -5,7 +5,9 @@ controller reads it: ``<ROOT>`` with ``<CONFIG>`` (IP_NUMBER, PORT, SENTYPE, ONL
 ``<SEND>`` and ``<RECEIVE>``, each a list of ``<ELEMENT TAG TYPE INDX [HOLDON]/>``.
 Anything else (an unknown element or attribute, ``Type`` for ``TYPE``, a type that is
 not BOOL, STRING, LONG or DOUBLE, an index out of 1..64) is a configuration error, which
-makes ``RSI_CREATE`` fail. Sources: controllers/kuka_rsi/README.md.
+makes ``RSI_CREATE`` fail. A RECEIVE element with ``INDX="INTERNAL"`` (``DEF_EStr``, a text
+for the smartHMI, ``DEF_Tech.T..``) feeds no ETHERNET output: it is accepted and not
+modelled. Sources: controllers/kuka_rsi/README.md.
 """
 
 from __future__ import annotations
@@ -53,7 +55,8 @@ class EthernetConfig:
     sentype: str
     only_send: bool
     send: tuple[str, ...]  # the internal values sent, in the file's order (RIst, AIPos, ...)
-    receive: tuple[Received, ...]
+    receive: tuple[Received, ...]  # the elements feeding the ETHERNET object's outputs
+    receive_internal: tuple[str, ...] = ()  # RECEIVE tags with INDX="INTERNAL" (not modelled)
 
     def output(self, indx: int) -> Received | None:
         """The RECEIVE element on output ``indx`` (1-based), if any."""
@@ -77,9 +80,9 @@ def load_ethernet(path: Path) -> EthernetConfig:
         raise ConfigError(f"{path.name}: no <CONFIG>")
     config = _config(sections["CONFIG"], path.name)
     send = _send(sections.get("SEND"), path.name)
-    receive = _receive(sections.get("RECEIVE"), path.name)
+    receive, internal = _receive(sections.get("RECEIVE"), path.name)
     return EthernetConfig(config["IP_NUMBER"], _int(config["PORT"], "PORT", path.name), config["SENTYPE"],
-                          _bool(config["ONLYSEND"], "ONLYSEND", path.name), send, receive)
+                          _bool(config["ONLYSEND"], "ONLYSEND", path.name), send, receive, internal)
 
 
 def _config(section: ET.Element, name: str) -> dict[str, str]:
@@ -134,9 +137,16 @@ def _send(section: ET.Element | None, name: str) -> tuple[str, ...]:
     return tuple(sent)
 
 
-def _receive(section: ET.Element | None, name: str) -> tuple[Received, ...]:
+def _receive(section: ET.Element | None, name: str) -> tuple[tuple[Received, ...], tuple[str, ...]]:
     received: list[Received] = []
+    internal: list[str] = []
     for e in _elements(section, "RECEIVE", name):
+        if e["INDX"] == "INTERNAL":
+            if not e["TAG"].startswith("DEF_") or e["TAG"] in internal:
+                raise ConfigError(f"{name}: RECEIVE element {e['TAG']!r} with INDX INTERNAL: only a DEF_ value, "
+                                  f"once")
+            internal.append(e["TAG"])
+            continue
         indx = _int(e["INDX"], f"INDX of {e['TAG']}", name)
         if not 1 <= indx <= MAX_CHANNELS:
             raise ConfigError(f"{name}: RECEIVE element {e['TAG']}: INDX {indx} is outside 1..{MAX_CHANNELS}")
@@ -149,7 +159,7 @@ def _receive(section: ET.Element | None, name: str) -> tuple[Received, ...]:
         if any(x.tag == r.tag for x in received):
             raise ConfigError(f"{name}: RECEIVE element {r.tag} appears twice")
         received.append(r)
-    return tuple(received)
+    return tuple(received), tuple(internal)
 
 
 def _int(text: str, what: str, name: str) -> int:

@@ -9,7 +9,8 @@ control flow decides what the controller does after a Stop, a HALT or an error.
 
 Statements: DECL INT/BOOL/REAL, the BASISTECH INI lines (GLOBAL INTERRUPT DECL ... IR_STOPM,
 INTERRUPT ON, BAS), PTP ($AXIS_ACT, an E6AXIS variable or aggregate), WAIT SEC,
-``x = RSI_CREATE(name, id, TRUE|FALSE)``, ``x = RSI_ON(#ABSOLUTE[, #IPO_FAST|#IPO])``,
+``x = RSI_CREATE(name, id, TRUE|FALSE)``, ``x = RSI_ON(#ABSOLUTE|#RELATIVE[, #IPO_FAST|#IPO])``
+(the sensor mode defaults to #IPO_FAST),
 ``RSI_MOVECORR()``, ``x = RSI_OFF()``, ``x = RSI_DELETE(id)``, IF/ELSE/ENDIF, LOOP/ENDLOOP,
 HALT. The .dat: DECL BOOL/INT/REAL/E6AXIS with a value, DECL CHAR x[n] then x[]="...".
 """
@@ -24,6 +25,8 @@ from typing import Any, Protocol
 AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 RSIOK = "RSIOK"  # the return value of a successful RSI command (its number is not modelled)
 IPO_CYCLES = {"#IPO_FAST": 4, "#IPO": 12}
+#: RSI_ON's sensor mode when the call names none (rsi-pi RSIPI_Minimal.src, quoting the RSI 3.3 manual)
+DEFAULT_IPO_MODE = "#IPO_FAST"
 
 
 class KrlError(ValueError):
@@ -48,7 +51,7 @@ class Controller(Protocol):
 
     def axis_act(self) -> list[float]: ...
     def rsi_create(self, name: str, permanent: bool) -> tuple[str, int]: ...
-    def rsi_on(self, mode: str, cycle_ms: int) -> str: ...
+    def rsi_on(self, mode: str, ipo_mode: str) -> str: ...
     def rsi_off(self) -> str: ...
     def rsi_delete(self, cont_id: int) -> str: ...
     def needs_confirm(self) -> bool: ...
@@ -76,7 +79,8 @@ _SIMPLE = [
     ("wait_sec", re.compile(r"WAIT\s+SEC\s+(\d+(?:\.\d*)?)$", re.I)),
     ("rsi_create", re.compile(rf"({_IDENT})\s*=\s*RSI_CREATE\s*\(\s*(\"[^\"]*\"|{_IDENT}\[\])\s*,\s*({_IDENT})"
                               r"\s*,\s*(TRUE|FALSE)\s*\)$", re.I)),
-    ("rsi_on", re.compile(rf"({_IDENT})\s*=\s*RSI_ON\s*\(\s*#ABSOLUTE\s*(?:,\s*(#IPO_FAST|#IPO))?\s*\)$", re.I)),
+    ("rsi_on", re.compile(rf"({_IDENT})\s*=\s*RSI_ON\s*\(\s*(#ABSOLUTE|#RELATIVE)\s*(?:,\s*(#IPO_FAST|#IPO))?\s*\)$",
+                          re.I)),
     ("movecorr", re.compile(r"RSI_MOVECORR\s*\(\s*\)$", re.I)),
     ("rsi_off", re.compile(rf"({_IDENT})\s*=\s*RSI_OFF\s*\(\s*\)$", re.I)),
     ("rsi_delete", re.compile(rf"({_IDENT})\s*=\s*RSI_DELETE\s*\(\s*({_IDENT})\s*\)$", re.I)),
@@ -311,7 +315,7 @@ def _exec(body: Sequence[Stmt], v: dict[str, Any], ctl: Controller,
         elif kind == "rsi_on":
             if ctl.needs_confirm():
                 yield Wait("confirm", stmt.line)
-            v[a[0].upper()] = ctl.rsi_on("#ABSOLUTE", IPO_CYCLES[(a[1] or "#IPO").upper()])
+            v[a[0].upper()] = ctl.rsi_on(a[1].upper(), (a[2] or DEFAULT_IPO_MODE).upper())
         elif kind == "movecorr":
             yield Wait("movecorr")
         elif kind == "rsi_off":

@@ -2,8 +2,10 @@
 
 The loaded context decides the signal flow (RSI_ON(#ABSOLUTE)): ETHERNET (answers read with
 the configuration's RECEIVE elements, HOLDON on a late answer, Timeout) -> STOP
-(ExitMoveCorr: RSI_MOVECORR returns) and -> AXISCORR (each axis' correction clamped to its
-LowerLim..UpperLim) with AXISCORRMON (a correction beyond Max stops RSI); then the motion
+(ExitMoveCorr: RSI_MOVECORR returns on its input's rising edge) and -> AXISCORR (the overall
+correction: each cycle's value itself with #ABSOLUTE, the sum of all with #RELATIVE, clamped
+to LowerLim..UpperLim) with the overall correction monitor (AXISCORRMON's Max, else 6 deg:
+beyond it RSI stops); on RSI 3.x with #IPO no correction moves the axes; then the motion
 system: the command ASPos + correction must stay inside the software limit switches and
 must not step faster than an axis can move; the axes follow the command at most at rated
 speed. ASPos is the programmed position RSI_ON found (the last motion's target), never a
@@ -12,6 +14,7 @@ corrected one. Corrections move the axes only while RSI_MOVECORR runs.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Sequence
 
 from .context import SignalFlow
@@ -27,13 +30,18 @@ VEL_ABS_TOLERANCE = 2e-4
 MAX_TRIPS_KEPT = 100
 #: the message of the ETHERNET object stopping RSI after Timeout late packets, by generation
 TIMEOUT_ERROR = {"3": "RSIBad", "4.1": "RSITimeout", "5.0": "RSITimeout"}
+#: T1: the flange's Cartesian velocity is monitored at 250 mm/s (the ri README, Testing)
+T1_VELOCITY_MM_S = 250.0
 
 
 class Rsi:
     def __init__(self, machine: Machine, generation: str, start_pose: Sequence[float],
-                 log: Callable[[str], None]) -> None:
+                 log: Callable[[str], None], t1: bool = False) -> None:
         self.machine = machine
         self.generation = generation
+        self.t1 = t1  # operating mode T1: the flange's velocity is monitored
+        self.relative = False  # RSI_ON(#RELATIVE): each cycle's correction adds to the overall one
+        self.corrects = True  # False: RSI_ON's sensor mode applies no correction in RSI_MOVECORR
         self.flow: SignalFlow | None = None  # the context RSI_ON switched on
         self.cycle_ms = 12
         self._kin = Kinematics(machine)
@@ -53,7 +61,8 @@ class Rsi:
         self.aipos = [float(v) for v in start_pose]
         self.aspos = list(self.aipos)
         self.outputs: dict[int, float | str] = {}  # the ETHERNET object's outputs (RECEIVE INDX -> value)
-        self.corr = [0.0] * 6  # AXISCORR's output: the correction applied
+        self.corr = [0.0] * 6  # AXISCORR's output: the overall correction applied
+        self._stop_input = 0.0  # the Stop object's input last cycle (it acts on a rising edge)
         self.cmd = list(self.aipos)
         self.cycle = 0  # packets of this run
         self.delay = 0  # late packets of this run (the Delay element)
@@ -79,11 +88,18 @@ class Rsi:
         self.aipos = [float(v) for v in pose]
         self.cmd = list(self.aipos)
 
-    def set_flow(self, flow: SignalFlow, cycle_ms: int) -> None:
-        """The context and cycle of the next run (RSI_ON)."""
+    def set_flow(self, flow: SignalFlow, cycle_ms: int, mode: str = "#ABSOLUTE", ipo_mode: str = "#IPO_FAST") -> None:
+        """The context, cycle and modes of the next run (RSI_ON(mode, ipo_mode))."""
         assert not self.running
         self.flow = flow
         self.cycle_ms = cycle_ms
+        self.relative = mode == "#RELATIVE"
+        # RSI 3.x: in #IPO mode corrections act on LIN/CIRC path motions only, so none in
+        # RSI_MOVECORR (rsi-pi RSIPI_Minimal.src, quoting the RSI 3.3 manual 4.1 and 7.1.4)
+        self.corrects = not (self.generation == "3" and ipo_mode == "#IPO")
+        if not self.corrects:
+            self._log("RSI 3.x, RSI_ON(#IPO): corrections act on LIN/CIRC path motions only; "
+                      "RSI_MOVECORR applies none")
         self._writer = RobWriter(flow.ethernet.send, flow.precision)
         dt = cycle_ms / 1000.0
         self._servo_step = tuple(r * dt for r in self.machine.rated)
@@ -100,6 +116,7 @@ class Rsi:
         self.cmd = list(self.aipos)
         self.outputs = {}
         self.corr = [0.0] * 6
+        self._stop_input = 0.0
         self.cycle = 0
         self.delay = 0
         self.not_taken = 0
@@ -176,21 +193,27 @@ class Rsi:
     def _signal_flow(self) -> None:
         flow = self.flow
         assert flow is not None
+        stop_input = self.outputs.get(flow.stop_output, 0.0) if flow.stop_output is not None else 0.0
+        stop = stop_input not in (0.0, "") and self._stop_input in (0.0, "")  # a rising edge
+        self._stop_input = 0.0 if stop_input == "" else float(stop_input)
+        if not self.in_movecorr or not self.corrects:
+            if stop and self.in_movecorr:
+                self._movecorr_returns()
+            return  # outside RSI_MOVECORR (or in a mode without corrections) the axes do not move
         corr = [0.0] * 6
         for n, indx in enumerate(flow.corr_outputs):  # AXISCORR clamps each axis to its window
             raw = self.outputs.get(indx, 0.0) if indx is not None else 0.0
             assert isinstance(raw, float)
-            self.max_ak_step[n] = max(self.max_ak_step[n], abs(raw - self.corr[n]))
-            corr[n] = min(max(raw, flow.lower[n]), flow.upper[n])
-        if flow.monitor is not None:  # AXISCORRMON stops RSI beyond its window
-            for n in range(6):
-                if abs(corr[n]) > flow.monitor[n]:
-                    self._trip(f"AXISCORRMON: correction limit {AXES[n]} exceeded",
-                               f"correction {AXES[n]} = {corr[n]:.4f}, Max{AXES[n]} {flow.monitor[n]:g}")
-                    return
-        stop = flow.stop_output is not None and self.outputs.get(flow.stop_output, 0.0) not in (0.0, "")
-        if not self.in_movecorr:
-            return  # outside RSI_MOVECORR the axes do not move
+            step = raw if self.relative else raw - self.corr[n]
+            self.max_ak_step[n] = max(self.max_ak_step[n], abs(step))
+            overall = self.corr[n] + raw if self.relative else raw
+            corr[n] = min(max(overall, flow.lower[n]), flow.upper[n])
+        for n in range(6):  # the overall correction monitor (AXISCORRMON, or RSI's default)
+            if abs(corr[n]) > flow.monitor[n]:
+                self._trip("KSS29000 AXISCORR Permissible overall correction exceeded: RSI is stopped",
+                           f"overall correction {AXES[n]} = {corr[n]:.4f}, limit {flow.monitor[n]:g} "
+                           f"({flow.monitor_object or 'no AXISCORRMON: the default'})")
+                return
         cmd = [self.aspos[n] + corr[n] for n in range(6)]
         for n in range(6):
             if cmd[n] > self._upper[n] or cmd[n] < self._lower[n]:
@@ -209,12 +232,23 @@ class Rsi:
                     f"limit {self.vel_limit[n]:.4f} ({self.machine.rated[n]:g} deg/s)",
                 )
                 return
+        if self.t1:
+            before, after = self._pose("rsol", self.cmd), self._kin.pose(tuple(cmd))
+            speed = math.dist(before[:3], after[:3]) / (self.cycle_ms / 1000.0)
+            if speed > T1_VELOCITY_MM_S * (1.0 + VEL_TOLERANCE):
+                self._trip("T1: Cartesian velocity 250 mm/s exceeded",
+                           f"flange {speed:.1f} mm/s in one {self.cycle_ms} ms cycle")
+                return
         self.corr = corr
         self.cmd = cmd
-        if stop:  # the Stop object, Mode ExitMoveCorr
-            self.in_movecorr = False
-            self.movecorr_done = True
-            self._log(f"run {self.runs}: Stop from the PC: RSI_MOVECORR returns")
+        if stop:
+            self._movecorr_returns()
+
+    def _movecorr_returns(self) -> None:
+        """The Stop object (Mode ExitMoveCorr) fired: RSI_MOVECORR returns."""
+        self.in_movecorr = False
+        self.movecorr_done = True
+        self._log(f"run {self.runs}: Stop from the PC: RSI_MOVECORR returns")
 
     def _pose(self, which: str, q: Sequence[float]) -> Pose:
         key = tuple(q)

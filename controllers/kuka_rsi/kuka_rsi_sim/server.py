@@ -74,7 +74,7 @@ class Simulator:
         src = opts.program
         self.program = krl.parse_program(src.read_text("ascii"), src.with_suffix(".dat").read_text("ascii"),
                                          src.stem)
-        self.rsi = Rsi(opts.machine, opts.generation, opts.start_pose, log)
+        self.rsi = Rsi(opts.machine, opts.generation, opts.start_pose, log, opts.t1)
         self.cycle_ms = opts.cycle_ms or 12
         self.period = self.cycle_ms / 1000.0
         # select(): microsecond timeouts (epoll and poll round up to whole milliseconds)
@@ -298,7 +298,7 @@ class Simulator:
             f"SENTYPE {flow.ethernet.sentype}")
         return krl.RSIOK, cont_id
 
-    def rsi_on(self, mode: str, cycle_ms: int) -> str:
+    def rsi_on(self, mode: str, ipo_mode: str) -> str:
         if not self.bco:
             raise krl.ProgramStop("KSS01443 Impermissible start motion: RSI_ON needs a motion first (BCO run)")
         if self.rsi.running:
@@ -313,9 +313,9 @@ class Simulator:
         if not self._resolve(flow):
             return "RSI_ON failed"
         self.active = cont_id
-        self.cycle_ms = self.opts.cycle_ms or cycle_ms
+        self.cycle_ms = self.opts.cycle_ms or krl.IPO_CYCLES[ipo_mode]
         self.period = self.cycle_ms / 1000.0
-        self.rsi.set_flow(flow, self.cycle_ms)
+        self.rsi.set_flow(flow, self.cycle_ms, mode, ipo_mode)
         self.rsi.start_run(self.programmed)
         self._reset_run_stats()
         now = time.monotonic()
