@@ -10,13 +10,14 @@ part and when; nothing moves.
 from __future__ import annotations
 
 import logging
+import os
 import threading
 from collections.abc import Sequence
 
 import numpy as np
 
 from rob6.bus import Bus, BusError
-from rob6.cell import CellModel, Guard
+from rob6.cell import CellModel, Guard, default_cell, load_cell
 from rob6.messages import Cell, Empty
 from rob6.robots import RobotModel
 
@@ -83,9 +84,27 @@ class PathCheck:
     def pose(self, joints: list[float]) -> str:
         """IsPossible: why the arm may not be at ``joints`` (a zone of the lab's cell file, or
         the margin), or "". With the default cell IsPossible answers as the original did: its
-        transcripts ask about poses below the floor and count on ``true`` (docs/SAFETY_ZONES.md)."""
-        guard = self._guard()
+        transcripts ask about poses below the floor and count on ``true`` (docs/SAFETY_ZONES.md).
+        A question about a pose needs no driver: while the driver's cell is not known (it has
+        not answered since the planner started), the cell this planner was started with
+        (``ROB6_CELL``, else the default) answers."""
+        try:
+            guard = self._guard()
+        except CellUnknown:
+            guard = self._own_guard()
         if not guard.model.cell.from_file:
             return ""
         stop = guard.pose(np.asarray(joints, float))
         return f"pose in the cell's way: {stop.describe()}" if stop is not None else ""
+
+    def _own_guard(self) -> Guard:
+        """The guard of the cell this planner was started with (``ROB6_CELL``, else the default)."""
+        local = self._local
+        if getattr(local, "own", None) is None:
+            path = os.environ.get("ROB6_CELL")
+            cell = load_cell(path) if path else default_cell(self.robot)
+            log.warning("the driver's cell is not known: IsPossible answers with %s until the driver answers",
+                        cell.source)
+            local.own = Guard(CellModel(self.robot, cell))
+        own: Guard = local.own
+        return own
