@@ -8,6 +8,7 @@ the arm, a tool of a capsule and a sphere).
 
 from __future__ import annotations
 
+import socket
 import tempfile
 import time
 from collections.abc import Callable
@@ -15,18 +16,25 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.ports import free_port
+from harness.system import running
 from rob6.cell import CellModel, Guard, default_cell, load_cell
-from rob6.messages import Cell
+from rob6.messages import Cell, LinkQuery
 from rob6.robots import get_robot
+from rob6.units import UNIT_CYCLE_S
 from rob6_driver.limits import Limits
 from rob6_driver.motion import MotionCore
 from rob6_driver.zones import ZoneGuard
 from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import JointLimits, TrajectoryPlanner
+from tests.controllers.rsi_controller import SYSTEM_TIMEOUT, install
 
+from .links import ControllerSim
 from .tables import Table
 
 RSI_CYCLE_MS = 4.0
+#: the long PTP whose check runs beside the RSI cycle (issue 56's figure: a 22 s PTP)
+LONG_PTP_S = 22.0
 ROBOT = "kr16"
 #: q(s) = (0, s, 90, 0, -s, 0): the flange points down, lower as s grows (tests/cell/zone_rig.py)
 HOVER = np.array([0.0, -55.0, 90.0, 0.0, 55.0, 0.0])
@@ -43,7 +51,7 @@ def busy_cell() -> str:
         boxes.append(f"  - {{name: box{k}, keep: out, box: {{min: [{x - 100:.0f}, {y - 100:.0f}, 0], "
                      f"max: [{x + 100:.0f}, {y + 100:.0f}, 900]}}}}")
     return ("margin_mm: 5\nzones:\n" + "\n".join(boxes) + "\ntool:\n"
-            "  - {name: gripper, capsule: {from: [0, 0, 0], to: [0, 0, -125], radius: 12}}\n"
+            "  - {name: gripper, capsule: {from: [0, 0, -12], to: [0, 0, -125], radius: 12}}\n"
             "  - {name: tool tip, sphere: {center: [0, 0, -150], radius: 25}}\n")
 
 
@@ -78,7 +86,7 @@ def _ptp(start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
 def setpoint_rows(count: int) -> list[tuple[object, ...]]:
     """One setpoint's check, over every setpoint of two PTPs: one far from every zone, one
     ending 40 mm above the floor; as Alter's are checked (no path known ahead) and as a
-    straight trajectory's are (its poses known clear)."""
+    straight trajectory's are (its poses known clear), with the way from the setpoint before."""
     robot = get_robot(ROBOT)
     limits = Limits.defaults(robot)
     moves = {"a PTP far from every zone": _ptp(HOVER, HOVER + np.array([60.0, 10.0, -10.0, 30.0, -10.0, 45.0])),
@@ -92,7 +100,8 @@ def setpoint_rows(count: int) -> list[tuple[object, ...]]:
                 for _ in range(max(1, count // len(q))):
                     for k in range(len(q)):
                         start = time.perf_counter()
-                        guard.setpoint(q[k], qd[k], qdd[k], limits.vmax, limits.amax, limits.jmax, along=along)
+                        guard.setpoint(q[k], qd[k], qdd[k], limits.vmax, limits.amax, limits.jmax, along=along,
+                                       prev=q[k - 1] if k else None)
                         samples.append((time.perf_counter() - start) * 1e6)
                 p50, p99 = _p50_p99(samples)
                 rows.append((name, move, how, f"{p50:.0f}", f"{p99:.0f}", f"{max(samples):.0f}",
@@ -145,6 +154,47 @@ def path_rows(repeat: int) -> list[tuple[object, ...]]:
     return rows
 
 
+def rsi_long_ptp() -> dict[str, float]:
+    """A 22 s PTP on kr16rt over RSI (kuka-rsi-sim, KSS 8.6) with ten boxes and a tool: the
+    late packets the controller counted from the move's request to its end (the driver checks
+    the trajectory's poses as it takes it, beside the RSI thread), and what that check costs."""
+    robot = get_robot("kr16rt")
+    udp = free_port(socket.SOCK_DGRAM)
+    start, end = np.array([-60.0, -80.0, 100.0, 0.0, 30.0, 0.0]), np.array([60.0, -80.0, 100.0, 0.0, 30.0, 0.0])
+    speed = [120.0 / LONG_PTP_S * UNIT_CYCLE_S] * 6  # deg per 12 ms: 120 deg of A1 in some 22 s
+    with tempfile.TemporaryDirectory() as logs:
+        cell = Path(logs) / "busy.yaml"
+        cell.write_text(busy_cell())
+        with running("kr16rt", dummy=False, log_dir=logs, extra_env={
+                "ROB6_LINK": "rsi", "ROB6_RSI_LISTEN": f"127.0.0.1:{udp}", "ROB6_CELL": str(cell)}) as system:
+            bus = system.bus("bench")
+            program, sensor = install(Path(logs) / "kr-c4", "8.6", "kr16rt")
+            kuka = ControllerSim("kuka_rsi_sim", "--program", str(program), "--sensor-interface", str(sensor),
+                                 "--kss", "8.6", "--robot", "kr16rt", "--rob6", f"127.0.0.1:{udp}",
+                                 "--timeout", str(SYSTEM_TIMEOUT), "--start-pose", ",".join(f"{v:g}" for v in start))
+            try:
+                while bus.request("driver", "link", LinkQuery()).state != "connected":
+                    time.sleep(0.05)
+                with system.client() as client:
+                    assert client.ask("SetJointsMaxSpeed " + " ".join(f"{v:f}" for v in speed)) == "true\n"
+                    before = kuka.status()["late_total"]
+                    began = time.monotonic()
+                    assert client.ask("MovePTPJoints " + " ".join(f"{v:g}" for v in end), timeout=120) == "true\n"
+                    took = time.monotonic() - began
+                    late = kuka.status()["late_total"] - before
+            finally:
+                kuka.close()
+                bus.close()
+    config = MotionSettings(robot)
+    config.speed = speed
+    plan = TrajectoryPlanner(robot).plan_ptp(start, end, config)
+    assert plan.ok and plan.trajectory is not None
+    q = plan.trajectory.q
+    zones = ZoneGuard(robot, _cells()["10 boxes and a tool"])
+    check = _us(lambda: zones.trajectory(q, robot.cycle_s), 5)
+    return {"seconds": took, "late": late, "samples": len(q), "check_ms": check[0] / 1000}
+
+
 def zones_table(table: Table, count: int = 2000) -> None:
     table(f"Safety zones: one setpoint's check (FK, distances, the brake; {ROBOT}), us, against the "
           f"{RSI_CYCLE_MS:g} ms RSI cycle", ("cell", "setpoints of", "checked as", "p50", "p99", "max", "p99 of the cycle"),
@@ -153,6 +203,10 @@ def zones_table(table: Table, count: int = 2000) -> None:
           ("cell", "p50", "p99", "p99 of the cycle"), core_rows(count))
     table(f"Safety zones: the planner's check of a PTP ({ROBOT}), ms", ("what", "length", "p50", "p99"),
           path_rows(max(20, count // 100)))
+    run = rsi_long_ptp()
+    table("Safety zones: a long PTP over RSI (kr16rt, kuka-rsi-sim, 10 boxes and a tool)",
+          ("PTP", "samples", "the driver's check of its poses, ms (p50)", "late packets (controller)", "goal"),
+          [(f"{run['seconds']:.1f} s", run["samples"], f"{run['check_ms']:.1f}", run["late"], "0")])
 
 
 if __name__ == "__main__":

@@ -171,7 +171,7 @@ class Guard:
         self._inp.control_interface = ruckig.ControlInterface.Velocity
         self._inp.target_velocity = [0.0] * N_JOINTS
         self._inp.target_acceleration = [0.0] * N_JOINTS
-        self._last: tuple[bytes, np.ndarray] | None = None  # the last setpoint's distances
+        self._last: tuple[bytes, float] | None = None  # the last setpoint asked about, and its nearest distance
 
     @property
     def empty(self) -> bool:
@@ -225,13 +225,21 @@ class Guard:
             return None
         top = self.margin if floors is None else float(floors.max())
         d = None
-        room = self.model.nearest(q) - top
+        nearest = self.model.nearest(q)
+        last, self._last = self._last, (q.tobytes(), nearest)
+        room = nearest - top
         if room <= 0:  # measured pair by pair: one within its margin (a way out) may be fine
             d = self.model.distances(q)
             if floors is None or (d <= floors).any():
                 return self._worst(d, 0.0, floors)
-        if prev is not None and (stop := self._step(prev, q, d, floors)) is not None:
-            return stop
+        if prev is not None:
+            # the way from the setpoint before (whose nearest distance the last call measured)
+            before = last[1] if last is not None and last[0] == prev.tobytes() else self.model.nearest(prev)
+            if before - top + room <= self.model.travel(q - prev).max():
+                d = self.model.distances(q) if d is None else d
+                found = self._between(prev, q, self.model.distances(prev), d, self.margins if floors is None else floors)
+                if found is not None:
+                    return self._worst(found[1], 0.0, floors)
         if floors is not None and (stop := self._too_fast(qd, floors, d if d is not None else self.model.distances(q))):
             return stop
         if not qd.any() and not qdd.any():
@@ -273,17 +281,6 @@ class Guard:
                                            delta, budget):
                     return self._worst(d, needed, floors)
         return None
-
-    def _step(self, prev: np.ndarray, q: np.ndarray, d: np.ndarray | None, floors: np.ndarray | None) -> Stop | None:
-        """The way from the last setpoint ``prev`` to ``q``, a straight line in joint space:
-        clear when both ends' room covers how much nearer any pair can come between them."""
-        key = prev.tobytes()
-        d_prev = self._last[1] if self._last is not None and self._last[0] == key else self.model.distances(prev)
-        d_q = self.model.distances(q) if d is None else d
-        self._last = (q.tobytes(), d_q)
-        floor = self.margins if floors is None else floors
-        found = self._between(prev, q, d_prev, d_q, floor)
-        return None if found is None else self._worst(found[1], 0.0, floors)
 
     def _too_fast(self, qd: np.ndarray, floors: np.ndarray, d: np.ndarray) -> Stop | None:
         """On a way out, a pair within its margin moves at most ``ESCAPE_SPEED_MM_S``."""
