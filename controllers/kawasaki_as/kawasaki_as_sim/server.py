@@ -129,12 +129,13 @@ class Controller:
     def motion_room(self) -> bool:
         return self.arm.room()
 
-    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool) -> None:
+    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool,
+             speed_pct: float) -> None:
         why = outside_range(q)
         if why:
             # AS refuses a destination outside the motion range: "(E1088) Destination is out of motion range."
             raise AsError("E1088", f"Destination is out of motion range: {why}")
-        self.arm.move(Segment(q, seconds, accuracy_mm, stop, after_rest))
+        self.arm.move(Segment(q, seconds, accuracy_mm, stop, after_rest, speed_pct))
 
     def settled(self) -> bool:
         self.arm.advance(self.clock)
