@@ -23,9 +23,10 @@ PTP = ([30.0, -20.0, 50.0, 10.0, 20.0, -20.0], [-20.0, -40.0, 60.0, -10.0, 40.0,
 
 
 def kawasaki_stream(seconds: float) -> dict[str, Any]:
-    port = free_port()
-    sim = ControllerSim("kawasaki_as_sim", "--port", str(port))
-    before, after, link, moves = streamed_points_run("kaw_fs", {"ROB6_LINK": "kawasaki", "ROB6_KAS_PORT": str(port)},
+    port, state_port = free_port(), free_port()
+    sim = ControllerSim("kawasaki_as_sim", "--port", str(port), "--state-port", str(state_port))
+    before, after, link, moves = streamed_points_run("kaw_fs", {"ROB6_LINK": "kawasaki", "ROB6_KAS_PORT": str(port),
+                                                                 "ROB6_KAS_STATE_PORT": str(state_port)},
                                                      sim, "the Kawasaki link", START, PTP, "EnableAlter", seconds,
                                                      lin_y_mm=60.0)
     def refused(st: dict[str, Any]) -> int:

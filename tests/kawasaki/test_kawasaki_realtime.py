@@ -36,13 +36,15 @@ POSITION_TOL = 1.5e-3
 LEAD_US = 2 * 48_000
 
 
-def kawasaki_system(port: int, **kwargs: Any) -> AbstractContextManager[System]:
+def kawasaki_system(ports: tuple[int, int], **kwargs: Any) -> AbstractContextManager[System]:
+    """The driver on the program's port and its state port."""
     return running("kaw_fs", dummy=False, extra_env={
-        "ROB6_LINK": "kawasaki", "ROB6_KAS_HOST": "127.0.0.1", "ROB6_KAS_PORT": str(port)}, **kwargs)
+        "ROB6_LINK": "kawasaki", "ROB6_KAS_HOST": "127.0.0.1", "ROB6_KAS_PORT": str(ports[0]),
+        "ROB6_KAS_STATE_PORT": str(ports[1])}, **kwargs)
 
 
-def controller(port: int, *args: str) -> KawasakiController:
-    return KawasakiController("--port", str(port), *args)
+def controller(ports: tuple[int, int], *args: str) -> KawasakiController:
+    return KawasakiController("--port", str(ports[0]), "--state-port", str(ports[1]), *args)
 
 
 RIG = StreamedRig(ROBOT, START, POSITION_TOL, moving_key="moving")
@@ -56,7 +58,8 @@ def session(client: Client, ctl: KawasakiController) -> None:
 
 
 def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> None:
-    (port,) = free_tcp_ports(1)
+    first, second = free_tcp_ports(2)
+    port = (first, second)
     with kawasaki_system(port, log_dir=str(tmp_path)) as system, system.client() as client:
         waiting = f"ERROR: driver: robot not connected (waiting for the Kawasaki AS program at 127.0.0.1:{port})\n"
         assert reply(client, "MovePTPJoints 10 -30 40 0 30 0") == waiting + "false\n"
@@ -82,9 +85,10 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> N
 
 
 @pytest.fixture(scope="module")
-def kawasaki() -> Iterator[tuple[System, int]]:
+def kawasaki() -> Iterator[tuple[System, tuple[int, int]]]:
     """One rob6 system on the kawasaki link for the fault tests; each test brings its own controller."""
-    (port,) = free_tcp_ports(1)
+    first, second = free_tcp_ports(2)
+    port = (first, second)
     with kawasaki_system(port) as system:
         yield system, port
 
@@ -93,7 +97,7 @@ Rig = tuple[System, KawasakiController, Client]
 
 
 @pytest.fixture
-def rig(kawasaki: tuple[System, int]) -> Iterator[Rig]:
+def rig(kawasaki: tuple[System, tuple[int, int]]) -> Iterator[Rig]:
     """A fault test's start: a controller of its own, rob6 connected to it, and a client."""
     system, port = kawasaki
     with controller(port) as ctl, system.client() as client:
