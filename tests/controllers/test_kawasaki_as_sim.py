@@ -22,41 +22,44 @@ from tests.motion.link_session import wait_until
 pytestmark = pytest.mark.slow
 
 ZERO = "0.000 90.000 0.000 0.000 0.000 0.000"  # rob6's zero, the controller's joints
-HELLO = "H rob6-kas 2 64"
+HELLO = "H rob6-kas 3 64"
 
 
 class Client:
-    def __init__(self, addr: tuple[str, int]) -> None:
+    """A client on the program's port (hello, answers) and its state port (states)."""
+
+    def __init__(self, addr: tuple[str, int], state_addr: tuple[str, int] | None = None) -> None:
         self.sock = socket.create_connection(addr, timeout=10)
-        self.buffer = b""
+        self.state_sock = socket.create_connection(state_addr, timeout=10) if state_addr else None
+        self.buffers: dict[socket.socket, bytes] = {}
         self.states: list[list[str]] = []
 
-    def line(self, timeout: float = 10.0) -> str:
-        self.sock.settimeout(timeout)
-        while b"\n" not in self.buffer:
-            data = self.sock.recv(4096)
+    def _line(self, sock: socket.socket, timeout: float) -> str:
+        sock.settimeout(timeout)
+        buffer = self.buffers.get(sock, b"")
+        while b"\n" not in buffer:
+            data = sock.recv(4096)
             if not data:
                 raise ConnectionError("closed")
-            self.buffer += data
-        line, _, self.buffer = self.buffer.partition(b"\n")
+            buffer += data
+        line, _, self.buffers[sock] = buffer.partition(b"\n")
         return line.decode()
 
+    def line(self, timeout: float = 10.0) -> str:
+        return self._line(self.sock, timeout)
+
     def answer(self) -> list[str]:
-        """The next A line (its fields); the states met on the way are kept."""
-        while True:
-            fields = self.line().split()
-            if fields[0] == "S":
-                self.states.append(fields)
-            else:
-                assert fields[0] == "A", fields
-                return fields
+        """The next A line (its fields)."""
+        fields = self.line().split()
+        assert fields[0] == "A", fields
+        return fields
 
     def state(self) -> list[str]:
-        while True:
-            fields = self.line().split()
-            if fields[0] == "S":
-                self.states.append(fields)
-                return fields
+        assert self.state_sock is not None, "no state connection"
+        fields = self._line(self.state_sock, 10.0).split()
+        assert fields[0] == "S", fields
+        self.states.append(fields)
+        return fields
 
     def send(self, text: str) -> list[str]:
         self.sock.sendall(text.encode() + b"\n")
@@ -64,6 +67,8 @@ class Client:
 
     def close(self) -> None:
         self.sock.close()
+        if self.state_sock is not None:
+            self.state_sock.close()
 
 
 @pytest.fixture
@@ -74,7 +79,7 @@ def sim() -> Iterator[KawasakiController]:
 
 @pytest.fixture
 def client(sim: KawasakiController) -> Iterator[Client]:
-    c = Client(sim.port)
+    c = Client(sim.port, sim.state_port)
     assert c.line() == HELLO
     yield c
     c.close()
@@ -89,8 +94,8 @@ def test_hello_and_the_state_at_ten_hertz_or_more(client: Client) -> None:
     began = time.monotonic()
     for _ in range(10):
         last = client.state()
-    assert len(first) == 15 and first[2:8] == ZERO.split(" ")
-    assert first[8:] == ["1", "0", "0", "0", "0", "0", "0"]  # motor on, repeat, at rest, nothing queued
+    assert len(first) == 16 and first[2:8] == ZERO.split(" ")
+    assert first[8:] == ["1", "0", "0", "0", "0", "0", "0", "1"]  # motor on, repeat, at rest, nothing queued, running
     assert int(last[1]) == int(first[1]) + 10  # numbered, none left out
     # ten states every 50 ms take 0.5 s; 5 s leaves a loaded machine ten times that and still
     # catches a state sent at 2 Hz or slower
@@ -111,7 +116,7 @@ def test_a_motion_starts_at_three_points_and_ends_exactly_on_the_final_one(sim: 
     assert st["position_ctrl_deg"] == [20.0, 90.0, 0.0, 0.0, 0.0, 0.0]
     assert st["position_rob6_deg"] == [20.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     assert sim.type("kunder") == 0 and st["max_speed_ratio"] <= 1.0
-    wait_until(lambda: client.state()[8:] == ["1", "0", "0", "0", "3", "0", "0"], what="a state at rest, done 3")
+    wait_until(lambda: client.state()[8:15] == ["1", "0", "0", "0", "3", "0", "0"], what="a state at rest, done 3")
 
 
 def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim: KawasakiController, client: Client) -> None:
