@@ -115,27 +115,30 @@
   .$sp = " " + $CHR(13)
   .$t = $DECODE(.$line, .$sp, 0)
   .$w = $DECODE(.$line, .$sp, 1)
-  .nf = 1
-  IF .$t == "P" THEN
-    .nf = 9
+  ; the sequence number first (digits only, 1..999999): a line refused later still carries it
+  .$f[1] = $DECODE(.$line, .$sp, 0)
+  .$w = $DECODE(.$line, .$sp, 1)
+  .x[1] = VAL(.$f[1])
+  .$w = $DECODE(.$f[1], "0123456789", 1)
+  IF (.$w == "") OR (.$f[1] <> "") OR (.x[1] < 1) OR (.x[1] > 999999) THEN
+    RETURN
   END
-  FOR .j = 1 TO .nf
-    .$f[.j] = $DECODE(.$line, .$sp, 0)
-    .$w = $DECODE(.$line, .$sp, 1)
-    .x[.j] = VAL(.$f[.j])
-    .$w = $DECODE(.$f[.j], "-.0123456789", 1)
-    IF (.$w == "") OR (.$f[.j] <> "") THEN
-      RETURN
+  .seq = .x[1]
+  IF .$t == "P" THEN
+    FOR .j = 2 TO 9
+      .$f[.j] = $DECODE(.$line, .$sp, 0)
+      .$w = $DECODE(.$line, .$sp, 1)
+      .x[.j] = VAL(.$f[.j])
+      .$w = $DECODE(.$f[.j], "-.0123456789", 1)
+      IF (.$w == "") OR (.$f[.j] <> "") THEN
+        RETURN
+      END
     END
   END
   ; anything left is a field too many
   IF (.$line <> "") OR ((.$t <> "P") AND (.$t <> "C")) THEN
     RETURN
   END
-  IF (.x[1] < 1) OR (.x[1] > 999999) OR (.x[1] MOD 1 <> 0) THEN
-    RETURN
-  END
-  .seq = .x[1]
   IF .$t == "P" THEN
     IF (.x[8] < 1) OR (.x[8] > 99999) OR (.x[8] MOD 1 <> 0) OR ((.x[9] <> 0) AND (.x[9] <> 1)) THEN
       RETURN
