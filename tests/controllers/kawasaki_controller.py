@@ -52,9 +52,10 @@ class KawasakiController(PointsControllerProcess):
     def teach(self, on: bool) -> None:
         self._ok({"cmd": "teach", "on": on})
 
-    def execute(self) -> None:
-        """The operator's ``EXECUTE rob6_motion`` (after a stop the robot program is started anew)."""
-        self._ok({"cmd": "execute"})
+    def execute(self, program: str | None = None) -> None:
+        """The operator's ``EXECUTE`` (after a stop the robot program is started anew; ``program``
+        when none was executed before)."""
+        self._ok({"cmd": "execute"} | ({"program": program} if program else {}))
 
     def hold(self, on: bool) -> None:
         """The pendant's HOLD (True) or RUN (False)."""

@@ -125,8 +125,10 @@ def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim: Kawasaki
     wait_until(lambda: sim.type("kunder") == 1 and not sim.status()["moving"], what="the arm to stop at point 3")
     assert sim.status()["position_ctrl_deg"][0] == pytest.approx(6.0, abs=1e-6)
     assert client.send(point(4, 7, 100, final=True))[2] == "0"  # a final point alone starts
-    wait_until(lambda: sim.type("kdone") == 4 and not sim.status()["moving"], what="point 4")
-    assert sim.status()["position_ctrl_deg"][0] == 7.0 and sim.type("kunder") == 1
+    # kdone is the point the program took, before its JMOVE starts the arm from rest: wait for the arm there
+    wait_until(lambda: not (st := sim.status())["moving"] and st["position_ctrl_deg"][0] == 7.0,
+               what="the arm to stop on point 4")
+    assert sim.type("kdone") == 4 and sim.type("kunder") == 1
 
 
 def test_a_point_is_in_time_while_the_motions_planned_still_run(sim: KawasakiController, client: Client) -> None:
@@ -173,8 +175,8 @@ def test_cancel_drops_the_queue_and_the_arm_stops_after_the_motion_under_way(sim
     ("P 1 20 90 0 0 0 0 48 0", "3"),  # JT1 20 deg in 48 ms: 417 deg/s, rated 360
 ])
 def test_what_the_program_answers(sim: KawasakiController, client: Client, line: str, code: str) -> None:
-    # the answer carries the line's sequence number, 0 when the line was not read that far
-    readable = not line.startswith("P 1.5") and not line.endswith(" 7")
+    # the answer carries the line's sequence number, read first: 0 only when it is not one
+    readable = not line.startswith("P 1.5")
     assert client.send(line)[:3] == ["A", "1" if readable else "0", code]
     assert sim.status()["position_ctrl_deg"] == [0.0, 90.0, 0.0, 0.0, 0.0, 0.0]
 
@@ -233,13 +235,13 @@ def test_an_idle_client_is_kept_and_one_that_closes_is_replaced(sim: KawasakiCon
     while time.monotonic() - began < 10.0:
         client.state()
     assert client.send(point(2, 6, 1000)) == ["A", "2", "0", "2"]  # still the same connection
-    assert sim.status()["connections"] == 1
+    assert (sim.status()["connections"], sim.status()["state_connections"]) == (1, 1)
     client.close()
     wait_until(lambda: sim.queued() == 0, what="the program to notice the client closed")
     again = Client(sim.port)
     assert again.line() == HELLO
     assert again.send(point(1, 1, 1000)) == ["A", "1", "0", "1"]  # a new connection counts anew
-    assert sim.status()["connections"] == 2
+    assert (sim.status()["connections"], sim.status()["state_connections"]) == (2, 1)
     again.close()
 
 
@@ -276,7 +278,9 @@ def test_teach_mode_stops_and_refuses(sim: KawasakiController, client: Client) -
     st = sim.status()
     assert st["teach"] and st["position_ctrl_deg"][0] < 30.0
     assert client.send(point(2, 1, 2000, final=True))[2] == "4"
-    assert client.state()[9] == "1"
+    # the states sent before the switch wait unread on the state connection: the first in teach mode
+    taught = wait_until(lambda: s if (s := client.state())[9] == "1" else None, what="a state in teach mode")
+    assert (taught[11], taught[15]) == ("0", "0")  # the queue dropped, rob6_motion not running
     assert sim.request({"cmd": "execute"}) == {"ok": False, "error": "program in TEACH mode."}
 
 
@@ -288,6 +292,7 @@ def test_teach_mode_stops_and_refuses(sim: KawasakiController, client: Client) -
     ('{"cmd": "slow_ack", "ms": "x"}', "slow_ack: 'ms' must be a number >= 0"),
     ('{"cmd": "monitor_speed", "percent": 0}', "monitor_speed: 'percent' must be 1..100"),
     ('{"cmd": "type", "expr": "nosuch"}', "(E0102) Variable is not defined: nosuch"),
+    ('{"cmd": "execute", "program": 1}', "execute: 'program' must be a program's name"),
     ("[1]", "expected a JSON object with a string 'cmd'"),
 ])
 def test_the_control_channel_says_what_is_wrong(sim: KawasakiController, request_: str, error: str) -> None:

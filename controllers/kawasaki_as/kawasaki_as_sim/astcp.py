@@ -53,7 +53,7 @@ class TcpOption:
         self.listeners: dict[int, socket.socket] = {}
         self.conns: dict[int, Conn] = {}
         self.latency_s = 0.0
-        self.accepted = 0
+        self.accepted: dict[int, int] = {}  # connections accepted, by the program's port
         self._polled = time.monotonic()  # when the network was last read
         self._next = 1
         self._on_accept, self._on_data, self._on_sent = on_accept, on_data, on_sent
@@ -96,7 +96,7 @@ class TcpOption:
             self._next += 1
             conn = Conn(sock, peer[:2])
             self.conns[number] = conn
-            self.accepted += 1
+            self.accepted[port] = self.accepted.get(port, 0) + 1
             self._on_accept(conn)
             return (float(number), *(float(b) for b in socket.inet_aton(peer[0])))
         client = self.conns.get(_number(args[0]))

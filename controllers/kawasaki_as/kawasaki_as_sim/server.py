@@ -236,7 +236,9 @@ class Controller:
             "position_rob6_deg": [round(x, 6) for x in to_rob6(self.arm.q)],
             "moving": self.arm.moving, "estop": self.estop, "motor": self.motor, "teach": self.teach,
             "error": self.error, "monitor_speed": self.arm.monitor_speed,
-            "client": self.net.connected(), "connections": self.net.accepted,
+            "client": self.net.connected(),
+            "connections": self.net.accepted.get(self.cfg.as_port, 0),
+            "state_connections": self.net.accepted.get(self.cfg.as_port + 1, 0),
             "lines_received": self.tap.lines, "answers": dict(sorted(self.tap.answers.items())),
             "underruns_reported": self.tap.underruns,
             "segments": self.arm.executed, "max_speed_ratio": round(self.arm.max_speed_ratio, 4),
@@ -287,6 +289,13 @@ class Controller:
         elif cmd == "clear_error":
             self.error = 0
         elif cmd == "execute":
+            # EXECUTE name, or EXECUTE alone: the robot program executed last
+            program = req.get("program", self.robot_program)
+            if not isinstance(program, str):
+                return {"ok": False, "error": "execute: 'program' must be a program's name"}
+            if not program:
+                return {"ok": False, "error": "execute: no robot program was executed before: name its 'program'"}
+            self.robot_program = program
             why = self.execute()
             if why:
                 return {"ok": False, "error": why}
