@@ -61,7 +61,7 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> N
     first, second = free_tcp_ports(2)
     port = (first, second)
     with kawasaki_system(port, log_dir=str(tmp_path)) as system, system.client() as client:
-        waiting = f"ERROR: driver: robot not connected (waiting for the Kawasaki AS program at 127.0.0.1:{port})\n"
+        waiting = f"ERROR: driver: robot not connected (waiting for the Kawasaki AS program at 127.0.0.1:{first})\n"
         assert reply(client, "MovePTPJoints 10 -30 40 0 30 0") == waiting + "false\n"
         assert reply(client, "EnableAlter") == waiting + "false\n"
         assert reply(client, "MovePTPJoints 999 0 0 0 0 0") == "false\n"  # refused before the driver
@@ -147,22 +147,55 @@ def test_teach_mode_and_a_controller_error_mid_motion(rig: Rig) -> None:
     back_home(client, ctl, system)
 
 
-def test_connection_dropped_mid_motion_and_restored(kawasaki: tuple[System, int], rig: Rig) -> None:
+NOT_RUNNING = ("robot program rob6_motion not running (start it: EXECUTE rob6_motion, "
+               "or CONTINUE after a HOLD)")
+
+
+def test_a_robot_program_not_started_or_held_is_a_clear_error(kawasaki: tuple[System, tuple[int, int]]) -> None:
+    """rob6_motion never started (the operator typed only PCEXECUTE 1: rob6_pc): the state says
+    it does not run (TASK(1)), a motion command answers that at once and no point goes out (the
+    program would answer each 4 and nothing would ever drain). Started, rob6 moves; HOLD mid-motion
+    is the same error; after RUN rob6 continues from where the arm stands."""
+    system, port = kawasaki
+    with controller(port, "--start", "PCEXECUTE 1: rob6_pc") as ctl, system.client() as client:
+        wait_until(lambda: ctl.status()["client"], what="rob6 to connect")
+        assert ctl.status()["tasks"].get("robot") is None
+        not_running = f"ERROR: driver: {NOT_RUNNING}\nfalse\n"
+        # until the first state the link says it is not connected yet; then why it cannot move
+        wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START)) == not_running, what="the first state")
+        assert reply(client, "EnableAlter") == not_running
+        assert ctl.status()["lines_received"] == 0  # not a point sent, none refused
+        ctl.execute("rob6_motion")
+        connected(client, ctl, system)
+        interrupted(client, ctl, lambda: ctl.hold(True), NOT_RUNNING)
+        assert ctl.type("TASK(1)") == 2  # held, not aborted: RUN lets it go on
+        assert reply(client, "MovePTPJoints " + fmt(START)) == not_running
+        ctl.hold(False)
+        back_home(client, ctl, system)
+        assert refused(ctl) <= 1  # at most the point on its way when HOLD came
+
+
+def test_connection_dropped_mid_motion_and_restored(kawasaki: tuple[System, tuple[int, int]], rig: Rig) -> None:
+    """The network drops both connections at once: the driver names the one it noticed first."""
     system, ctl, client = rig
-    port = kawasaki[1]
+    port, state_port = kawasaki[1]
     runs = link_status(system).runs
-    interrupted(client, ctl, ctl.drop_connection,
-                f"kawasaki link lost: the controller at 127.0.0.1:{port} closed the connection")
+    RIG.long_move(client, ctl)
+    assert ctl.drop_connection()
+    assert client.read_lines(2, timeout=30) in (
+        f"ERROR: driver: kawasaki link lost: the controller at 127.0.0.1:{port} closed the connection\nfalse\n",
+        f"ERROR: driver: kawasaki link lost: the controller at 127.0.0.1:{state_port} closed the state connection"
+        "\nfalse\n")
     wait_until(lambda: ctl.status()["client"], what="rob6 to reconnect")
     back_home(client, ctl, system)  # after the segment under way ran out: no jump back
     assert link_status(system).runs > runs
 
 
-def test_slow_then_missing_acknowledgements(kawasaki: tuple[System, int], rig: Rig) -> None:
+def test_slow_then_missing_acknowledgements(kawasaki: tuple[System, tuple[int, int]], rig: Rig) -> None:
     system, ctl, client = rig
     RIG.slow_then_missing_acknowledgements(
         client, ctl, system, [20.0, -20.0, 50.0, 0.0, 30.0, 10.0],
-        f"kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{kawasaki[1]} for 2000 ms")
+        f"kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{kawasaki[1][0]} for 2000 ms")
 
 
 def test_a_point_outside_the_controllers_range_is_never_sent(rig: Rig) -> None:
