@@ -22,7 +22,7 @@ from rob6.messages import IkBatchRequest
 from .adept import adept_table
 from .background import background_table
 from .busy import busy_table
-from .kawasaki import kawasaki_table
+from .kawasaki import kawasaki_simclock_table, kawasaki_table
 from .latency import cpu_seconds, echo_baseline, measure, measure_beside, percentiles, usage, zenoh_baselines
 from .links import links_table, live_realtime_table, ros_realtime_table
 from .tables import table
@@ -281,6 +281,7 @@ def main() -> int:
     alter_s = float(os.environ.get("ROB6_BENCH_ALTER_S", "60"))
     links_table(alter_s, table)
     adept_table(max(5.0, alter_s / 6), table)
+    kawasaki_simclock_table(table)
     kawasaki_table(max(5.0, alter_s / 3), table)
     busy_table(float(os.environ.get("ROB6_BENCH_BUSY_S", "60")), table)
     recording_table()

@@ -1,20 +1,20 @@
 ; rob6.as -- rob6's AS program for a Kawasaki FS03N (E/F controller with the TCP/IP option),
-; the server side of deploy/kawasaki/PROTOCOL.md (rob6-kas 2). Every construct it uses and
+; the server side of deploy/kawasaki/PROTOCOL.md (rob6-kas 3). Every construct it uses and
 ; its source: deploy/kawasaki/REFERENCES.md. Tested against controllers/kawasaki_as, which
 ; executes this file; NOT yet on a real controller: read deploy/kawasaki/README.md first.
 ;
 ;   rob6_pc     PC program 1 (PCEXECUTE 1: rob6_pc): sets the globals, starts rob6_state,
-;               serves one rob6 driver on TCP port kport: checks each line, queues its
-;               point, answers every line.
-;   rob6_state  PC program 2: the state line every 50 ms while a driver is connected.
+;               serves one rob6 driver on TCP port kport: checks each line (rob6_line),
+;               queues its point, answers every line.
+;   rob6_state  PC program 2: on its own port kport + 1, the state line every 50 ms while a
+;               client is connected (a socket of its own: never held up by rob6_pc's receive).
 ;   rob6_motion robot program (EXECUTE rob6_motion): JMOVEs the queued points.
 ;
 ; Shared globals, each written by one program only (kflush, kend, kmore: see below): the
 ; queue ring kq1[]..kq6[] (joints, deg), kms[] (ms), kfin[] (final 0/1), kseq[] of kcap
 ; points; kin points written and kgo points released to the motion (rob6_pc), kout points
-; taken (rob6_motion), kflush the points dropped by a cancel or a stop; ksock the driver's
-; socket (-1 none); kdone, kunder, ke[], kend and kmore (1: it streams, a point is due)
-; what rob6_motion did. Everything else is local (.name) to one program; no name is
+; taken (rob6_motion), kflush the points dropped by a cancel or a stop; kdone, kunder,
+; ke[], kend and kmore (1: it streams, a point is due) what rob6_motion did. Everything else is local (.name) to one program; no name is
 ; longer than 15 characters.
 
 .PROGRAM rob6_pc()
@@ -29,7 +29,6 @@
   kdone = 0
   kunder = 0
   kend = 0
-  ksock = -1
   krated[1] = 360
   krated[2] = 250
   krated[3] = 225
@@ -71,10 +70,9 @@
   IF .sock < 0 GOTO 10
   .last = 0
   .$buf = ""
-  .$out[1] = "H rob6-kas 2 " + $ENCODE(/L, kcap) + $CHR(10)
+  .$out[1] = "H rob6-kas 3 " + $ENCODE(/L, kcap) + $CHR(10)
   TCP_SEND .ret, .sock, .$out[1], 1, 1
   IF .ret < 0 GOTO 90
-  ksock = .sock
 20
   TCP_RECV .ret, .sock, .$in[1], .n, 1, 120
   IF .ret == -34024 GOTO 20
@@ -100,79 +98,64 @@
   GOTO 30
 90
   ; the driver is gone (closed, failed, or not rob6): drop the queue, the motion under way runs out
-  ksock = -1
   kflush = kin
   TCP_CLOSE .ret, .sock
   GOTO 10
 .END
 
 .PROGRAM rob6_line(.$line, .last, .seq, .code)
-  ; one line -> .seq (its sequence number, 0 when unreadable) and .code (the answer)
+  ; one line -> .seq (its sequence number, 0 when unreadable) and .code (the answer). rob6 is
+  ; the only client: the fields are taken by position and each checked with one $DECODE (a
+  ; run of digits, '-' and '.', nothing after it), read with VAL; about 110 steps a point
   .seq = 0
   .code = 1
-  IF LEN(.$line) > 0 THEN
-    IF $MID(.$line, LEN(.$line), 1) == $CHR(13) THEN
-      .$line = $MID(.$line, 1, LEN(.$line) - 1)
-    END
-  END
   IF LEN(.$line) > 119 THEN
     RETURN
   END
-  .nf = 0
-10
-  .$w = $DECODE(.$line, " ", 0)
-  .$s = $DECODE(.$line, " ", 1)
-  IF .$w <> "" THEN
-    IF .nf == 10 THEN
-      RETURN
-    END
-    .nf = .nf + 1
-    .$f[.nf] = .$w
-  END
-  IF .$line <> "" GOTO 10
-  IF .nf < 2 THEN
+  .$sp = " " + $CHR(13)
+  .$t = $DECODE(.$line, .$sp, 0)
+  .$w = $DECODE(.$line, .$sp, 1)
+  ; the sequence number first (digits only, 1..999999): a line refused later still carries it
+  .$f[1] = $DECODE(.$line, .$sp, 0)
+  .$w = $DECODE(.$line, .$sp, 1)
+  .x[1] = VAL(.$f[1])
+  .$w = $DECODE(.$f[1], "0123456789", 1)
+  IF (.$w == "") OR (.$f[1] <> "") OR (.x[1] < 1) OR (.x[1] > 999999) THEN
     RETURN
   END
-  CALL rob6_num(.$f[2], .v, .kind)
-  IF (.kind <> 1) OR (.v < 1) OR (.v > 999999) THEN
-    RETURN
-  END
-  .seq = .v
-  IF .$f[1] == "C" THEN
-    IF .nf <> 2 THEN
-      RETURN
-    END
-  ELSE
-    IF (.$f[1] <> "P") OR (.nf <> 10) THEN
-      RETURN
-    END
-    FOR .j = 1 TO 6
-      CALL rob6_num(.$f[.j + 2], .v, .kind)
-      IF .kind == 0 THEN
+  .seq = .x[1]
+  IF .$t == "P" THEN
+    FOR .j = 2 TO 9
+      .$f[.j] = $DECODE(.$line, .$sp, 0)
+      .$w = $DECODE(.$line, .$sp, 1)
+      .x[.j] = VAL(.$f[.j])
+      .$w = $DECODE(.$f[.j], "-.0123456789", 1)
+      IF (.$w == "") OR (.$f[.j] <> "") THEN
         RETURN
       END
-      .q[.j] = .v
     END
-    CALL rob6_num(.$f[9], .ms, .kind)
-    IF (.kind <> 1) OR (.ms < 1) OR (.ms > 99999) THEN
+  END
+  ; anything left is a field too many
+  IF (.$line <> "") OR ((.$t <> "P") AND (.$t <> "C")) THEN
+    RETURN
+  END
+  IF .$t == "P" THEN
+    IF (.x[8] < 1) OR (.x[8] > 99999) OR (.x[8] MOD 1 <> 0) OR ((.x[9] <> 0) AND (.x[9] <> 1)) THEN
       RETURN
     END
-    IF (.$f[10] <> "0") AND (.$f[10] <> "1") THEN
-      RETURN
-    END
-    .final = VAL(.$f[10])
   END
   IF .seq <= .last THEN
     .code = 6
     RETURN
   END
   .last = .seq
-  IF .$f[1] == "C" THEN
+  IF .$t == "C" THEN
     kflush = kin
     .code = 0
     RETURN
   END
-  IF (NOT SWITCH(POWER)) OR (NOT SWITCH(REPEAT)) OR (ERROR <> 0) THEN
+  ; ready: motor power on, repeat mode, no error, and rob6_motion running (TASK(1) 1)
+  IF (NOT SWITCH(POWER)) OR (NOT SWITCH(REPEAT)) OR (ERROR <> 0) OR (TASK(1) <> 1) THEN
     .code = 4
     RETURN
   END
@@ -196,11 +179,11 @@
     END
   END
   FOR .j = 1 TO 6
-    IF (.q[.j] < kmin[.j]) OR (.q[.j] > kmax[.j]) THEN
+    IF (.x[.j + 1] < kmin[.j]) OR (.x[.j + 1] > kmax[.j]) THEN
       .code = 2
       RETURN
     END
-    IF ABS(.q[.j] - .from[.j]) * 1000 / .ms > krated[.j] * 1.05 THEN
+    IF ABS(.x[.j + 1] - .from[.j]) * 1000 / .x[8] > krated[.j] * 1.05 THEN
       .code = 3
       RETURN
     END
@@ -210,64 +193,40 @@
     RETURN
   END
   .w = kin MOD kcap
-  kq1[.w] = .q[1]
-  kq2[.w] = .q[2]
-  kq3[.w] = .q[3]
-  kq4[.w] = .q[4]
-  kq5[.w] = .q[5]
-  kq6[.w] = .q[6]
-  kms[.w] = .ms
-  kfin[.w] = .final
+  kq1[.w] = .x[2]
+  kq2[.w] = .x[3]
+  kq3[.w] = .x[4]
+  kq4[.w] = .x[5]
+  kq5[.w] = .x[6]
+  kq6[.w] = .x[7]
+  kms[.w] = .x[8]
+  kfin[.w] = .x[9]
   kseq[.w] = .seq
   kin = kin + 1
   ; released to the motion at once while it streams; from rest once kstart points or a final one wait
   IF kmore == 1 THEN
     kgo = kin
   ELSE
-    IF (kin - MAXVAL(kgo, kout, kflush) >= kstart) OR (.final == 1) THEN
+    IF (kin - MAXVAL(kgo, kout, kflush) >= kstart) OR (.x[9] == 1) THEN
       kgo = kin
     END
   END
   .code = 0
 .END
 
-.PROGRAM rob6_num(.$t, .v, .kind)
-  ; .$t -> .kind 1 (an unsigned integer), 2 (another plain decimal number) or 0 (not a number), .v its value
-  .kind = 0
-  .v = 0
-  .start = 1
-  IF $MID(.$t, 1, 1) == "-" THEN
-    .start = 2
-  END
-  .digits = 0
-  .dots = 0
-  FOR .k = .start TO LEN(.$t)
-    .$c = $MID(.$t, .k, 1)
-    IF .$c == "." THEN
-      .dots = .dots + 1
-    ELSE
-      IF INSTR(1, "0123456789", .$c) == 0 THEN
-        RETURN
-      END
-      .digits = .digits + 1
-    END
-  END
-  IF (.digits == 0) OR (.dots > 1) OR (LEN(.$t) > 12) THEN
-    RETURN
-  END
-  .v = VAL(.$t)
-  .kind = 2
-  IF (.start == 1) AND (.dots == 0) THEN
-    .kind = 1
-  END
-.END
-
 .PROGRAM rob6_state()
-  ; every 50 ms: a stop drops the queue and the last target (the arm braked short of it);
-  ; while a driver is connected, the state line
+  ; every 50 ms: a stop (or rob6_motion not running) drops the queue and the last target (the
+  ; arm braked short of it); while a client is connected to the state port kport + 1, the
+  ; state line. Its own port and socket: no TCP_RECV of rob6_pc ever holds it up
   .n = 0
+  .sock = -1
   HERE .#was
   DECOMPOSE .was[1] = .#was
+  TCP_LISTEN .ret, kport + 1
+  IF .ret < 0 THEN
+    PRINT "rob6_state: TCP_LISTEN on port ", kport + 1, " failed: ", .ret
+    HALT
+  END
 10
   .power = 0
   IF SWITCH(POWER) THEN
@@ -277,10 +236,19 @@
   IF SWITCH(REPEAT) THEN
     .teach = 0
   END
-  IF (.power == 0) OR (.teach == 1) OR (ERROR <> 0) THEN
+  .run = 0
+  IF TASK(1) == 1 THEN
+    .run = 1
+  END
+  IF (.power == 0) OR (.teach == 1) OR (ERROR <> 0) OR (.run == 0) THEN
     kflush = kin
     kend = 0
     kmore = 0
+  END
+  IF .sock < 0 THEN
+    ; no client: wait for one (up to 1 s, the stops above checked in between)
+    TCP_ACCEPT .sock, kport + 1, 1
+    GOTO 10
   END
   HERE .#now
   DECOMPOSE .j[1] = .#now
@@ -295,15 +263,17 @@
     END
     .was[.k] = .j[.k]
   END
-  IF ksock >= 0 THEN
-    .n = (.n + 1) MOD 1000000
-    .$s[1] = "S " + $ENCODE(/L, .n)
-    FOR .k = 1 TO 6
-      .$s[1] = .$s[1] + " " + $ENCODE(/F9.3, .j[.k])
-    END
-    .$s[1] = .$s[1] + $ENCODE(" ", /L, .power, " ", /L, .teach, " ", /L, .moving, " ", /L, .q)
-    .$s[1] = .$s[1] + $ENCODE(" ", /L, kdone, " ", /L, ERROR, " ", /L, kunder) + $CHR(10)
-    TCP_SEND .ret, ksock, .$s[1], 1, 1
+  .n = (.n + 1) MOD 1000000
+  .$s[1] = "S " + $ENCODE(/L, .n)
+  FOR .k = 1 TO 6
+    .$s[1] = .$s[1] + " " + $ENCODE(/F9.3, .j[.k])
+  END
+  .$s[1] = .$s[1] + $ENCODE(" ", /L, .power, " ", /L, .teach, " ", /L, .moving, " ", /L, .q)
+  .$s[1] = .$s[1] + $ENCODE(" ", /L, kdone, " ", /L, ERROR, " ", /L, kunder, " ", /L, .run) + $CHR(10)
+  TCP_SEND .ret, .sock, .$s[1], 1, 1
+  IF .ret < 0 THEN
+    TCP_CLOSE .ret, .sock
+    .sock = -1
   END
   TWAIT 0.05
   GOTO 10

@@ -32,16 +32,19 @@ class KawasakiController(PointsControllerProcess):
 
     module = "kawasaki_as_sim"
     label = "kawasaki-as-sim"
-    ready_line = re.compile(r"kawasaki-as-sim ready: port ([\d.]+):(\d+), control ([\d.]+):(\d+)$")
+    ready_line = re.compile(r"kawasaki-as-sim ready: port ([\d.]+):(\d+), state port (\d+), control ([\d.]+):(\d+)$")
 
     def __init__(self, *args: str, start_timeout: float = 20.0) -> None:
-        super().__init__(["--port", "0", "--control", "127.0.0.1:0", *_program_args(), *args], start_timeout)
+        super().__init__(["--port", "0", "--state-port", "0", "--control", "127.0.0.1:0", *_program_args(), *args],
+                         start_timeout)
         self.port: tuple[str, int]  # (host, port) of the AS program's server: set by start()
+        self.state_port: tuple[str, int]  # (host, port) of its state program
 
     def _ready(self, groups: tuple[str, ...]) -> tuple[str, int]:
         g = groups
         self.port = (g[0], int(g[1]))
-        return g[2], int(g[3])
+        self.state_port = (g[0], int(g[2]))
+        return g[3], int(g[4])
 
     def motor(self, on: bool) -> None:
         self._ok({"cmd": "motor", "on": on})
@@ -49,9 +52,14 @@ class KawasakiController(PointsControllerProcess):
     def teach(self, on: bool) -> None:
         self._ok({"cmd": "teach", "on": on})
 
-    def execute(self) -> None:
-        """The operator's ``EXECUTE rob6_motion`` (after a stop the robot program is started anew)."""
-        self._ok({"cmd": "execute"})
+    def execute(self, program: str | None = None) -> None:
+        """The operator's ``EXECUTE`` (after a stop the robot program is started anew; ``program``
+        when none was executed before)."""
+        self._ok({"cmd": "execute"} | ({"program": program} if program else {}))
+
+    def hold(self, on: bool) -> None:
+        """The pendant's HOLD (True) or RUN (False)."""
+        self._ok({"cmd": "hold" if on else "run"})
 
     def monitor_speed(self, percent: float) -> None:
         self._ok({"cmd": "monitor_speed", "percent": percent})

@@ -11,97 +11,32 @@ from pathlib import Path
 
 import pytest
 
-from kawasaki_as_sim.arm import Arm, Segment
 from kawasaki_as_sim.aslang import AsSyntaxError, load
-from kawasaki_as_sim.asrun import AsError, Interpreter, Value
+from kawasaki_as_sim.simclock import SimCell
 
 SOURCE = (Path(__file__).resolve().parents[2] / "deploy/kawasaki/rob6.as").read_text()
-TICK_S = 0.004  # the stand-in's (server.TICK_S)
+PORT, STATE_PORT = 49200, 49201  # the program's kport and kport + 1
 PERIOD_S = 0.048
 SPEED_DEG_S = 50.0  # JT1 in the stream
 
 
-class Cell:
-    """The controller running a program: tasks every tick, the arm, one client's lines."""
-
-    def __init__(self, source: str, pose: tuple[float, ...] = (0.0, 90.0, 0.0, 0.0, 0.0, 0.0)) -> None:
-        self.t = 0.0
-        self.arm = Arm(pose, 0.0)
-        self.inbox: list[tuple[float, str]] = []
-        self.sent: list[str] = []
-        self.errors: list[str] = []
-        self.speeds: list[tuple[float, float]] = []  # (t, JT1 speed)
-        self.interp = Interpreter(load(source), self)
-        assert self.interp.start("pc1", "rob6_pc") == ""
-        assert self.interp.start("robot", "rob6_motion") == ""
-
-    # ---- the Machine
-    def now(self) -> float:
-        return self.t
-
-    def switch(self, name: str) -> bool:
-        return {"power": True, "repeat": True}[name]
-
-    def error_code(self) -> int:
-        return 0
-
-    def here(self) -> tuple[float, ...]:
-        return tuple(self.arm.q)
-
-    def motion_room(self) -> bool:
-        return self.arm.room()
-
-    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool) -> None:
-        self.arm.move(Segment(q, seconds, accuracy_mm, stop, after_rest))
-
-    def settled(self) -> bool:
-        return not self.arm.moving
-
-    def print_line(self, task: str, text: str) -> None:
-        pass
-
-    def tcp(self, op: str, args: list[Value], started: float) -> tuple[Value, ...] | None:
-        if op == "tcp_accept":
-            return (1.0, 127.0, 0.0, 0.0, 1.0)
-        if op == "tcp_send":
-            assert isinstance(args[1], str)
-            self.sent.append(args[1])
-        if op == "tcp_recv":
-            due = [line for t, line in self.inbox if t <= self.t]
-            if not due:
-                timeout = args[3]
-                assert isinstance(timeout, float)
-                return (-34024.0,) if self.t - started >= timeout else None
-            self.inbox = self.inbox[len(due):]
-            text = "".join(due)
-            return (0.0, *(text[i:i + 120] for i in range(0, len(text), 120)))
-        return (0.0,)
-
-    def program_error(self, task: str, error: AsError) -> None:
-        self.errors.append(f"{task}: {self.interp.tasks[task].message}")
-
-    # ---- time
-    def run(self, seconds: float) -> None:
-        end = self.t + seconds
-        while self.t < end - 1e-9:
-            self.t += TICK_S
-            self.arm.advance(self.t)
-            self.interp.tick()
-            self.speeds.append((self.t, abs(self.arm.v[0])))
-
-    def value(self, name: str) -> Value:
-        value = self.interp.globals[name]
-        assert not isinstance(value, dict)
-        return value
+def started(source: str, pose: tuple[float, ...] = (0.0, 90.0, 0.0, 0.0, 0.0, 0.0)) -> SimCell:
+    """The controller with rob6.as started as its README says, a client on both ports."""
+    cell = SimCell(source, pose)
+    cell.start(("pc1", "rob6_pc"), ("robot", "rob6_motion"))
+    cell.connect(PORT, cell.t)
+    cell.connect(STATE_PORT, cell.t)
+    return cell
 
 
-def stream(source: str, points: int = 40) -> Cell:
+def stream(source: str, points: int = 40) -> SimCell:
     """JT1 at 50 deg/s, a point every 48 ms, sent as rob6 sends them; the last one final."""
-    cell = Cell(source)
+    cell = started(source)
+    t0 = cell.t + 0.1
     for n in range(1, points + 1):
         jt1 = SPEED_DEG_S * PERIOD_S * n
-        cell.inbox.append((0.1 + PERIOD_S * (n - 1),
-                           f"P {n} {jt1:.3f} 90.000 0.000 0.000 0.000 0.000 48 {int(n == points)}\n"))
+        cell.send(PORT, t0 + PERIOD_S * (n - 1),
+                  f"P {n} {jt1:.3f} 90.000 0.000 0.000 0.000 0.000 48 {int(n == points)}\n")
     cell.run(0.1 + PERIOD_S * points + 1.5)
     return cell
 
@@ -120,10 +55,10 @@ def check_streams_smoothly(source: str) -> None:
 
 
 def check_states_below_minus_100(source: str) -> None:
-    cell = Cell(source, pose=(-120.0, 90.0, 0.0, 0.0, 0.0, -359.5))
+    cell = started(source, pose=(-120.0, 90.0, 0.0, 0.0, 0.0, -359.5))
     cell.run(0.3)
     assert not cell.errors, cell.errors
-    states = [line.split() for line in cell.sent if line.startswith("S ")]
+    states = [line.split() for line in cell.port(STATE_PORT).sent if line.startswith("S ")]
     assert len(states) >= 5
     assert [float(x) for x in states[-1][2:8]] == [-120.0, 90.0, 0.0, 0.0, 0.0, -359.5]
 
@@ -161,3 +96,94 @@ def test_a_single_line_mistake_fails(old: str, new: str, check: object) -> None:
     assert callable(check)
     with pytest.raises((AssertionError, AsSyntaxError)):
         check(_mutated(old, new))
+
+
+# ---- the PC side within a controller's means: a step budget per tick, one socket at a time
+
+def check_keeps_up(source: str) -> None:
+    """Under the stand-in's default step budget every point is answered before the next one
+    arrives, and the queue never runs dry."""
+    points = 40
+    cell = stream(source, points)
+    assert not cell.errors, cell.errors
+    port = cell.port(PORT)
+    answers = [t for text, t in zip(port.sent, port.sent_at, strict=True) if text.startswith("A ")]
+    arrivals = [cell.t - 0.1 - PERIOD_S * points - 1.5 + 0.1 + PERIOD_S * n for n in range(points)]
+    assert len(answers) == points
+    late = [round(a - b, 3) for a, b in zip(answers, arrivals, strict=True) if a - b >= PERIOD_S]
+    assert not late, late
+    assert cell.value("kunder") == 0 and cell.value("kdone") == points
+
+
+def test_the_shipped_program_keeps_up_with_a_point_every_48_ms_under_the_default_budget() -> None:
+    check_keeps_up(SOURCE)
+
+
+def test_a_line_that_costs_too_many_steps_under_runs() -> None:
+    # 200 more steps a point: over the budget's 12 ticks of 48 ms with the state task beside it
+    expensive = _mutated("  .code = 0\n.END\n\n.PROGRAM rob6_state", "  FOR .z = 1 TO 200\n  END\n  .code = 0\n"
+                                                                  ".END\n\n.PROGRAM rob6_state")
+    with pytest.raises(AssertionError):
+        check_keeps_up(expensive)
+    cell = stream(expensive)
+    under = cell.value("kunder")
+    assert isinstance(under, float) and under > 0  # the arm ran dry between points
+
+
+def test_the_state_stream_keeps_its_rate_while_rob6_pc_waits_to_receive() -> None:
+    cell = started(SOURCE)
+    cell.run(2.0)  # the driver sends nothing: rob6_pc waits in TCP_RECV (120 s)
+    states = cell.port(STATE_PORT).sent
+    # a line every 50 ms plus the ~55 steps that make it (three ticks at the default budget)
+    assert len(states) >= 30 and all(line.startswith("S ") for line in states)
+
+
+SHARED_SOCKET = """
+.PROGRAM srv()
+  TCP_LISTEN .ret, 49200
+  TCP_ACCEPT sock, 49200, 10
+  PCEXECUTE 2: sender
+10
+  TCP_RECV .ret, sock, .$in[1], .n, 1, 120
+  GOTO 10
+.END
+.PROGRAM sender()
+10
+  TCP_SEND .ret, sock, "S", 1, 1
+  TWAIT 0.05
+  GOTO 10
+.END
+"""
+
+
+def test_one_sockets_instructions_are_serialised() -> None:
+    # rob6.as before issue 58: the state sent on the socket rob6_pc receives on; a TCP_RECV
+    # waiting (1 s) holds the socket, the sender gets it each time the receive times out
+    cell = SimCell(SHARED_SOCKET.replace('"S"', '.$s[1]').replace("10\n  TCP_SEND", '  .$s[1] = "S"\n10\n  TCP_SEND')
+                   .replace("1, 120", "1, 1"))
+    cell.connect(PORT, 0.0)
+    cell.start(("pc1", "srv"), settle_s=3.0)
+    assert not cell.errors, cell.errors
+    assert 2 <= len(cell.port(PORT).sent) <= 4  # one a second, not twenty
+
+
+def test_points_are_refused_while_rob6_motion_is_not_running() -> None:
+    cell = SimCell(SOURCE)
+    cell.start(("pc1", "rob6_pc"))  # the operator never typed EXECUTE rob6_motion
+    cell.connect(PORT, cell.t)
+    cell.connect(STATE_PORT, cell.t)
+    cell.send(PORT, cell.t + 0.01, "P 1 1.000 90.000 0.000 0.000 0.000 0.000 48 1\n")
+    cell.run(0.5)
+    assert cell.port(PORT).sent[1:] == ["A 1 4 0\n"]  # not ready
+    assert cell.port(STATE_PORT).sent[-1].split()[-1] == "0"  # the state says: not running
+    cell.interp.start("robot", "rob6_motion")
+    cell.send(PORT, cell.t + 0.01, "P 2 1.000 90.000 0.000 0.000 0.000 0.000 48 1\n")
+    cell.run(0.5)
+    # accepted (the queued count in the answer depends on whether rob6_motion took the point
+    # in the ticks rob6_pc needed to answer: not this test's matter) and done
+    assert [a.split()[:3] for a in cell.port(PORT).sent[2:]] == [["A", "2", "0"]] and cell.value("kdone") == 2
+    assert cell.port(STATE_PORT).sent[-1].split()[-1] == "1"
+    cell.interp.held = True  # HOLD
+    cell.send(PORT, cell.t + 0.01, "P 3 2.000 90.000 0.000 0.000 0.000 0.000 48 1\n")
+    cell.run(0.5)
+    assert cell.port(PORT).sent[3:] == ["A 3 4 0\n"] and cell.port(STATE_PORT).sent[-1].split()[-1] == "0"

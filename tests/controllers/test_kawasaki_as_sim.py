@@ -22,41 +22,44 @@ from tests.motion.link_session import wait_until
 pytestmark = pytest.mark.slow
 
 ZERO = "0.000 90.000 0.000 0.000 0.000 0.000"  # rob6's zero, the controller's joints
-HELLO = "H rob6-kas 2 64"
+HELLO = "H rob6-kas 3 64"
 
 
 class Client:
-    def __init__(self, addr: tuple[str, int]) -> None:
+    """A client on the program's port (hello, answers) and its state port (states)."""
+
+    def __init__(self, addr: tuple[str, int], state_addr: tuple[str, int] | None = None) -> None:
         self.sock = socket.create_connection(addr, timeout=10)
-        self.buffer = b""
+        self.state_sock = socket.create_connection(state_addr, timeout=10) if state_addr else None
+        self.buffers: dict[socket.socket, bytes] = {}
         self.states: list[list[str]] = []
 
-    def line(self, timeout: float = 10.0) -> str:
-        self.sock.settimeout(timeout)
-        while b"\n" not in self.buffer:
-            data = self.sock.recv(4096)
+    def _line(self, sock: socket.socket, timeout: float) -> str:
+        sock.settimeout(timeout)
+        buffer = self.buffers.get(sock, b"")
+        while b"\n" not in buffer:
+            data = sock.recv(4096)
             if not data:
                 raise ConnectionError("closed")
-            self.buffer += data
-        line, _, self.buffer = self.buffer.partition(b"\n")
+            buffer += data
+        line, _, self.buffers[sock] = buffer.partition(b"\n")
         return line.decode()
 
+    def line(self, timeout: float = 10.0) -> str:
+        return self._line(self.sock, timeout)
+
     def answer(self) -> list[str]:
-        """The next A line (its fields); the states met on the way are kept."""
-        while True:
-            fields = self.line().split()
-            if fields[0] == "S":
-                self.states.append(fields)
-            else:
-                assert fields[0] == "A", fields
-                return fields
+        """The next A line (its fields)."""
+        fields = self.line().split()
+        assert fields[0] == "A", fields
+        return fields
 
     def state(self) -> list[str]:
-        while True:
-            fields = self.line().split()
-            if fields[0] == "S":
-                self.states.append(fields)
-                return fields
+        assert self.state_sock is not None, "no state connection"
+        fields = self._line(self.state_sock, 10.0).split()
+        assert fields[0] == "S", fields
+        self.states.append(fields)
+        return fields
 
     def send(self, text: str) -> list[str]:
         self.sock.sendall(text.encode() + b"\n")
@@ -64,6 +67,8 @@ class Client:
 
     def close(self) -> None:
         self.sock.close()
+        if self.state_sock is not None:
+            self.state_sock.close()
 
 
 @pytest.fixture
@@ -74,7 +79,7 @@ def sim() -> Iterator[KawasakiController]:
 
 @pytest.fixture
 def client(sim: KawasakiController) -> Iterator[Client]:
-    c = Client(sim.port)
+    c = Client(sim.port, sim.state_port)
     assert c.line() == HELLO
     yield c
     c.close()
@@ -89,8 +94,8 @@ def test_hello_and_the_state_at_ten_hertz_or_more(client: Client) -> None:
     began = time.monotonic()
     for _ in range(10):
         last = client.state()
-    assert len(first) == 15 and first[2:8] == ZERO.split(" ")
-    assert first[8:] == ["1", "0", "0", "0", "0", "0", "0"]  # motor on, repeat, at rest, nothing queued
+    assert len(first) == 16 and first[2:8] == ZERO.split(" ")
+    assert first[8:] == ["1", "0", "0", "0", "0", "0", "0", "1"]  # motor on, repeat, at rest, nothing queued, running
     assert int(last[1]) == int(first[1]) + 10  # numbered, none left out
     # ten states every 50 ms take 0.5 s; 5 s leaves a loaded machine ten times that and still
     # catches a state sent at 2 Hz or slower
@@ -111,7 +116,7 @@ def test_a_motion_starts_at_three_points_and_ends_exactly_on_the_final_one(sim: 
     assert st["position_ctrl_deg"] == [20.0, 90.0, 0.0, 0.0, 0.0, 0.0]
     assert st["position_rob6_deg"] == [20.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     assert sim.type("kunder") == 0 and st["max_speed_ratio"] <= 1.0
-    wait_until(lambda: client.state()[8:] == ["1", "0", "0", "0", "3", "0", "0"], what="a state at rest, done 3")
+    wait_until(lambda: client.state()[8:15] == ["1", "0", "0", "0", "3", "0", "0"], what="a state at rest, done 3")
 
 
 def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim: KawasakiController, client: Client) -> None:
@@ -120,8 +125,10 @@ def test_a_queue_that_runs_dry_before_a_final_point_is_an_underrun(sim: Kawasaki
     wait_until(lambda: sim.type("kunder") == 1 and not sim.status()["moving"], what="the arm to stop at point 3")
     assert sim.status()["position_ctrl_deg"][0] == pytest.approx(6.0, abs=1e-6)
     assert client.send(point(4, 7, 100, final=True))[2] == "0"  # a final point alone starts
-    wait_until(lambda: sim.type("kdone") == 4 and not sim.status()["moving"], what="point 4")
-    assert sim.status()["position_ctrl_deg"][0] == 7.0 and sim.type("kunder") == 1
+    # kdone is the point the program took, before its JMOVE starts the arm from rest: wait for the arm there
+    wait_until(lambda: not (st := sim.status())["moving"] and st["position_ctrl_deg"][0] == 7.0,
+               what="the arm to stop on point 4")
+    assert sim.type("kdone") == 4 and sim.type("kunder") == 1
 
 
 def test_a_point_is_in_time_while_the_motions_planned_still_run(sim: KawasakiController, client: Client) -> None:
@@ -168,8 +175,8 @@ def test_cancel_drops_the_queue_and_the_arm_stops_after_the_motion_under_way(sim
     ("P 1 20 90 0 0 0 0 48 0", "3"),  # JT1 20 deg in 48 ms: 417 deg/s, rated 360
 ])
 def test_what_the_program_answers(sim: KawasakiController, client: Client, line: str, code: str) -> None:
-    # the answer carries the line's sequence number, 0 when the line was not read that far
-    readable = not line.startswith("P 1.5") and not line.endswith(" 7")
+    # the answer carries the line's sequence number, read first: 0 only when it is not one
+    readable = not line.startswith("P 1.5")
     assert client.send(line)[:3] == ["A", "1" if readable else "0", code]
     assert sim.status()["position_ctrl_deg"] == [0.0, 90.0, 0.0, 0.0, 0.0, 0.0]
 
@@ -228,13 +235,13 @@ def test_an_idle_client_is_kept_and_one_that_closes_is_replaced(sim: KawasakiCon
     while time.monotonic() - began < 10.0:
         client.state()
     assert client.send(point(2, 6, 1000)) == ["A", "2", "0", "2"]  # still the same connection
-    assert sim.status()["connections"] == 1
+    assert (sim.status()["connections"], sim.status()["state_connections"]) == (1, 1)
     client.close()
     wait_until(lambda: sim.queued() == 0, what="the program to notice the client closed")
     again = Client(sim.port)
     assert again.line() == HELLO
     assert again.send(point(1, 1, 1000)) == ["A", "1", "0", "1"]  # a new connection counts anew
-    assert sim.status()["connections"] == 2
+    assert (sim.status()["connections"], sim.status()["state_connections"]) == (2, 1)
     again.close()
 
 
@@ -271,7 +278,9 @@ def test_teach_mode_stops_and_refuses(sim: KawasakiController, client: Client) -
     st = sim.status()
     assert st["teach"] and st["position_ctrl_deg"][0] < 30.0
     assert client.send(point(2, 1, 2000, final=True))[2] == "4"
-    assert client.state()[9] == "1"
+    # the states sent before the switch wait unread on the state connection: the first in teach mode
+    taught = wait_until(lambda: s if (s := client.state())[9] == "1" else None, what="a state in teach mode")
+    assert (taught[11], taught[15]) == ("0", "0")  # the queue dropped, rob6_motion not running
     assert sim.request({"cmd": "execute"}) == {"ok": False, "error": "program in TEACH mode."}
 
 
@@ -283,6 +292,7 @@ def test_teach_mode_stops_and_refuses(sim: KawasakiController, client: Client) -
     ('{"cmd": "slow_ack", "ms": "x"}', "slow_ack: 'ms' must be a number >= 0"),
     ('{"cmd": "monitor_speed", "percent": 0}', "monitor_speed: 'percent' must be 1..100"),
     ('{"cmd": "type", "expr": "nosuch"}', "(E0102) Variable is not defined: nosuch"),
+    ('{"cmd": "execute", "program": 1}', "execute: 'program' must be a program's name"),
     ("[1]", "expected a JSON object with a string 'cmd'"),
 ])
 def test_the_control_channel_says_what_is_wrong(sim: KawasakiController, request_: str, error: str) -> None:

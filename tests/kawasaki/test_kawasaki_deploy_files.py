@@ -26,7 +26,7 @@ REFERENCES = (DEPLOY / "REFERENCES.md").read_text()
 
 def test_the_programs_load() -> None:
     programs = load(SOURCE)
-    assert sorted(programs) == ["rob6_line", "rob6_motion", "rob6_num", "rob6_pc", "rob6_state"]
+    assert sorted(programs) == ["rob6_line", "rob6_motion", "rob6_pc", "rob6_state"]
 
 
 def _words() -> set[str]:

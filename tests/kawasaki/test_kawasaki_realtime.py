@@ -32,17 +32,21 @@ START = [0.0, -30.0, 40.0, 0.0, 30.0, 0.0]
 #: the wire carries 1e-3 deg
 POSITION_TOL = 1.5e-3
 #: how long a point may come late before the arm runs dry: rob6.as starts at three points,
-#: two periods (48 ms, the link's default) ahead of the arm
-LEAD_US = 2 * 48_000
+#: but its robot program takes each point as soon as the motion before begins, so a steady
+#: stream has one period (48 ms, the link's default) of slack (deploy/kawasaki/PROTOCOL.md,
+#: "Rules"); the answer comes after the point is queued, so an answer later than that is late
+LEAD_US = 48_000
 
 
-def kawasaki_system(port: int, **kwargs: Any) -> AbstractContextManager[System]:
+def kawasaki_system(ports: tuple[int, int], **kwargs: Any) -> AbstractContextManager[System]:
+    """The driver on the program's port and its state port."""
     return running("kaw_fs", dummy=False, extra_env={
-        "ROB6_LINK": "kawasaki", "ROB6_KAS_HOST": "127.0.0.1", "ROB6_KAS_PORT": str(port)}, **kwargs)
+        "ROB6_LINK": "kawasaki", "ROB6_KAS_HOST": "127.0.0.1", "ROB6_KAS_PORT": str(ports[0]),
+        "ROB6_KAS_STATE_PORT": str(ports[1])}, **kwargs)
 
 
-def controller(port: int, *args: str) -> KawasakiController:
-    return KawasakiController("--port", str(port), *args)
+def controller(ports: tuple[int, int], *args: str) -> KawasakiController:
+    return KawasakiController("--port", str(ports[0]), "--state-port", str(ports[1]), *args)
 
 
 RIG = StreamedRig(ROBOT, START, POSITION_TOL, moving_key="moving")
@@ -56,9 +60,10 @@ def session(client: Client, ctl: KawasakiController) -> None:
 
 
 def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> None:
-    (port,) = free_tcp_ports(1)
+    first, second = free_tcp_ports(2)
+    port = (first, second)
     with kawasaki_system(port, log_dir=str(tmp_path)) as system, system.client() as client:
-        waiting = f"ERROR: driver: robot not connected (waiting for the Kawasaki AS program at 127.0.0.1:{port})\n"
+        waiting = f"ERROR: driver: robot not connected (waiting for the Kawasaki AS program at 127.0.0.1:{first})\n"
         assert reply(client, "MovePTPJoints 10 -30 40 0 30 0") == waiting + "false\n"
         assert reply(client, "EnableAlter") == waiting + "false\n"
         assert reply(client, "MovePTPJoints 999 0 0 0 0 0") == "false\n"  # refused before the driver
@@ -71,7 +76,7 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> N
             assert status["max_speed_ratio"] <= 1.0  # no axis above its rated speed, ever
             link = link_status(system)
             # the arm never ran out of points mid-path, unless this loaded machine held rob6 up
-            # longer than the program's lead (two 48 ms periods): an answer that late, or
+            # longer than the program's lead (one 48 ms period): an answer that late, or
             # driver cycles missed (the link counts them with the controller's underruns)
             kunder = ctl.type("kunder")
             assert kunder == 0 or link.latency_us[2] > LEAD_US or link.missed > kunder, (kunder, link)
@@ -82,9 +87,10 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> N
 
 
 @pytest.fixture(scope="module")
-def kawasaki() -> Iterator[tuple[System, int]]:
+def kawasaki() -> Iterator[tuple[System, tuple[int, int]]]:
     """One rob6 system on the kawasaki link for the fault tests; each test brings its own controller."""
-    (port,) = free_tcp_ports(1)
+    first, second = free_tcp_ports(2)
+    port = (first, second)
     with kawasaki_system(port) as system:
         yield system, port
 
@@ -93,7 +99,7 @@ Rig = tuple[System, KawasakiController, Client]
 
 
 @pytest.fixture
-def rig(kawasaki: tuple[System, int]) -> Iterator[Rig]:
+def rig(kawasaki: tuple[System, tuple[int, int]]) -> Iterator[Rig]:
     """A fault test's start: a controller of its own, rob6 connected to it, and a client."""
     system, port = kawasaki
     with controller(port) as ctl, system.client() as client:
@@ -143,22 +149,55 @@ def test_teach_mode_and_a_controller_error_mid_motion(rig: Rig) -> None:
     back_home(client, ctl, system)
 
 
-def test_connection_dropped_mid_motion_and_restored(kawasaki: tuple[System, int], rig: Rig) -> None:
+NOT_RUNNING = ("robot program rob6_motion not running (start it: EXECUTE rob6_motion, "
+               "or CONTINUE after a HOLD)")
+
+
+def test_a_robot_program_not_started_or_held_is_a_clear_error(kawasaki: tuple[System, tuple[int, int]]) -> None:
+    """rob6_motion never started (the operator typed only PCEXECUTE 1: rob6_pc): the state says
+    it does not run (TASK(1)), a motion command answers that at once and no point goes out (the
+    program would answer each 4 and nothing would ever drain). Started, rob6 moves; HOLD mid-motion
+    is the same error; after RUN rob6 continues from where the arm stands."""
+    system, port = kawasaki
+    with controller(port, "--start", "PCEXECUTE 1: rob6_pc") as ctl, system.client() as client:
+        wait_until(lambda: ctl.status()["client"], what="rob6 to connect")
+        assert ctl.status()["tasks"].get("robot") is None
+        not_running = f"ERROR: driver: {NOT_RUNNING}\nfalse\n"
+        # until the first state the link says it is not connected yet; then why it cannot move
+        wait_until(lambda: reply(client, "MovePTPJoints " + fmt(START)) == not_running, what="the first state")
+        assert reply(client, "EnableAlter") == not_running
+        assert ctl.status()["lines_received"] == 0  # not a point sent, none refused
+        ctl.execute("rob6_motion")
+        connected(client, ctl, system)
+        interrupted(client, ctl, lambda: ctl.hold(True), NOT_RUNNING)
+        assert ctl.type("TASK(1)") == 2  # held, not aborted: RUN lets it go on
+        assert reply(client, "MovePTPJoints " + fmt(START)) == not_running
+        ctl.hold(False)
+        back_home(client, ctl, system)
+        assert refused(ctl) <= 1  # at most the point on its way when HOLD came
+
+
+def test_connection_dropped_mid_motion_and_restored(kawasaki: tuple[System, tuple[int, int]], rig: Rig) -> None:
+    """The network drops both connections at once: the driver names the one it noticed first."""
     system, ctl, client = rig
-    port = kawasaki[1]
+    port, state_port = kawasaki[1]
     runs = link_status(system).runs
-    interrupted(client, ctl, ctl.drop_connection,
-                f"kawasaki link lost: the controller at 127.0.0.1:{port} closed the connection")
+    RIG.long_move(client, ctl)
+    assert ctl.drop_connection()
+    assert client.read_lines(2, timeout=30) in (
+        f"ERROR: driver: kawasaki link lost: the controller at 127.0.0.1:{port} closed the connection\nfalse\n",
+        f"ERROR: driver: kawasaki link lost: the controller at 127.0.0.1:{state_port} closed the state connection"
+        "\nfalse\n")
     wait_until(lambda: ctl.status()["client"], what="rob6 to reconnect")
     back_home(client, ctl, system)  # after the segment under way ran out: no jump back
     assert link_status(system).runs > runs
 
 
-def test_slow_then_missing_acknowledgements(kawasaki: tuple[System, int], rig: Rig) -> None:
+def test_slow_then_missing_acknowledgements(kawasaki: tuple[System, tuple[int, int]], rig: Rig) -> None:
     system, ctl, client = rig
     RIG.slow_then_missing_acknowledgements(
         client, ctl, system, [20.0, -20.0, 50.0, 0.0, 30.0, 10.0],
-        f"kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{kawasaki[1]} for 2000 ms")
+        f"kawasaki link lost: no acknowledgement from the controller at 127.0.0.1:{kawasaki[1][0]} for 2000 ms")
 
 
 def test_a_point_outside_the_controllers_range_is_never_sent(rig: Rig) -> None:

@@ -10,6 +10,7 @@ import click
 
 from .arm import outside_range
 from .aslang import AsSyntaxError
+from .asrun import PC_STEPS_PER_TICK
 from .convention import to_controller
 from .server import START, Config, Controller, event, run
 
@@ -47,25 +48,30 @@ def _pose(value: str) -> tuple[float, ...]:
 @click.option("--host", default="127.0.0.1", show_default=True, help="Address of the program's port.")
 @click.option("--port", default=49200, show_default=True, type=click.IntRange(0, 65535),
               help="Where the program's port appears on this host (0: any free port).")
+@click.option("--state-port", default=49201, show_default=True, type=click.IntRange(0, 65535),
+              help="Where the program's state port (its kport + 1) appears on this host (0: any free port).")
+@click.option("--pc-steps", default=PC_STEPS_PER_TICK, show_default=True, type=click.IntRange(1, 100000),
+              help="Steps all PC programs together run per 4 ms tick (a guess until a first session measures it).")
 @click.option("--as-port", default=49200, show_default=True, type=click.IntRange(8192, 65535),
               help="The port the program listens on (its kport).")
 @click.option("--control", default="127.0.0.1:0", show_default=True,
               help="HOST:PORT of the JSON fault-injection channel.")
 @click.option("--start-pose", default="0 0 0 0 0 0", show_default=True,
               help="Initial joints, rob6 convention, degrees (six numbers).")
-def main(program: Path | None, start: tuple[str, ...], host: str, port: int, as_port: int, control: str,
-         start_pose: str) -> None:
+def main(program: Path | None, start: tuple[str, ...], host: str, port: int, state_port: int, pc_steps: int,
+         as_port: int, control: str, start_pose: str) -> None:
     """A simulated Kawasaki FS03N controller executing an AS program (rob6's rob6.as), for
     testing rob6's kawasaki link."""
     control_host, control_port = _host_port(control)
     path = program or (PACKAGED if PACKAGED.exists() else REPOSITORY)
     if not path.exists():
         raise click.UsageError(f"no AS program at {PACKAGED} or {REPOSITORY}: give --program")
-    cfg = Config(program=path, host=host, port=port, as_port=as_port, control_host=control_host,
+    cfg = Config(program=path, host=host, port=port, state_port=state_port, pc_steps=pc_steps, as_port=as_port, control_host=control_host,
                  control_port=control_port, start_pose_ctrl=_pose(start_pose), start=start or START)
 
-    def ready(addr: tuple[str, int], ctl_addr: tuple[str, int]) -> None:
-        print(f"kawasaki-as-sim ready: port {addr[0]}:{addr[1]}, control {ctl_addr[0]}:{ctl_addr[1]}", flush=True)
+    def ready(addr: tuple[str, int, int], ctl_addr: tuple[str, int]) -> None:
+        print(f"kawasaki-as-sim ready: port {addr[0]}:{addr[1]}, state port {addr[2]}, "
+              f"control {ctl_addr[0]}:{ctl_addr[1]}", flush=True)
 
     def on_signals(ctl: Controller) -> None:
         def done(*_: object) -> None:

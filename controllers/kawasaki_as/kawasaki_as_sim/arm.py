@@ -51,6 +51,7 @@ class Segment:
     accuracy_mm: float = 1.0  # the next segment starts once the arm is this close to q
     stop: bool = False  # ends at rest (CP OFF, FINE)
     after_rest: bool = False  # starts only once the arm is at rest at the previous target
+    speed_pct: float = 100.0  # SPEED n (no unit): every axis at most n % of its rated speed
 
     @property
     def accuracy_deg(self) -> float:
@@ -125,7 +126,7 @@ class Arm:
                     return None
                 seg = self.plan.popleft()
                 stretch = 100.0 / self.monitor_speed
-                seconds = max(seg.seconds, *(abs(b - a) / v for a, b, v in
+                seconds = max(seg.seconds, *(abs(b - a) / (v * seg.speed_pct / 100.0) for a, b, v in
                                              zip(self.ref, seg.q, RATED_SPEED, strict=True))) * stretch
                 self._seg = (list(self.ref), seg, start, seconds)
             r0, cur, ts, seconds = self._seg

@@ -132,7 +132,7 @@ MAX_NAME = 15
 FUNCTIONS: dict[str, tuple[int, int]] = {
     "val": (1, 1), "len": (1, 1), "$mid": (2, 3), "instr": (2, 3), "$decode": (3, 3),
     "$encode": (1, 20), "$chr": (1, 1), "maxval": (2, 20), "abs": (1, 1), "switch": (1, 1),
-    "error": (0, 0), "true": (0, 0), "false": (0, 0), "on": (0, 0), "off": (0, 0), "#ppoint": (6, 6),
+    "error": (0, 0), "task": (1, 1), "true": (0, 0), "false": (0, 0), "on": (0, 0), "off": (0, 0), "#ppoint": (6, 6),
 }
 #: binary operators by precedence, loosest first
 LEVELS = (("or",), ("and",), ("==", "<>", "!=", "<", ">", "<=", ">="), ("+", "-"), ("*", "/", "mod"), ("^",))
@@ -274,7 +274,7 @@ class Step:
 
 #: instruction -> (least, most) expressions; words they may end with
 INSTRUCTIONS: dict[str, tuple[int, int]] = {
-    "twait": (1, 1), "tcp_listen": (2, 2), "tcp_accept": (4, 4), "tcp_recv": (6, 6), "tcp_send": (5, 5),
+    "twait": (1, 1), "tcp_listen": (2, 2), "tcp_accept": (3, 4), "tcp_recv": (6, 6), "tcp_send": (5, 5),
     "tcp_close": (2, 2), "tcp_end_listen": (2, 2), "here": (1, 1), "jmove": (1, 1), "speed": (1, 1),
     "accuracy": (1, 1), "cp": (0, 0), "break": (0, 0), "pcexecute": (1, 1),
 }

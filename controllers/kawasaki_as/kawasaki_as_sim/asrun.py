@@ -28,8 +28,12 @@ from .aslang import Binary, Call, Expr, Fmt, Name, Num, Program, Step, Str, Unar
 TRUE = -1.0
 MAX_STRING = 255
 MAX_INDEX = 9999
-#: steps a task may run in one tick before the others get their turn
-STEPS_PER_TICK = 5000
+#: steps the robot program may run in one tick (it waits at its next motion long before)
+ROBOT_STEPS_PER_TICK = 5000
+#: steps all PC programs together run in one tick, one step of each in turn: a conservative
+#: guess (no public figure; PC tasks yield to motion planning, REFERENCES.md R12), to be
+#: replaced by the first session's measurement (deploy/kawasaki/README.md); --pc-steps
+PC_STEPS_PER_TICK = 25
 #: CP when the robot program starts: the switch keeps what the cell's last program left, here OFF
 CP_AT_START = False
 #: the accuracy (mm) when no ACCURACY ... ALWAYS has set one
@@ -77,8 +81,10 @@ class Machine(Protocol):
     def error_code(self) -> int: ...
     def here(self) -> tuple[float, ...]: ...
     def motion_room(self) -> bool: ...
-    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool) -> None:
-        """A motion: ``stop`` it ends at rest (CP OFF, FINE); ``after_rest`` the one before ends at rest."""
+    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool,
+             speed_pct: float) -> None:
+        """A motion: ``stop`` it ends at rest (CP OFF, FINE); ``after_rest`` the one before ends
+        at rest; ``speed_pct`` of the rated speeds at most (SPEED n)."""
     def settled(self) -> bool: ...
     def print_line(self, task: str, text: str) -> None: ...
     def tcp(self, op: str, args: list[Value], started: float) -> tuple[Value, ...] | None: ...
@@ -103,7 +109,10 @@ class Task:
     waiting: bool = False
     speed_s: float | None = None  # SPEED ... S for the next JMOVE
     speed_always_s: float | None = None
+    speed_pct: float | None = None  # SPEED n (percent of the rated speeds) for the next JMOVE
+    speed_always_pct: float | None = None
     look_ahead_lost: bool = False  # a step since the last motion that the controller cannot look past
+    steps: int = 0  # steps executed (a waiting instruction counts once, when it completes)
 
     @property
     def alive(self) -> bool:
@@ -111,7 +120,12 @@ class Task:
 
 
 class Interpreter:
-    def __init__(self, programs: dict[str, Program], machine: Machine):
+    def __init__(self, programs: dict[str, Program], machine: Machine, pc_steps_per_tick: int = PC_STEPS_PER_TICK):
+        if pc_steps_per_tick < 1:
+            raise ValueError(f"a step budget of {pc_steps_per_tick} steps a tick")
+        self.pc_steps_per_tick = pc_steps_per_tick
+        self.held = False  # HOLD: the robot program pauses until RUN
+        self.socket_holder: dict[int, str] = {}  # socket number -> the task whose TCP instruction uses it
         self.programs = programs
         self.machine = machine
         self.globals: dict[str, Value | dict[int, Value]] = {}
@@ -132,26 +146,51 @@ class Interpreter:
         if prog.params:
             return f"{program} takes parameters"
         self.tasks[task] = Task(task, [Frame(prog)], started=self.machine.now())
-        self._run(self.tasks[task])  # it starts at once, up to its first wait
-        return ""
+        if task == "robot" and not self.held:
+            self._run(self.tasks[task], ROBOT_STEPS_PER_TICK)  # it starts at once, up to its first wait
+        return ""  # a PC program: from the next tick, in its share of the budget
 
     def abort(self, task: str, why: str) -> None:
         t = self.tasks.get(task)
         if t is not None and t.alive:
             t.state, t.message = "aborted", why
 
-    def tick(self) -> None:
-        for task in list(self.tasks.values()):
-            if task.alive:
-                self._run(task)
+    def task_state(self, task: str) -> float:
+        """``TASK(n)``: 1 the program runs (or waits in an instruction), 2 it is held, 0 it is
+        not running (never started, completed, halted, aborted, stopped by an error)."""
+        t = self.tasks.get(task)
+        if t is None or not t.alive:
+            return 0.0
+        return 2.0 if task == "robot" and self.held else 1.0
 
-    def _run(self, task: Task) -> None:
-        for _ in range(STEPS_PER_TICK):
-            if not task.alive:
+    def tick(self) -> None:
+        """The robot program up to its next wait; then the PC programs, one step of each in
+        turn, until each waits or together they used ``pc_steps_per_tick``."""
+        robot = self.tasks.get("robot")
+        if robot is not None and robot.alive and not self.held:
+            self._run(robot, ROBOT_STEPS_PER_TICK)
+        turn = [t for name, t in sorted(self.tasks.items()) if name != "robot" and t.alive]
+        budget = self.pc_steps_per_tick
+        while turn and budget > 0:
+            for t in list(turn):
+                if budget == 0:
+                    break
+                if self._step(t):
+                    budget -= 1
+                else:
+                    turn.remove(t)
+
+    def _run(self, task: Task, steps: int) -> None:
+        for _ in range(steps):
+            if not self._step(task):
                 return
+
+    def _step(self, task: Task) -> bool:
+        """One step of ``task``: False when it waits or is no longer alive."""
+        while task.alive:
             frame = task.frames[-1]
             if frame.pc >= len(frame.program.steps):
-                self._return(task)
+                self._return(task)  # the end of a program is not a step of its own
                 continue
             step = frame.program.steps[frame.pc]
             try:
@@ -160,11 +199,14 @@ class Interpreter:
                 task.state = "error"
                 task.message = f"{exc} ({frame.program.name} line {step.line}: {step.text})"
                 self.machine.program_error(task.name, exc)
-                return
+                return False
             if not done:
                 task.state = "waiting"
-                return
+                return False
+            task.steps += 1
             task.state = "running" if task.alive else task.state
+            return task.alive
+        return False
 
     def _return(self, task: Task) -> None:
         frame = task.frames.pop()
@@ -283,13 +325,18 @@ class Interpreter:
                 self._assign(frame, Var(step.target.name, Num(float(base + j))), x)
         elif name == "speed":
             value = self._real(frame, step.args[0])
-            if "s" not in step.words:
-                raise AsError("", "rob6's stand-in models SPEED in seconds (S) only")
             if value <= 0:
-                raise AsError("", f"SPEED {value:g} S: not a time")
-            task.speed_s = value
-            if "always" in step.words:
-                task.speed_always_s = value
+                raise AsError("", f"SPEED {value:g}: not a speed or a time")
+            if "s" in step.words:
+                task.speed_s, task.speed_pct = value, None
+                if "always" in step.words:
+                    task.speed_always_s, task.speed_always_pct = value, None
+            else:
+                # SPEED n without a unit: percent of the maximum speed (public AS code, issue 58
+                # item 9); above 100 acts as 100 (the stand-in's choice)
+                task.speed_pct, task.speed_s = min(value, 100.0), None
+                if "always" in step.words:
+                    task.speed_always_pct, task.speed_always_s = task.speed_pct, None
         elif name == "accuracy":
             mm = self._real(frame, step.args[0])
             if mm < 0:
@@ -309,10 +356,11 @@ class Interpreter:
             if not m.motion_room():
                 return False
             seconds = task.speed_s if task.speed_s is not None else 0.0
-            task.speed_s = task.speed_always_s
+            pct = task.speed_pct if task.speed_pct is not None else 100.0
+            task.speed_s, task.speed_pct = task.speed_always_s, task.speed_always_pct
             mm, fine = self.accuracy_next or (self.accuracy, self.fine)
             self.accuracy_next = None
-            m.move(q, seconds, mm, fine or not self.cp, task.look_ahead_lost)
+            m.move(q, seconds, mm, fine or not self.cp, task.look_ahead_lost, pct)
             task.look_ahead_lost = False
         elif name == "break":
             return m.settled()
@@ -329,6 +377,16 @@ class Interpreter:
         """The TCP instructions: the first argument receives the result, the others are read
         (TCP_RECV's string array and count are written too)."""
         name = step.name
+        number = -1
+        if name in ("tcp_recv", "tcp_send", "tcp_close"):
+            # one socket, one instruction at a time: a TCP_SEND waits while another task's
+            # TCP_RECV waits on the same socket (issue 58 item 5; the stand-in's choice, README)
+            number = int(self._real(frame, step.args[1]))
+            holder = self.tasks.get(self.socket_holder.get(number, ""))
+            if holder is not None and holder is not task and holder.alive and holder.waiting:
+                task.started = self.machine.now()  # its own timeout runs once it has the socket
+                return False
+            self.socket_holder[number] = task.name
         values: list[Value] = []
         for i, e in enumerate(step.args[1:], start=1):
             if name == "tcp_recv" and i in (2, 3) or name == "tcp_accept" and i == 3:
@@ -343,6 +401,8 @@ class Interpreter:
         result = self.machine.tcp(name, values, task.started)
         if result is None:
             return False
+        if number >= 0:
+            self.socket_holder.pop(number, None)
         result_var = step.args[0]
         if not isinstance(result_var, Var):
             raise AsError("", f"{name.upper()}: the result goes into a variable")
@@ -357,7 +417,7 @@ class Interpreter:
             for k, piece in enumerate(elements):
                 self._assign(frame, Var(array.name, Num(float(base + k))), piece)
             self._assign(frame, counter, float(len(elements)))
-        elif name == "tcp_accept" and len(result) > 1:
+        elif name == "tcp_accept" and len(result) > 1 and len(step.args) == 4:
             ip = step.args[3]
             assert isinstance(ip, Var)
             base = self._index(frame, ip) if ip.index is not None else 0
@@ -470,6 +530,15 @@ class Interpreter:
             return 0.0
         if name == "error":
             return float(self.machine.error_code())
+        if name == "task":
+            # TASK(1) the robot program, TASK(1001)..TASK(1005) PC programs 1..5 (issue 58 item 6;
+            # the numbering of PC tasks and the values: the stand-in's choice, README)
+            number = self._real(frame, args[0])
+            if number == 1:
+                return self.task_state("robot")
+            if number in (1001, 1002, 1003, 1004, 1005):
+                return self.task_state(f"pc{int(number) - 1000}")
+            raise AsError("", f"TASK({number:g}): no such task")
         if name == "switch":
             word = args[0]
             assert isinstance(word, Name)

@@ -1,6 +1,6 @@
 """The controller's TCP/IP option: the AS TCP instructions on real sockets, with their codes and limits.
 
-``TCP_LISTEN`` opens a port (8192..65535), ``TCP_ACCEPT`` waits up to its timeout (1..60 s)
+``TCP_LISTEN`` opens a port (8192..65535), ``TCP_ACCEPT`` waits up to its timeout (above 0, up to 60 s)
 for a client and gives it a socket number, ``TCP_RECV`` waits up to its timeout for data
 and returns it split into string elements of at most ``max`` characters (1..255), at
 most 4096 bytes a call, ``TCP_SEND`` sends string elements, ``TCP_CLOSE`` and
@@ -29,7 +29,8 @@ from .asrun import AsError, Value
 TIMEOUT = -34024.0
 FAILED = -34025.0
 PORT_RANGE = (8192, 65535)
-TIMEOUT_RANGE = (1.0, 60.0)
+#: (exclusive, inclusive): sub-second timeouts are what public AS code uses (issue 58 item 9)
+TIMEOUT_RANGE = (0.0, 60.0)
 MAX_ELEMENT = 255
 MAX_BYTES_PER_RECV = 4096
 
@@ -52,7 +53,7 @@ class TcpOption:
         self.listeners: dict[int, socket.socket] = {}
         self.conns: dict[int, Conn] = {}
         self.latency_s = 0.0
-        self.accepted = 0
+        self.accepted: dict[int, int] = {}  # connections accepted, by the program's port
         self._polled = time.monotonic()  # when the network was last read
         self._next = 1
         self._on_accept, self._on_data, self._on_sent = on_accept, on_data, on_sent
@@ -95,7 +96,7 @@ class TcpOption:
             self._next += 1
             conn = Conn(sock, peer[:2])
             self.conns[number] = conn
-            self.accepted += 1
+            self.accepted[port] = self.accepted.get(port, 0) + 1
             self._on_accept(conn)
             return (float(number), *(float(b) for b in socket.inet_aton(peer[0])))
         client = self.conns.get(_number(args[0]))
@@ -217,8 +218,8 @@ def _port(x: Value) -> int:
 
 
 def _timeout(x: Value) -> float:
-    if not isinstance(x, float) or not TIMEOUT_RANGE[0] <= x <= TIMEOUT_RANGE[1]:
-        raise AsError("", f"timeout {x!r} outside {TIMEOUT_RANGE[0]:g}..{TIMEOUT_RANGE[1]:g} s")
+    if not isinstance(x, float) or not TIMEOUT_RANGE[0] < x <= TIMEOUT_RANGE[1]:
+        raise AsError("", f"timeout {x!r} not above {TIMEOUT_RANGE[0]:g} and up to {TIMEOUT_RANGE[1]:g} s")
     return x
 
 

@@ -34,7 +34,7 @@ from typing import Any
 
 from . import aslang
 from .arm import Arm, Segment, outside_range
-from .asrun import AsError, Interpreter, Value
+from .asrun import PC_STEPS_PER_TICK, AsError, Interpreter, Value
 from .astcp import Conn, TcpOption
 from .convention import to_rob6
 
@@ -56,6 +56,8 @@ class Config:
     host: str = "127.0.0.1"
     port: int = 49200  # where the program's port appears on this host (0: any free port)
     as_port: int = 49200  # the program's port (its kport)
+    state_port: int = 49201  # where the program's port kport + 1 (rob6_state's) appears on this host (0: any)
+    pc_steps: int = PC_STEPS_PER_TICK  # the PC programs' step budget per tick
     control_host: str = "127.0.0.1"
     control_port: int = 0
     start_pose_ctrl: tuple[float, ...] = (0.0, 90.0, 0.0, 0.0, 0.0, 0.0)
@@ -107,8 +109,9 @@ class Controller:
         self.teach = False
         self.error = 0
         self.tap = Tap()
-        self.net = TcpOption(cfg.host, {cfg.as_port: cfg.port}, self._accepted, self.tap.received, self.tap.sent)
-        self.interp = Interpreter(self.programs, self)
+        self.net = TcpOption(cfg.host, {cfg.as_port: cfg.port, cfg.as_port + 1: cfg.state_port}, self._accepted,
+                             self.tap.received, self.tap.sent)
+        self.interp = Interpreter(self.programs, self, cfg.pc_steps)
         self.robot_program = ""
         self.done = False
 
@@ -129,12 +132,13 @@ class Controller:
     def motion_room(self) -> bool:
         return self.arm.room()
 
-    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool) -> None:
+    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool,
+             speed_pct: float) -> None:
         why = outside_range(q)
         if why:
             # AS refuses a destination outside the motion range: "(E1088) Destination is out of motion range."
             raise AsError("E1088", f"Destination is out of motion range: {why}")
-        self.arm.move(Segment(q, seconds, accuracy_mm, stop, after_rest))
+        self.arm.move(Segment(q, seconds, accuracy_mm, stop, after_rest, speed_pct))
 
     def settled(self) -> bool:
         self.arm.advance(self.clock)
@@ -176,6 +180,7 @@ class Controller:
         moving = self.arm.moving
         self.arm.stop()
         self.interp.abort("robot", why)
+        self.interp.held = False
         event(f"{why}: the robot program stops, the arm {'brakes' if moving else 'stands'} at "
               f"{' '.join(f'{x:.3f}' for x in self.arm.q)}")
 
@@ -196,20 +201,27 @@ class Controller:
                 break
         self.net.poll()
 
-    def boot(self) -> tuple[str, int]:
-        """The operator's start commands; the program's port once it listens."""
+    def boot(self) -> tuple[str, int, int]:
+        """The operator's start commands, each once the tasks started wait (an operator types
+        the next one seconds later); the program's port once it listens."""
         for line in self.cfg.start:
             why = self.command(line)
             if why:
                 raise RuntimeError(f"{line}: {why}")
+            deadline = time.monotonic() + BOOT_TIMEOUT_S
             self.tick()
+            while any(t.state == "running" for t in self.interp.tasks.values()) and time.monotonic() < deadline:
+                time.sleep(TICK_S)
+                self.tick()
         deadline = time.monotonic() + BOOT_TIMEOUT_S
-        while (addr := self.net.address(self.cfg.as_port)) is None:
+        while (addr := self.net.address(self.cfg.as_port)) is None or (
+                state := self.net.address(self.cfg.as_port + 1)) is None:
             if time.monotonic() > deadline:
-                raise RuntimeError(f"the program never listened on its port {self.cfg.as_port}; tasks: {self.tasks()}")
+                raise RuntimeError(f"the program never listened on its ports {self.cfg.as_port} and "
+                                   f"{self.cfg.as_port + 1}; tasks: {self.tasks()}")
             self.tick()
             time.sleep(TICK_S)
-        return addr
+        return addr[0], addr[1], state[1]
 
     def tasks(self) -> dict[str, str]:
         return {name: t.state + (f": {t.message}" if t.message else "") for name, t in self.interp.tasks.items()}
@@ -224,7 +236,9 @@ class Controller:
             "position_rob6_deg": [round(x, 6) for x in to_rob6(self.arm.q)],
             "moving": self.arm.moving, "estop": self.estop, "motor": self.motor, "teach": self.teach,
             "error": self.error, "monitor_speed": self.arm.monitor_speed,
-            "client": self.net.connected(), "connections": self.net.accepted,
+            "client": self.net.connected(),
+            "connections": self.net.accepted.get(self.cfg.as_port, 0),
+            "state_connections": self.net.accepted.get(self.cfg.as_port + 1, 0),
             "lines_received": self.tap.lines, "answers": dict(sorted(self.tap.answers.items())),
             "underruns_reported": self.tap.underruns,
             "segments": self.arm.executed, "max_speed_ratio": round(self.arm.max_speed_ratio, 4),
@@ -265,9 +279,23 @@ class Controller:
                 return {"ok": False, "error": "error: 'code' must be a positive integer"}
             self.error = code
             self.halt(f"error {code}")
+        elif cmd in ("hold", "run"):
+            # the pendant's HOLD/RUN switch: HOLD brakes the arm and pauses the robot program
+            # (TASK(1) 2), RUN lets it go on from its next step (issue 58 item 8; R6)
+            self.interp.held = cmd == "hold"
+            if self.interp.held:
+                self.arm.advance(self.clock)
+                self.arm.stop()
         elif cmd == "clear_error":
             self.error = 0
         elif cmd == "execute":
+            # EXECUTE name, or EXECUTE alone: the robot program executed last
+            program = req.get("program", self.robot_program)
+            if not isinstance(program, str):
+                return {"ok": False, "error": "execute: 'program' must be a program's name"}
+            if not program:
+                return {"ok": False, "error": "execute: no robot program was executed before: name its 'program'"}
+            self.robot_program = program
             why = self.execute()
             if why:
                 return {"ok": False, "error": why}
@@ -308,7 +336,7 @@ def _pct(values: list[float], p: float) -> float:
     return round(values[min(len(values) - 1, max(0, math.ceil(p * len(values)) - 1))], 3)
 
 
-def run(cfg: Config, ready: Callable[[tuple[str, int], tuple[str, int]], None],
+def run(cfg: Config, ready: Callable[[tuple[str, int, int], tuple[str, int]], None],
         stop: Callable[[Controller], None]) -> None:
     """Boot the controller, say ``ready``, and run until ``ctl.done``."""
     ctl = Controller(cfg)

@@ -72,12 +72,15 @@ from .service import DriverService
               help="kawasaki: the controller's address [env ROB6_KAS_HOST].")
 @click.option("--kas-port", envvar="ROB6_KAS_PORT", default=DEFAULT_KAS_PORT, show_default=True, type=int,
               help="kawasaki: the port rob6's AS PC program listens on [env ROB6_KAS_PORT].")
+@click.option("--kas-state-port", envvar="ROB6_KAS_STATE_PORT", default=0, show_default=True, type=int,
+              help="kawasaki: the port of rob6's AS state program, 0: --kas-port + 1 [env ROB6_KAS_STATE_PORT].")
 @click.option("--kas-period", envvar="ROB6_KAS_PERIOD", default=DEFAULT_KAS_PERIOD_S, show_default=True,
               type=float, help="kawasaki: seconds between streamed points, rounded to controller cycles "
                                "[env ROB6_KAS_PERIOD].")
 def main(settings: BusSettings, log_level: str, cell: str | None, dummy: bool, link: str, rsi_listen: str, rsi_sentype: str,
          sm_host: str, sm_motion_port: int, sm_state_port: int, sm_io_port: int, sm_byte_order: str,
-         sm_period: float, sm_outputs: str, kas_host: str, kas_port: int, kas_period: float) -> None:
+         sm_period: float, sm_outputs: str, kas_host: str, kas_port: int, kas_state_port: int,
+         kas_period: float) -> None:
     """Run the driver of one robot."""
     robot = get_robot(settings.robot)
     try:
@@ -86,7 +89,7 @@ def main(settings: BusSettings, log_level: str, cell: str | None, dummy: bool, l
         service.fail("driver", str(exc), EXIT_REFUSED)
     sm = AdeptSettings(host=sm_host, motion_port=sm_motion_port, state_port=sm_state_port, io_port=sm_io_port,
                        byte_order=sm_byte_order, period_s=sm_period, outputs=sm_outputs)
-    kas = KawasakiSettings(host=kas_host, port=kas_port, period_s=kas_period)
+    kas = KawasakiSettings(host=kas_host, port=kas_port, period_s=kas_period, state_port=kas_state_port)
     if link in ("simple_message", "adept"):
         _check_link(link, robot.is_adept, "the Adept Viper s850 (ad850)", robot.name, dummy, sm.check)
     if link == "kawasaki":

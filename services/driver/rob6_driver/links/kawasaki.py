@@ -1,7 +1,8 @@
 """The kawasaki link: drives a Kawasaki FS03N (``kaw_fs``) through rob6's AS program pair.
 
-The program pair runs on the controller (deploy/kawasaki); the link keeps one TCP connection
-to its PC program (``ROB6_KAS_HOST``, ``ROB6_KAS_PORT``), in the protocol of ``kawasaki_codec.py``.
+The program runs on the controller (deploy/kawasaki); the link keeps two TCP connections to
+its PC programs (``ROB6_KAS_HOST``): points and answers on ``ROB6_KAS_PORT``, the state on
+``ROB6_KAS_STATE_PORT`` (default the next port up), in the protocol of ``kawasaki_codec.py``.
 
 The clock is the driver's own: every ``robot.cycle_s`` (16 ms) the motion core steps,
 and while the robot moves every ``period_s`` (default 48 ms, three cycles) its setpoint
@@ -27,7 +28,9 @@ error the gateway shows as ``ERROR: driver: ...``:
 * the connection lost (closed, no state for ``state_timeout_s``, no answer for
   ``ack_timeout_s``): ``kawasaki link lost: ...``; rob6 reconnects every ``retry_s``;
 * the state: ``robot reports motor power off`` (also what an E-stop shows: AS has no switch
-  that tells an E-stop apart), ``robot reports teach mode``, ``robot reports controller error N``;
+  that tells an E-stop apart), ``robot reports teach mode``, ``robot reports controller error N``,
+  ``robot program rob6_motion not running ...`` (never started, held, or stopped: the
+  program answers every point "not ready" then, and the queue would never drain);
 * a point refused: ``robot refused a point (code N: ...)``; the robot not at the target
   when it stopped: ``robot stopped short of the target ...``.
 
@@ -89,10 +92,15 @@ class KawasakiSettings:
     host: str = DEFAULT_HOST
     port: int = DEFAULT_PORT
     period_s: float = DEFAULT_PERIOD_S
+    state_port: int = 0  # 0: port + 1, where rob6.as's rob6_state listens
+
+    @property
+    def state_address_port(self) -> int:
+        return self.state_port or self.port + 1
 
     def check(self) -> None:
         """ValueError (one line, naming the setting) when a value cannot work."""
-        check_address("ROB6_KAS", self.host, ("PORT", self.port))
+        check_address("ROB6_KAS", self.host, ("PORT", self.port), ("STATE_PORT", self.state_address_port))
         check_period("ROB6_KAS", self.period_s)
 
 
@@ -108,6 +116,12 @@ class KawasakiLink(StreamedPointsLink):
         self.settings = settings
         self.addr = (settings.host, int(settings.port))
         self.name = endpoint_name(self.addr)
+        self.state_addr = (settings.host, int(settings.state_address_port))
+        self.state_name = endpoint_name(self.state_addr)
+        # the state connection (the connection thread's own)
+        self._state_sock: socket.socket | None = None
+        self._state_buffer = bytearray()
+        self._state_heard = 0.0
         # the connection (guarded by _cond)
         self._up = False
         self._robot: State | None = None
@@ -160,6 +174,9 @@ class KawasakiLink(StreamedPointsLink):
             return "robot reports motor power off"
         if st.error:
             return f"robot reports controller error {st.error}"
+        if not st.running:
+            return ("robot program rob6_motion not running (start it: EXECUTE rob6_motion, "
+                    "or CONTINUE after a HOLD)")
         return ""
 
     def _controller_moving(self) -> bool | None:
@@ -192,6 +209,33 @@ class KawasakiLink(StreamedPointsLink):
         sock.setblocking(False)
         hello = self._await(sock, buffer, Hello, HELLO_TIMEOUT_S, "no hello")
         assert isinstance(hello, Hello)
+        try:
+            state = socket.create_connection(self.state_addr, timeout=HELLO_TIMEOUT_S)
+        except OSError as exc:
+            raise LinkDown(f"no state connection to {self.state_name}: {exc.strerror or exc}") from None
+        state.setblocking(False)
+        self._state_sock, self._state_buffer = state, bytearray()
+        self._state_heard = time.monotonic()
+        try:
+            return self._serve_points(sock, buffer, hello)
+        finally:
+            self._state_sock = None
+            state.close()
+
+    def _select(self, sock: socket.socket, timeout: float, *more: socket.socket) -> list[socket.socket]:
+        """Wait up to ``timeout`` for ``sock`` (or ``more``); the state connection's lines are
+        taken in meanwhile. The readable ones of ``sock`` and ``more``."""
+        watch = [sock, *more] + ([self._state_sock] if self._state_sock is not None else [])
+        readable, _, _ = select.select(watch, [], [], timeout)
+        if self._state_sock is not None and self._state_sock in readable:
+            self._receive(self._state_sock, self._state_buffer, "state connection", self.state_name)
+            for message in self._messages(self._state_buffer, name=self.state_name):
+                if not isinstance(message, State):
+                    raise LinkDown(f"a message other than a state on the state connection to {self.state_name}")
+                self._state_heard = time.monotonic()
+        return [s for s in readable if s is not self._state_sock]
+
+    def _serve_points(self, sock: socket.socket, buffer: bytearray, hello: Hello) -> str:
         with self._cond:
             self._up = True
             self._inflight = False
@@ -202,23 +246,21 @@ class KawasakiLink(StreamedPointsLink):
             self.controller_queued = 0
             self.runs += 1
             self._evaluate()
-        heard = time.monotonic()
         while not self._closing.is_set():
             with self._cond:
                 request = self._next_request()
             if request is None:
-                readable, _, _ = select.select([sock, self._wake_r], [], [], 0.1)
+                readable = self._select(sock, 0.1, self._wake_r)
                 if self._wake_r in readable:
                     self._drain_wake()
                 if sock in readable:
                     self._receive(sock, buffer, "connection", self.name)
                     for message in self._messages(buffer):
-                        heard = time.monotonic()
                         if isinstance(message, Ack):
                             self._garbage(f"driver: an unasked answer for point {message.sequence}")
-                if time.monotonic() - heard > self.state_timeout_s:
+                if time.monotonic() - self._state_heard > self.state_timeout_s:
                     ms = round(self.state_timeout_s * 1000)
-                    raise LinkDown(f"no state message from the controller at {self.name} for {ms} ms")
+                    raise LinkDown(f"no state message from the controller at {self.state_name} for {ms} ms")
                 continue
             frame, sequence, q, is_cancel = request
             sent = time.perf_counter()
@@ -228,7 +270,6 @@ class KawasakiLink(StreamedPointsLink):
                 raise LinkDown(f"sending to the controller at {self.name} failed: {exc.strerror or exc}") from None
             ack = self._await(sock, buffer, Ack, self.ack_timeout_s, "no acknowledgement", sequence)
             assert isinstance(ack, Ack)
-            heard = time.monotonic()
             self._on_ack(sock, buffer, ack, q, is_cancel, time.perf_counter() - sent)
         return "closing"
 
@@ -265,19 +306,20 @@ class KawasakiLink(StreamedPointsLink):
                 ms = round(timeout * 1000)
                 extra = " (is it rob6's AS program?)" if kind is Hello else ""
                 raise LinkDown(f"{what} from the controller at {self.name} for {ms} ms{extra}")
-            readable, _, _ = select.select([sock], [], [], min(remaining, 0.1))
-            if readable:
+            if self._select(sock, min(remaining, 0.1)):
                 self._receive(sock, buffer, "connection", self.name)
 
-    def _messages(self, buffer: bytearray, until: type[Hello] | type[Ack] | None = None) -> list[Message]:
+    def _messages(self, buffer: bytearray, until: type[Hello] | type[Ack] | None = None,
+                  name: str = "") -> list[Message]:
         """Parse the complete lines in ``buffer``; states are taken in at once. Stops after
         the first message of type ``until`` (the rest stays in the buffer)."""
+        name = name or self.name
         out: list[Message] = []
         while True:
             end = buffer.find(b"\n")
             if end < 0:
                 if len(buffer) > MAX_LINE:
-                    raise LinkDown(f"unreadable data from the controller at {self.name} "
+                    raise LinkDown(f"unreadable data from the controller at {name} "
                                    f"(no line end in {len(buffer)} bytes)")
                 return out
             line = bytes(buffer[:end])
@@ -285,8 +327,8 @@ class KawasakiLink(StreamedPointsLink):
             try:
                 message = parse(line)
             except KasError as exc:
-                self._garbage(f"driver: unreadable message from {self.name}: {exc}")
-                raise LinkDown(f"unreadable message from the controller at {self.name} ({exc})") from None
+                self._garbage(f"driver: unreadable message from {name}: {exc}")
+                raise LinkDown(f"unreadable message from the controller at {name} ({exc})") from None
             if isinstance(message, State):
                 self._on_state(message)
             out.append(message)
@@ -339,6 +381,5 @@ class KawasakiLink(StreamedPointsLink):
             for message in self._messages(buffer):
                 if isinstance(message, Ack):
                     self._garbage(f"driver: an unasked answer for point {message.sequence}")
-            readable, _, _ = select.select([sock], [], [], min(remaining, 0.05))
-            if readable:
+            if self._select(sock, min(remaining, 0.05)):
                 self._receive(sock, buffer, "connection", self.name)

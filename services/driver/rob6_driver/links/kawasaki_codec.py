@@ -6,8 +6,9 @@ are converted between rob6's convention and the controller's.
 One message is one line of printable ASCII ended by LF (a CR before it is ignored), at
 most ``MAX_LINE`` characters, fields separated by one or more spaces (AS pads numbers),
 the first field a one-letter type. The driver sends ``P`` (a point) and ``C`` (cancel the queue); the
-controller sends ``H`` (hello, once per connection), ``A`` (the answer to every P and
-C) and ``S`` (its state, at least every 100 ms).
+controller sends ``H`` (hello, once per connection) and ``A`` (the answer to every P and
+C) on the program's port, and ``S`` (its state, at least every 100 ms) on the state port,
+the next one up: a socket of its own, so a receive waiting on the first never holds it up.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from rob6.errors import LinkError
 from .wire_numbers import finite_float
 
 PROTOCOL = "rob6-kas"
-VERSION = 2
+VERSION = 3
 #: one message, LF included; AS strings hold 255 characters, the program keeps below that
 MAX_LINE = 120
 MAX_SEQUENCE = 999_999
@@ -104,6 +105,7 @@ class State:
     done: int  # the sequence number of the last point the arm finished
     error: int  # controller error code, 0 none
     underruns: int  # times the queue ran dry before a final point
+    running: bool = True  # the robot program (rob6_motion) runs: TASK(1) is 1 (not held, stopped, never started)
 
 
 def point(sequence: int, q_rob6_deg: npt.ArrayLike, duration_s: float, final: bool) -> bytes:
@@ -148,14 +150,14 @@ def parse(line: bytes) -> Hello | Ack | State:
             raise KasError(f"an answer with {len(args)} fields (3 expected): {text!r}")
         return Ack(_int(args[0], "sequence"), _int(args[1], "code"), _int(args[2], "queued"))
     if kind == "S":
-        if len(args) != 14:
-            raise KasError(f"a state with {len(args)} fields (14 expected): {text!r}")
+        if len(args) != 15:
+            raise KasError(f"a state with {len(args)} fields (15 expected): {text!r}")
         joints = tuple(_float(x) for x in args[1:7])
         motor, teach, moving = (_flag(x) for x in args[7:10])
         return State(_int(args[0], "count"), joints, motor=motor, teach=teach, moving=moving,
                      queued=_int(args[10], "queued"),
                      done=_int(args[11], "done"), error=_int(args[12], "error"),
-                     underruns=_int(args[13], "underruns"))
+                     underruns=_int(args[13], "underruns"), running=_flag(args[14]))
     raise KasError(f"an unknown message type {kind!r}")
 
 
