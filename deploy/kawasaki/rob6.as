@@ -9,18 +9,22 @@
 ;   rob6_state  PC program 2: the state line every 50 ms while a driver is connected.
 ;   rob6_motion robot program (EXECUTE rob6_motion): JMOVEs the queued points.
 ;
-; Shared globals, each written by one program only (kflush, kend: see below): the
+; Shared globals, each written by one program only (kflush, kend, kmore: see below): the
 ; queue ring kq1[]..kq6[] (joints, deg), kms[] (ms), kfin[] (final 0/1), kseq[] of kcap
-; points; kin points written (rob6_pc), kout points taken (rob6_motion), kflush the points
-; dropped by a cancel or a stop; ksock the driver's socket (-1 none); kdone, kunder, ke[]
-; and kend what rob6_motion did. Everything else is local (.name) to one program.
+; points; kin points written and kgo points released to the motion (rob6_pc), kout points
+; taken (rob6_motion), kflush the points dropped by a cancel or a stop; ksock the driver's
+; socket (-1 none); kdone, kunder, ke[], kend and kmore (1: it streams, a point is due)
+; what rob6_motion did. Everything else is local (.name) to one program; no name is
+; longer than 15 characters.
 
 .PROGRAM rob6_pc()
   kcap = 64
   kport = 49200
   kstart = 3
   kin = 0
+  kgo = 0
   kout = 0
+  kmore = 0
   kflush = 0
   kdone = 0
   kunder = 0
@@ -44,6 +48,18 @@
   kmax[5] = 135
   kmin[6] = -360
   kmax[6] = 360
+  ; every slot defined: rob6_motion reads one before its point is there (and then ignores it)
+  FOR .w = 0 TO kcap - 1
+    kq1[.w] = 0
+    kq2[.w] = 0
+    kq3[.w] = 0
+    kq4[.w] = 0
+    kq5[.w] = 0
+    kq6[.w] = 0
+    kms[.w] = 1
+    kfin[.w] = 0
+    kseq[.w] = 0
+  END
   PCEXECUTE 2: rob6_state
   TCP_LISTEN .ret, kport
   IF .ret < 0 THEN
@@ -55,7 +71,7 @@
   IF .sock < 0 GOTO 10
   .last = 0
   .$buf = ""
-  .$out[1] = "H rob6-kas 2 " + $ENCODE(/I2, kcap) + $CHR(10)
+  .$out[1] = "H rob6-kas 2 " + $ENCODE(/L, kcap) + $CHR(10)
   TCP_SEND .ret, .sock, .$out[1], 1, 1
   IF .ret < 0 GOTO 90
   ksock = .sock
@@ -78,7 +94,7 @@
   .$line = $MID(.$buf, 1, .p - 1)
   .$buf = $MID(.$buf, .p + 1, 255)
   CALL rob6_line(.$line, .last, .seq, .code)
-  .$out[1] = "A " + $ENCODE(/I6, .seq) + " " + $ENCODE(/I1, .code) + " " + $ENCODE(/I3, kin - MAXVAL(kout, kflush)) + $CHR(10)
+  .$out[1] = "A " + $ENCODE(/L, .seq, " ", /L, .code, " ", /L, kin - MAXVAL(kout, kflush)) + $CHR(10)
   TCP_SEND .ret, .sock, .$out[1], 1, 1
   IF .ret < 0 GOTO 90
   GOTO 30
@@ -204,6 +220,14 @@
   kfin[.w] = .final
   kseq[.w] = .seq
   kin = kin + 1
+  ; released to the motion at once while it streams; from rest once kstart points or a final one wait
+  IF kmore == 1 THEN
+    kgo = kin
+  ELSE
+    IF (kin - MAXVAL(kgo, kout, kflush) >= kstart) OR (.final == 1) THEN
+      kgo = kin
+    END
+  END
   .code = 0
 .END
 
@@ -256,6 +280,7 @@
   IF (.power == 0) OR (.teach == 1) OR (ERROR <> 0) THEN
     kflush = kin
     kend = 0
+    kmore = 0
   END
   HERE .#now
   DECOMPOSE .j[1] = .#now
@@ -272,13 +297,12 @@
   END
   IF ksock >= 0 THEN
     .n = (.n + 1) MOD 1000000
-    .$s[1] = "S " + $ENCODE(/I6, .n)
+    .$s[1] = "S " + $ENCODE(/L, .n)
     FOR .k = 1 TO 6
       .$s[1] = .$s[1] + " " + $ENCODE(/F9.3, .j[.k])
     END
-    .$s[1] = .$s[1] + " " + $ENCODE(/I1, .power) + " " + $ENCODE(/I1, .teach) + " " + $ENCODE(/I1, .moving)
-    .$s[1] = .$s[1] + " " + $ENCODE(/I3, .q) + " " + $ENCODE(/I6, kdone) + " " + $ENCODE(/I8, ERROR)
-    .$s[1] = .$s[1] + " " + $ENCODE(/I6, kunder) + $CHR(10)
+    .$s[1] = .$s[1] + $ENCODE(" ", /L, .power, " ", /L, .teach, " ", /L, .moving, " ", /L, .q)
+    .$s[1] = .$s[1] + $ENCODE(" ", /L, kdone, " ", /L, ERROR, " ", /L, kunder) + $CHR(10)
     TCP_SEND .ret, ksock, .$s[1], 1, 1
   END
   TWAIT 0.05
@@ -286,66 +310,42 @@
 .END
 
 .PROGRAM rob6_motion()
-  ; starts a motion at kstart points or a final one; every point one JMOVE, the final one exact.
-  ; A JMOVE waits until the motion before it has begun, so the program runs one point ahead of
-  ; the arm; .ahead is how long the motions planned still run (at 100 %), as the program counts
-  ; it: the next point is late (an underrun) only when that time has run out
-  kout = kin
-  kend = 0
+  ; one JMOVE a pass: the next released point, else (an idle pass) the last target again for
+  ; 8 ms. A pass has no branch, loop or wait: a controller that meets one between two motion
+  ; instructions plans no motion ahead across it and stops the arm at every point (motion
+  ; type 1, REFERENCES.md), so every choice below is arithmetic (.has 1 a point, 0 none).
+  ; A JMOVE waits until the motion before it has begun: the program runs one point ahead.
+  ; CP is a switch the cell keeps: set here, as the accuracy, never assumed.
+  CP ON
   ACCURACY 50 ALWAYS
+  kout = MAXVAL(kin, kflush)
+  kend = 0
+  kmore = 0
+  .fl = kflush
+  HERE .#here
+  DECOMPOSE ke[1] = .#here
 10
-  IF kflush > kout THEN
-    kout = kflush
-  END
-  IF kin - kout >= kstart GOTO 20
-  IF kin > kout THEN
-    IF kfin[(kin - 1) MOD kcap] == 1 GOTO 20
-  END
-  TWAIT 0.008
-  GOTO 10
-20
-  .ahead = 0
-  .prev = 0
-30
-  IF kflush > kout THEN
-    kout = kflush
-    BREAK
-    GOTO 10
-  END
-  IF kin <= kout THEN
-    IF .ahead <= 0 THEN
-      ; the arm has run out of motions: it stands at the last point until kstart points come
-      kunder = (kunder + 1) MOD 1000000
-      GOTO 10
-    END
-    TWAIT 0.008
-    .ahead = .ahead - 0.008
-    GOTO 30
-  END
+  kout = MAXVAL(kout, kflush)
+  .has = MAXVAL(0, -MAXVAL(kout - kgo, -1))
+  .cut = MAXVAL(0, -MAXVAL(.fl - kflush, -1))
+  .fl = kflush
   .r = kout MOD kcap
-  SPEED kms[.r] / 1000 S
-  IF kfin[.r] == 1 THEN
-    ACCURACY 1 FINE
-  END
-  ke[1] = kq1[.r]
-  ke[2] = kq2[.r]
-  ke[3] = kq3[.r]
-  ke[4] = kq4[.r]
-  ke[5] = kq5[.r]
-  ke[6] = kq6[.r]
-  kend = 1
-  kdone = kseq[.r]
+  .fin = .has * kfin[.r]
+  ke[1] = ke[1] + .has * (kq1[.r] - ke[1])
+  ke[2] = ke[2] + .has * (kq2[.r] - ke[2])
+  ke[3] = ke[3] + .has * (kq3[.r] - ke[3])
+  ke[4] = ke[4] + .has * (kq4[.r] - ke[4])
+  ke[5] = ke[5] + .has * (kq5[.r] - ke[5])
+  ke[6] = ke[6] + .has * (kq6[.r] - ke[6])
+  kdone = kdone + .has * (kseq[.r] - kdone)
+  ; a point due (the last one was not final) and none there: the arm stops, an underrun
+  kunder = (kunder + (1 - .has) * kmore * (1 - .cut)) MOD 1000000
+  kmore = .has * (1 - .fin)
+  kend = MAXVAL(kend, .has)
+  kout = kout + .has
+  ; the final point exact (1 mm, then only idle passes to it), the others blended
+  ACCURACY 50 - 49 * .fin
+  SPEED (.has * kms[.r] + (1 - .has) * 8) / 1000 S
   JMOVE #PPOINT(ke[1], ke[2], ke[3], ke[4], ke[5], ke[6])
-  kout = kout + 1
-  ; the motion before this one has begun (now, or already while the program waited)
-  IF .ahead > .prev THEN
-    .ahead = .prev
-  END
-  .prev = kms[.r] / 1000
-  .ahead = .ahead + .prev
-  IF kfin[.r] == 1 THEN
-    BREAK
-    GOTO 10
-  END
-  GOTO 30
+  GOTO 10
 .END

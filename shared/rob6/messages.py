@@ -229,7 +229,9 @@ class HalfSpace(Struct):
 
 class Box(Struct):
     """A box: its corners before the rotation (robot base frame, mm), turned about its centre
-    by ``rpy_deg`` (URDF's roll, pitch, yaw: about x, then y, then z, fixed axes)."""
+    (the middle of ``min`` and ``max``) by ``rpy_deg`` = [r, p, y] degrees, URDF's roll, pitch,
+    yaw: about the base frame's x by r, then its y by p, then its z by y (fixed axes), the
+    rotation ``Rz(y) @ Ry(p) @ Rx(r)``; ``rob6.cell.file`` says it in full."""
 
     min: list[float]
     max: list[float]
@@ -246,6 +248,9 @@ class Zone(Struct):
     half_space: HalfSpace | None = None
     box: Box | None = None
     ignore: list[str] = []
+    #: more room than the cell's ``margin_mm`` kept from this zone (mm; never less): e.g. the
+    #: controller's own stopping distance from the vendor's data. None: the cell's margin
+    margin_mm: float | None = None
 
 
 class ToolShape(Struct):
@@ -267,11 +272,18 @@ class Cell(Struct):
     zones: list[Zone] = []
     tool: list[ToolShape] = []
     self_collision: bool = True
-    arm_padding_mm: float = 0.0  # added to the radius of every capsule of the arm (cables, covers)
+    arm_padding_mm: float = 0.0  # added around every shape of the arm (cables, covers); the default of every part
+    arm_padding_parts: dict[str, float] = {}  # a part's own padding, where the file gives one (mm)
     allowed_pairs: list[list[str]] = []  # pairs of parts that may touch, beyond the adjacent ones
     #: the lab's own (ROB6_CELL), not the default: IsPossible then checks poses against it too
     #: (with the default it answers as the original, whose transcripts ask about poses below the floor)
     from_file: bool = True
+    #: SHA-256 of the file's bytes (hex; the default cell's file too): a changed cell shows in
+    #: the driver's log, GetCell and every recording. "": a recording made before it was carried
+    sha256: str = ""
+    #: the pairs of parts not measured, each with why (near in the chain, allowed by the file,
+    #: touching at the zero position): filled by the driver from its model
+    unchecked: list[str] = []
 
 
 class Clearance(Struct):

@@ -61,9 +61,10 @@ zones:
     keep: out
     box: {{min: [{x - half:.1f}, {-half:.1f}, {self.table_z - 100:.1f}], max: [{x + half:.1f}, {half:.1f}, {self.table_z:.1f}]}}
 tool:
-  - {{name: gripper, capsule: {{from: [0, 0, 0], to: [0, 0, {-self.tool_mm + r:.1f}], radius: {r / 2:.1f}}}}}
+  - {{name: gripper, capsule: {{from: [0, 0, {-r / 2:.1f}], to: [0, 0, {-self.tool_mm + r:.1f}], radius: {r / 2:.1f}}}}}
   - {{name: tool tip, sphere: {{center: [0, 0, {-self.tool_mm:.1f}], radius: {r:.1f}}}}}
-"""
+""" + ("arm:\n  allowed_pairs: [[link_4, gripper]]   # the Viper's wrist estimate reaches the flange\n"
+       if self.robot == "ad850" else "")
 
     def write(self, directory: Path) -> Path:
         path = directory / f"{self.robot}-cell.yaml"

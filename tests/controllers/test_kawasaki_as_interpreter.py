@@ -1,6 +1,6 @@
 """The stand-in's AS interpreter is as strict as the controller: what it refuses at load (an
 unknown instruction or function, a wrong argument count, an unclosed block, a GOTO without
-its label) and what stops a program at run time (an undefined variable, E0102; an index out
+its label, a name over 15 characters, a $ENCODE format no public AS code shows) and what stops a program at run time (an undefined variable, E0102; an index out
 of range; a name used as scalar and array; an unknown switch; a string over 255 characters;
 a number that overflows its $ENCODE format; a CALL with the wrong number of arguments); and
 how its values behave (TRUE is -1, AND evaluates both sides, $DECODE consumes its text).
@@ -17,6 +17,7 @@ from kawasaki_as_sim.asrun import AsError, Interpreter, Value
 class Machine:
     def __init__(self) -> None:
         self.errors: list[AsError] = []
+        self.moves: list[tuple[float, bool, bool]] = []
         self.t = 0.0
 
     def now(self) -> float:
@@ -34,8 +35,8 @@ class Machine:
     def motion_room(self) -> bool:
         return True
 
-    def move(self, q: tuple[float, ...], seconds: float) -> None:
-        pass
+    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool) -> None:
+        self.moves.append((accuracy_mm, stop, after_rest))
 
     def settled(self) -> bool:
         return True
@@ -66,7 +67,12 @@ def value(interp: Interpreter, name: str) -> Value:
     ("  FLY 3", "unknown instruction 'FLY'"),
     ("  a = NOSUCH(1)", "unknown function NOSUCH"),
     ("  a = $NOSUCH(1)", "unknown function $NOSUCH"),
-    ("  a = $MID(\"x\", 1)", "$MID takes 3 arguments, given 2"),
+    ("  a = $MID(\"x\")", "$MID takes 2 to 3 arguments, given 1"),
+    ("  .abcdefghijklmnop = 1", "the name .ABCDEFGHIJKLMNOP is longer than 15 characters"),
+    ("  $abcdefghijklmnop = \"\"", "the name $ABCDEFGHIJKLMNOP is longer than 15 characters"),
+    ("  CALL abcdefghijklmnop()", "the name ABCDEFGHIJKLMNOP is longer than 15 characters"),
+    ("  a = $ENCODE(/I6, 1)", "unknown format /I6"),
+    ("  a = $ENCODE(/F9, 1)", "unknown format /F9"),
     ("  TCP_RECV a, b, $c[1], d, 1", "TCP_RECV: wrong arguments"),
     ("  IF a THEN", "IF without END in main"),
     ("  GOTO 10", "GOTO 10: no such label in main"),
@@ -85,7 +91,7 @@ def test_what_the_controller_refuses_to_load(body: str, error: str) -> None:
     ("  a = 1\n  a[1] = 2", "", "a is not an array"),
     ("  a[1] = 1\n  b = a", "", "a is an array, used without an index"),
     ("  a = SWITCH(EMERGENCY)", "", "SWITCH(EMERGENCY): no such switch"),
-    ("  $a = $ENCODE(/I5, -34024)", "", "$ENCODE: -34024 does not fit /I5"),
+    ("  $a = $ENCODE(/F7.1, -34024)", "", "$ENCODE: -34024 does not fit /F7"),
     ("  $a = \"x\"\n  FOR i = 1 TO 8\n    $a = $a + $a\n  END", "", "a string of 256 characters for $a"),
     ("  CALL sub(1)", "", "CALL sub: 1 arguments for 2 parameters"),
     ("  a = 1 / 0", "", "division by zero"),
@@ -106,10 +112,13 @@ def test_true_is_minus_one_and_and_evaluates_both_sides() -> None:
 
 def test_decode_consumes_its_text_and_encode_pads() -> None:
     interp, _ = run('  $l = "P  12 x"\n  $a = $DECODE($l, " ", 0)\n  $s = $DECODE($l, " ", 1)\n'
-                    '  $b = $DECODE($l, " ", 0)\n  $e = $ENCODE(/I6, 17) + $ENCODE(/F9.3, -1.5)\n'
-                    '  v = VAL("12x")\n  w = VAL("x")\n  i = INSTR(1, "abc", "c")\n  $m = $MID("abc", 2, 5)')
-    assert [value(interp, n) for n in ("$a", "$s", "$b", "$l", "$e")] == ["P", "  ", "12", " x", "    17   -1.500"]
-    assert [value(interp, n) for n in ("v", "w", "i", "$m")] == [12.0, 0.0, 3.0, "bc"]
+                    '  $b = $DECODE($l, " ", 0)\n  $e = $ENCODE(/F9.3, -1.5)\n'
+                    '  v = VAL("12x")\n  w = VAL("x")\n  i = INSTR(1, "abc", "c")\n  $m = $MID("abc", 2, 5)\n'
+                    '  j = INSTR("abc", "b")\n  k = INSTR(0, "abc", "a")\n  $n = $MID("abc", 2)\n'
+                    '  $o = $ENCODE(/L, -17, " ", /D, 3)')
+    assert [value(interp, n) for n in ("$a", "$s", "$b", "$l")] == ["P", "  ", "12", " x"]
+    assert [value(interp, n) for n in ("v", "w", "i", "$m", "j", "k", "$n")] == [12.0, 0.0, 3.0, "bc", 2.0, 1.0, "bc"]
+    assert value(interp, "$o") == "-17 3"
 
 
 def test_locals_belong_to_one_call_and_parameters_come_back() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import signal
@@ -144,7 +145,7 @@ zones:
     keep: in
     box: {min: [-2000, -2000, -100], max: [2000, 2000, 2500]}
 tool:
-  - {name: Greifer, capsule: {from: [0, 0, 0], to: [0, 0, 140], radius: 30}}
+  - {name: Greifer, capsule: {from: [0, 0, 0], to: [0, 0, -140], radius: 30}}   # out of the flange: -z
 arm:
   self_collision: false
 """
@@ -162,6 +163,9 @@ def test_get_cell_of_a_lab_cell_and_without_a_driver(tmp_path: Path) -> None:
         assert line.isascii() and line.count("\n") == 1
         assert msgspec.convert(json.loads(line), Cell) == load_cell(path)
         assert [z["name"] for z in json.loads(line)["zones"]] == ["Tisch (Gerät)", "Zelle €"]
+        sha256 = hashlib.sha256(path.read_bytes()).hexdigest()  # which cell: the driver logs it at start too
+        assert json.loads(line)["sha256"] == sha256
+        assert any("driver" in out and f"sha256 {sha256}" in out for out in system.output), system.output
         os.kill(system.pids()["driver"], signal.SIGKILL)
         wait_until(lambda: any("driver instance" in out and "went away" in out for out in system.output),
                    10.0, "the gateway to see the driver gone")

@@ -363,7 +363,7 @@ class RobotCommands:
 
         Protocol: ``DirectAdeptCmd``."""
     def get_cell(self, *, timeout: float | None = None) -> dict[str, Any]:
-        """The robot's cell, what rob6 guards every motion against: ``margin_mm``, ``zones`` (each with ``name``, ``keep`` out/in, a ``half_space`` {point, normal} or a ``box`` {min, max, rpy_deg}, ``ignore``), the ``tool``'s spheres and capsules on the flange (``name``, ``radius``, ``a``, ``b``), ``self_collision``, ``arm_padding_mm``, ``allowed_pairs``, the ``source`` file and ``from_file`` (false: the default cell); lengths in mm, robot base frame.
+        """The robot's cell, what rob6 guards every motion against: ``margin_mm``, ``zones`` (each with ``name``, ``keep`` out/in, a ``half_space`` {point, normal} or a ``box`` {min, max, rpy_deg}, ``ignore``, its own ``margin_mm`` or None), the ``tool``'s spheres and capsules on the flange (``name``, ``radius``, ``a``, ``b``; out of the flange along -z), ``self_collision``, ``arm_padding_mm``, ``allowed_pairs``, the ``source`` file, ``from_file`` (false: the default cell) and ``sha256`` (of the file's bytes: compare it to know the cell changed); lengths in mm, robot base frame.
 
         Original rob6server: An unknown command: it answers ``ERROR: GetCell`` (Rob6Error).
 
@@ -727,7 +727,7 @@ class AsyncRobotCommands:
 
         Protocol: ``DirectAdeptCmd``."""
     async def get_cell(self, *, timeout: float | None = None) -> dict[str, Any]:
-        """The robot's cell, what rob6 guards every motion against: ``margin_mm``, ``zones`` (each with ``name``, ``keep`` out/in, a ``half_space`` {point, normal} or a ``box`` {min, max, rpy_deg}, ``ignore``), the ``tool``'s spheres and capsules on the flange (``name``, ``radius``, ``a``, ``b``), ``self_collision``, ``arm_padding_mm``, ``allowed_pairs``, the ``source`` file and ``from_file`` (false: the default cell); lengths in mm, robot base frame.
+        """The robot's cell, what rob6 guards every motion against: ``margin_mm``, ``zones`` (each with ``name``, ``keep`` out/in, a ``half_space`` {point, normal} or a ``box`` {min, max, rpy_deg}, ``ignore``, its own ``margin_mm`` or None), the ``tool``'s spheres and capsules on the flange (``name``, ``radius``, ``a``, ``b``; out of the flange along -z), ``self_collision``, ``arm_padding_mm``, ``allowed_pairs``, the ``source`` file, ``from_file`` (false: the default cell) and ``sha256`` (of the file's bytes: compare it to know the cell changed); lengths in mm, robot base frame.
 
         Original rob6server: An unknown command: it answers ``ERROR: GetCell`` (Rob6Error).
 

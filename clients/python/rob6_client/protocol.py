@@ -537,9 +537,11 @@ COMMANDS: dict[str, Command] = _table(
     ("GetCell", "", JSON_OBJECT,
      "The robot's cell, what rob6 guards every motion against: ``margin_mm``, ``zones`` (each with "
      "``name``, ``keep`` out/in, a ``half_space`` {point, normal} or a ``box`` {min, max, rpy_deg}, "
-     "``ignore``), the ``tool``'s spheres and capsules on the flange (``name``, ``radius``, ``a``, "
-     "``b``), ``self_collision``, ``arm_padding_mm``, ``allowed_pairs``, the ``source`` file and "
-     "``from_file`` (false: the default cell); lengths in mm, robot base frame."),
+     "``ignore``, its own ``margin_mm`` or None), the ``tool``'s spheres and capsules on the flange "
+     "(``name``, ``radius``, ``a``, ``b``; out of the flange along -z), ``self_collision``, "
+     "``arm_padding_mm``, ``allowed_pairs``, the ``source`` file, ``from_file`` (false: the default "
+     "cell) and ``sha256`` (of the file's bytes: compare it to know the cell changed); lengths in mm, "
+     "robot base frame."),
 )
 #: the commands rob6 has and the original rob6server has not
 ROB6_ONLY = frozenset({"GetCell"})

@@ -4,9 +4,13 @@ A JMOVE becomes a segment of the commanded path: a joint-space straight line fro
 the previous one ends, lasting its SPEED ... S time (never less than the slowest axis
 needs at its rated speed), both stretched by the monitor speed (at 10 % ten times
 longer). The controller plans one motion ahead: while a segment runs, the next JMOVE is
-taken and starts when it ends (blended, the path does not stop); a further JMOVE waits
-until that one has started (``room``). When no segment follows, the path stops at the
-last point.
+taken and starts when it ends; a further JMOVE waits until that one has started
+(``room``). The next segment starts once the arm is within the segment's accuracy of its
+target (ACCURACY, in mm, taken as joint degrees at the FS03N's reach), or at rest there
+when the segment ends at rest: CP OFF or FINE at its JMOVE, no segment planned after it,
+or a next one the program reached past a branch or a wait (motion type 1, no look-ahead).
+Towards a target it must leave at a lower speed, or at rest, each joint slows at its
+acceleration limit, so a stop costs the time to brake and start again.
 
 The joints follow the commanded path like servos with the FS03N's speed and acceleration
 limits (they accelerate and brake at their limits and round the corners between
@@ -35,6 +39,8 @@ DT = 0.002  # integration step, s
 KP = 50.0  # 1/s: how firmly the joints close the last bit of a gap
 BRAKE_MARGIN = 0.9
 SETTLE_DEG = 1e-6
+#: the FS03N's reach (mm, robots.md): an accuracy of this many mm is one radian of a joint
+REACH_MM = 620.0
 MAX_CATCH_UP_S = 1.0
 
 
@@ -42,6 +48,13 @@ MAX_CATCH_UP_S = 1.0
 class Segment:
     q: tuple[float, ...]
     seconds: float  # as planned, before the monitor speed
+    accuracy_mm: float = 1.0  # the next segment starts once the arm is this close to q
+    stop: bool = False  # ends at rest (CP OFF, FINE)
+    after_rest: bool = False  # starts only once the arm is at rest at the previous target
+
+    @property
+    def accuracy_deg(self) -> float:
+        return math.degrees(self.accuracy_mm / REACH_MM)
 
 
 def outside_range(q: tuple[float, ...]) -> str:
@@ -61,7 +74,7 @@ class Arm:
         self.t = now
         self.executed = 0
         self.max_speed_ratio = 0.0  # the fastest any joint moved, as a fraction of its rated speed
-        self._seg: tuple[list[float], tuple[float, ...], float, float] | None = None  # start, end, t0, seconds
+        self._seg: tuple[list[float], Segment, float, float] | None = None  # start, segment, t0, seconds
         self._braking = False
 
     # ---- the robot program's view ---------------------------------------------
@@ -82,11 +95,19 @@ class Arm:
 
     @property
     def moving(self) -> bool:
+        """The arm moves or has somewhere to go (a motion to where it stands is no move)."""
+        if self._braking or any(self.v) or self.q != self.ref:
+            return True
+        planned = [self._seg[1], *self.plan] if self._seg is not None else list(self.plan)
+        return any(list(seg.q) != self.ref for seg in planned)
+
+    @property
+    def _active(self) -> bool:
         return self._seg is not None or bool(self.plan) or self._braking or any(self.v) or self.q != self.ref
 
     # ---- time --------------------------------------------------------------------
     def advance(self, now: float) -> None:
-        if not self.moving:
+        if not self._active:
             self.t = max(self.t, now)
             return
         if now - self.t > MAX_CATCH_UP_S:
@@ -106,18 +127,41 @@ class Arm:
                 stretch = 100.0 / self.monitor_speed
                 seconds = max(seg.seconds, *(abs(b - a) / v for a, b, v in
                                              zip(self.ref, seg.q, RATED_SPEED, strict=True))) * stretch
-                self._seg = (list(self.ref), seg.q, start, seconds)
-            r0, q, ts, seconds = self._seg
+                self._seg = (list(self.ref), seg, start, seconds)
+            r0, cur, ts, seconds = self._seg
+            q = cur.q
             if t < ts + seconds:
                 f = (t - ts) / seconds
                 self.ref = [a + (b - a) * f for a, b in zip(r0, q, strict=True)]
                 return [(b - a) / seconds for a, b in zip(r0, q, strict=True)]
             self.ref = list(q)
+            if self.plan and not self._may_go_on(cur, self.plan[0]):
+                return None  # the path waits at the target for the arm
             self._seg = None
             self.executed += 1
-            start = ts + seconds
+            start = max(ts + seconds, t0)
             if not self.plan:
                 return None
+
+    def _may_go_on(self, cur: Segment, nxt: Segment) -> bool:
+        if cur.stop or nxt.after_rest:
+            return not any(self.v) and all(abs(a - b) < SETTLE_DEG for a, b in zip(self.q, cur.q, strict=True))
+        return all(abs(a - b) <= cur.accuracy_deg for a, b in zip(self.q, cur.q, strict=True))
+
+    def _end_speeds(self) -> list[float] | None:
+        """Per joint, the speed at which the arm may reach the current segment's target (None: no
+        segment runs): the part of its motion the next segment continues, 0 where it ends at rest."""
+        if self._seg is None:
+            return None
+        r0, cur, _, seconds = self._seg
+        nxt = self.plan[0] if self.plan else None
+        if nxt is None or cur.stop or nxt.after_rest or nxt.seconds <= 0:
+            return [0.0] * N
+        out = []
+        for i in range(N):
+            vc, vn = (cur.q[i] - r0[i]) / seconds, (nxt.q[i] - cur.q[i]) / nxt.seconds
+            out.append(min(abs(vc), abs(vn)) if vc * vn > 0 else 0.0)
+        return out
 
     def _step(self, t0: float) -> None:
         if self._braking:
@@ -131,17 +175,22 @@ class Arm:
             return
         rdot = self._path(t0, t0 + DT)
         scale = self.monitor_speed / 100.0
+        ends = self._end_speeds()
         for i in range(N):
             e = self.ref[i] - self.q[i]
             a = MAX_ACCEL[i] * scale * scale  # the motion stretched in time: speed by scale, acceleration by its square
             # the position loop's last approach is the servo's, which no monitor speed slows
             speed = min(RATED_SPEED[i] * scale, math.sqrt(2.0 * BRAKE_MARGIN * MAX_ACCEL[i] * abs(e)),
                         (abs(rdot[i]) if rdot else 0.0) + KP * abs(e))
+            if ends is not None and self._seg is not None:
+                # brake towards the target in time to reach it at the speed the next segment takes on
+                ahead = (self._seg[1].q[i] - self.q[i]) * math.copysign(1.0, e)
+                speed = min(speed, math.sqrt(ends[i] ** 2 + 2.0 * BRAKE_MARGIN * a * max(ahead, 0.0)))
             dv = math.copysign(speed, e) - self.v[i]
             self.v[i] += max(-a * DT, min(a * DT, dv))
             self.q[i] += self.v[i] * DT
             self.max_speed_ratio = max(self.max_speed_ratio, abs(self.v[i]) / RATED_SPEED[i])
-        if rdot is None and all(abs(r - q) < SETTLE_DEG and abs(v) < KP * SETTLE_DEG * 10
+        if not any(rdot or ()) and all(abs(r - q) < SETTLE_DEG and abs(v) < KP * SETTLE_DEG * 10
                                 for r, q, v in zip(self.ref, self.q, self.v, strict=True)):
             self.q = list(self.ref)
             self.v = [0.0] * N

@@ -24,7 +24,7 @@ TOKEN = re.compile(r"""
     (?P<ws>[ \t]+)
   | (?P<num>\d+\.\d*|\.\d+|\d+)
   | (?P<str>"[^"]*")
-  | (?P<fmt>/[A-Za-z]\d+(?:\.\d+)?)
+  | (?P<fmt>/[A-Za-z](?:\d+(?:\.\d+)?)?(?![A-Za-z0-9_]))
   | (?P<name>[.]?[$#]?[A-Za-z_][A-Za-z0-9_.]*)
   | (?P<op><>|==|<=|>=|!=|[-+*/()\[\],=<>:^])
 """, re.VERBOSE)
@@ -50,6 +50,8 @@ def tokenize(text: str) -> list[Tok]:
         kind = m.lastgroup or ""
         if kind != "ws":
             value = m.group()
+            if kind == "name" and len(value.lstrip(".").lstrip("$#")) > MAX_NAME:
+                raise AsSyntaxError(f"the name {value.upper()} is longer than {MAX_NAME} characters")
             out.append(Tok(kind, value if kind in ("str", "num") else value.lower()))
         pos = m.end()
     out.append(Tok("end", ""))
@@ -105,7 +107,8 @@ class Binary:
 
 @dataclass(frozen=True)
 class Fmt:
-    """A ``$ENCODE`` format: ``/I6`` (integer, width 6), ``/F9.3`` (fixed, width 9, 3 decimals)."""
+    """A ``$ENCODE`` format: ``/F9.3`` (fixed, width 9, 3 decimals), ``/L`` and ``/D`` (a whole
+    number, as wide as it is)."""
 
     kind: str
     width: int
@@ -121,9 +124,13 @@ class Name:
 
 Expr = Num | Str | Var | Call | Unary | Binary | Fmt | Name
 
+#: the ``$ENCODE`` formats public AS code shows (deploy/kawasaki/REFERENCES.md); ``/In`` is none of them
+FORMATS = ("f", "l", "d")
+#: the longest name of a variable (without its ``.``, ``$``, ``#``), a program or a label
+MAX_NAME = 15
 #: functions: name -> (least, most) arguments. ERROR and the constants take none.
 FUNCTIONS: dict[str, tuple[int, int]] = {
-    "val": (1, 1), "len": (1, 1), "$mid": (3, 3), "instr": (3, 3), "$decode": (3, 3),
+    "val": (1, 1), "len": (1, 1), "$mid": (2, 3), "instr": (2, 3), "$decode": (3, 3),
     "$encode": (1, 20), "$chr": (1, 1), "maxval": (2, 20), "abs": (1, 1), "switch": (1, 1),
     "error": (0, 0), "true": (0, 0), "false": (0, 0), "on": (0, 0), "off": (0, 0), "#ppoint": (6, 6),
 }
@@ -185,11 +192,12 @@ class _Parser:
         if tok.kind == "str":
             return Str(tok.text[1:-1])
         if tok.kind == "fmt":
-            m = re.fullmatch(r"/([a-z])(\d+)(?:\.(\d+))?", tok.text)
+            m = re.fullmatch(r"/([a-z])(\d+)?(?:\.(\d+))?", tok.text)
             assert m is not None
-            if m.group(1) not in ("i", "f"):
+            kind, width = m.group(1), int(m.group(2) or 0)
+            if kind not in FORMATS or (kind == "f") != (m.group(3) is not None) or kind != "f" and width:
                 raise AsSyntaxError(f"unknown format {tok.text.upper()}")
-            return Fmt(m.group(1), int(m.group(2)), int(m.group(3) or 0))
+            return Fmt(kind, width, int(m.group(3) or 0))
         if tok.text == "(":
             inner = self.expr()
             self.expect(")")
@@ -392,6 +400,8 @@ def load(source: str) -> dict[str, Program]:
                                  re.IGNORECASE):
                 if current is not None:
                     raise AsSyntaxError(f".PROGRAM inside {current.name}")
+                if len(m.group(1)) > MAX_NAME:
+                    raise AsSyntaxError(f"the program name {m.group(1)} is longer than {MAX_NAME} characters")
                 params = [_param(p) for p in m.group(2).split(",") if p.strip()]
                 current = Program(m.group(1).lower(), params, [], {})
                 blocks = []

@@ -30,6 +30,15 @@ MAX_STRING = 255
 MAX_INDEX = 9999
 #: steps a task may run in one tick before the others get their turn
 STEPS_PER_TICK = 5000
+#: CP when the robot program starts: the switch keeps what the cell's last program left, here OFF
+CP_AT_START = False
+#: the accuracy (mm) when no ACCURACY ... ALWAYS has set one
+DEFAULT_ACCURACY_MM = 1.0
+#: steps of the robot program after which the controller cannot plan the next motion ahead
+#: (motion type 1): a conditional branch, a loop and a wait; a plain GOTO is none of them
+NO_LOOK_AHEAD_STEPS = ("if", "ifgoto", "for", "next")
+NO_LOOK_AHEAD_INSTRUCTIONS = ("twait", "break", "tcp_listen", "tcp_accept", "tcp_recv", "tcp_send", "tcp_close",
+                              "tcp_end_listen")
 
 Value = float | str | tuple[float, ...]
 
@@ -68,7 +77,8 @@ class Machine(Protocol):
     def error_code(self) -> int: ...
     def here(self) -> tuple[float, ...]: ...
     def motion_room(self) -> bool: ...
-    def move(self, q: tuple[float, ...], seconds: float) -> None: ...
+    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool) -> None:
+        """A motion: ``stop`` it ends at rest (CP OFF, FINE); ``after_rest`` the one before ends at rest."""
     def settled(self) -> bool: ...
     def print_line(self, task: str, text: str) -> None: ...
     def tcp(self, op: str, args: list[Value], started: float) -> tuple[Value, ...] | None: ...
@@ -93,6 +103,7 @@ class Task:
     waiting: bool = False
     speed_s: float | None = None  # SPEED ... S for the next JMOVE
     speed_always_s: float | None = None
+    look_ahead_lost: bool = False  # a step since the last motion that the controller cannot look past
 
     @property
     def alive(self) -> bool:
@@ -105,8 +116,10 @@ class Interpreter:
         self.machine = machine
         self.globals: dict[str, Value | dict[int, Value]] = {}
         self.tasks: dict[str, Task] = {}
-        self.accuracy = 1.0
-        self.cp = True
+        self.accuracy = DEFAULT_ACCURACY_MM  # ACCURACY ... ALWAYS
+        self.fine = False  # ACCURACY ... FINE ALWAYS
+        self.accuracy_next: tuple[float, bool] | None = None  # ACCURACY without ALWAYS: the next motion only
+        self.cp = CP_AT_START
 
     # ---------------------------------------------------------------- tasks
     def start(self, task: str, program: str) -> str:
@@ -168,6 +181,9 @@ class Interpreter:
     # ---------------------------------------------------------------- steps
     def _execute(self, task: Task, frame: Frame, step: Step) -> bool:
         kind = step.kind
+        if task.name == "robot" and (kind in NO_LOOK_AHEAD_STEPS
+                                     or kind == "instr" and step.name in NO_LOOK_AHEAD_INSTRUCTIONS):
+            task.look_ahead_lost = True
         if kind == "assign":
             assert step.target is not None and step.expr is not None
             self._assign(frame, step.target, self.eval(frame, step.expr))
@@ -275,7 +291,13 @@ class Interpreter:
             if "always" in step.words:
                 task.speed_always_s = value
         elif name == "accuracy":
-            self.accuracy = self._real(frame, step.args[0])
+            mm = self._real(frame, step.args[0])
+            if mm < 0:
+                raise AsError("", f"ACCURACY {mm:g}: not a distance")
+            if "always" in step.words:
+                self.accuracy, self.fine, self.accuracy_next = mm, "fine" in step.words, None
+            else:
+                self.accuracy_next = (mm, "fine" in step.words)
         elif name == "cp":
             self.cp = step.words == ["on"]
         elif name == "jmove":
@@ -288,7 +310,10 @@ class Interpreter:
                 return False
             seconds = task.speed_s if task.speed_s is not None else 0.0
             task.speed_s = task.speed_always_s
-            m.move(q, seconds)
+            mm, fine = self.accuracy_next or (self.accuracy, self.fine)
+            self.accuracy_next = None
+            m.move(q, seconds, mm, fine or not self.cp, task.look_ahead_lost)
+            task.look_ahead_lost = False
         elif name == "break":
             return m.settled()
         elif name == "pcexecute":
@@ -467,21 +492,24 @@ class Interpreter:
             if code != int(code) or not 0 <= code <= 255:
                 raise AsError("", f"$CHR({code:g}): not a character code")
             return chr(int(code))
-        s = self._string(frame, args[0 if name != "instr" else 1])
+        s = self._string(frame, args[1 if name == "instr" and len(args) == 3 else 0])
         if name == "len":
             return float(len(s))
         if name == "val":
             return _val(s)
         if name == "$mid":
-            start, count = self._real(frame, args[1]), self._real(frame, args[2])
+            # $MID($s, start[, count]): without a count, the rest of the text
+            start = self._real(frame, args[1])
+            count = self._real(frame, args[2]) if len(args) == 3 else float(MAX_STRING)
             if start < 1 or count < 0:
                 raise AsError("", f"$MID({start:g}, {count:g}): out of range")
             return s[int(start) - 1:int(start) - 1 + int(count)]
         if name == "instr":
-            start = self._real(frame, args[0])
-            if start < 1:
+            # INSTR([start,] $s, $find): from the text's start without one; 0 and 1 both the first character
+            start = self._real(frame, args[0]) if len(args) == 3 else 1.0
+            if start < 0:
                 raise AsError("", f"INSTR({start:g}, ...): out of range")
-            return float(s.find(self._string(frame, args[2]), int(start) - 1) + 1)
+            return float(s.find(self._string(frame, args[-1]), max(int(start), 1) - 1) + 1)
         raise AsError("", f"unknown function {name.upper()}")
 
     def _decode(self, frame: Frame, args: tuple[Expr, ...]) -> str:
@@ -512,8 +540,8 @@ class Interpreter:
                 continue
             if not isinstance(x, float):
                 raise AsError("", "$ENCODE of a position")
-            if fmt.kind == "i":
-                text = f"{round(x):{fmt.width}d}"
+            if fmt.kind in ("l", "d"):
+                text = f"{round(x)}"
             elif fmt.kind == "f":
                 text = f"{x:{fmt.width}.{fmt.decimals}f}"
             else:

@@ -129,12 +129,12 @@ class Controller:
     def motion_room(self) -> bool:
         return self.arm.room()
 
-    def move(self, q: tuple[float, ...], seconds: float) -> None:
+    def move(self, q: tuple[float, ...], seconds: float, accuracy_mm: float, stop: bool, after_rest: bool) -> None:
         why = outside_range(q)
         if why:
             # AS refuses a destination outside the motion range: "(E1088) Destination is out of motion range."
             raise AsError("E1088", f"Destination is out of motion range: {why}")
-        self.arm.move(Segment(q, seconds))
+        self.arm.move(Segment(q, seconds, accuracy_mm, stop, after_rest))
 
     def settled(self) -> bool:
         self.arm.advance(self.clock)

@@ -99,6 +99,8 @@ def main(settings: BusSettings, log_level: str, cell: str | None, dummy: bool, l
         try:
             driver = DriverService(bus, robot, dummy, link=link, rsi_listen=rsi_listen, rsi_sen_type=rsi_sentype,
                                    sm=sm, kas=kas, cell=robot_cell)
+        except CellError as exc:  # the cell's model: a tool shape in the arm's way, a check too slow for the cycle
+            raise service.StartupError(str(exc)) from None
         except OSError as exc:
             raise service.StartupError(f"cannot listen for RSI on udp/{rsi_listen}: {exc.strerror or exc}; "
                                        "is another driver running? Set ROB6_RSI_LISTEN") from None

@@ -84,6 +84,7 @@ import numpy as np
 import numpy.typing as npt
 import ruckig
 
+from rob6.cell.brake import LineBrake, line_brake
 from rob6.deadlines import stop_s
 from rob6.errors import RefusedError
 from rob6.robots import RobotModel, get_robot
@@ -106,6 +107,8 @@ FEED_HALVINGS = 12
 ALTER_FEED_MIN = 0.02
 #: Alter replans the motion under way when the feed has changed this much since its plan
 ALTER_FEED_STEP = 0.05
+#: the cell's violations are reported at most once in this long (controller seconds)
+ZONE_EVENT_PERIOD_S = 1.0
 
 
 # ====================================================================== data
@@ -227,7 +230,7 @@ class MotionCore:
         # internal generator (Alter, stops)
         self._otg = ruckig.Ruckig(N_JOINTS, self.dt)
         self._inp = ruckig.InputParameter(N_JOINTS)
-        self._gen: ruckig.Trajectory | None = None
+        self._gen: ruckig.Trajectory | LineBrake | None = None
         self._gen_t = 0.0
         self._gen_kind = ""  # alter | stop
         self._resync = False
@@ -245,6 +248,9 @@ class MotionCore:
         self._deferred: list[Callable[[], None]] = []
         self._zones = zones if zones is not None and not zones.empty else None
         self._zone_stop: ZoneReason | None = None  # why the cell stopped Alter: told with the next target
+        self._zone_blocked: tuple[np.ndarray, ZoneReason] | None = None  # an Alter target refused, and why
+        self._zone_events_at = -math.inf  # when the last zone violation was reported (they are rate-limited)
+        self._zone_events_quiet = 0  # zone violations not reported since
         self._along: np.ndarray | None = None  # the end of the straight trajectory being followed
 
     # ------------------------------------------------------------------ queries
@@ -335,6 +341,13 @@ class MotionCore:
         v = Violation(self.t, self._cycle, kind, joint, float(value), float(limit), source, message)
         self.violations.append(v)
         self.violation_count += 1
+        if kind == "zone":  # a stream aimed at a zone stops again and again: one event a second
+            if self.t - self._zone_events_at < ZONE_EVENT_PERIOD_S:
+                self._zone_events_quiet += 1
+                return
+            if self._zone_events_quiet:
+                message += f" ({self._zone_events_quiet} more since the last report)"
+            self._zone_events_at, self._zone_events_quiet = self.t, 0
         self._event(type="violation", kind=kind, joint=joint, value=float(value),
                     limit=float(limit), source=source, message=message)
 
@@ -372,6 +385,10 @@ class MotionCore:
             self._q = q.copy()
             self._target = q.copy()
             self._offline = ""
+            self._zone_blocked = None
+        if self._zones is not None and (where := self._zones.observe(q)):
+            log.warning("cell: the robot is back at a pose where %s", where)
+            self._event(type="zone_way_out", message=where)
         self._run_deferred()
 
     def _abort(self, reason: str) -> None:
@@ -468,6 +485,9 @@ class MotionCore:
                 return None
             rest = np.vstack([self._q, rest])
             return rest.min(axis=0), rest.max(axis=0)
+        if isinstance(self._gen, LineBrake):
+            lo, hi = self._gen.extrema()
+            return np.minimum(self._q, lo), np.maximum(self._q, hi)
         if self._gen is not None:
             lo, hi = trajectory_extrema(self._gen, self._gen_t)
             return np.minimum(self._q, lo), np.maximum(self._q, hi)
@@ -494,10 +514,11 @@ class MotionCore:
         monitor and for streamed trajectories).
         """
         motion = Motion("trajectory")
+        # the cell's check of every pose runs before the core's lock is taken: the cycle goes
+        # on meanwhile (a long path's check takes milliseconds, an RSI cycle is 4)
+        zone = self._zone_trajectory(q) if check else None
         with self._lock:
-            reason = self._check_execute(q, dt, qd, qdd, check)
-            if not reason and self._zones is not None and check:
-                reason = self._zones.trajectory(np.asarray(q, float), self.dt) or ""
+            reason = self._check_execute(q, dt, qd, qdd, check) or (zone or "")
             if self._offline:
                 self._deferred += motion._finish(False, self._offline, self._state(), error=self._offline)
             elif reason:
@@ -524,6 +545,18 @@ class MotionCore:
                     self._finish_trajectory(True, "")
         self._run_deferred()
         return motion
+
+    def _zone_trajectory(self, q: npt.ArrayLike) -> ZoneReason | None:
+        """The cell's word on a trajectory's poses (``ZoneGuard.trajectory``), when it is one."""
+        if self._zones is None:
+            return None
+        try:
+            arr = np.asarray(q, float)
+        except (TypeError, ValueError):
+            return None  # _check_execute says why
+        if arr.ndim != 2 or arr.shape[1] != N_JOINTS or len(arr) == 0 or not np.all(np.isfinite(arr)):
+            return None
+        return self._zones.trajectory(arr, self.dt)
 
     def _check_execute(self, q: npt.ArrayLike, dt: float | None, qd: npt.ArrayLike | None,
                        qdd: npt.ArrayLike | None, check: bool = True) -> str:
@@ -610,9 +643,8 @@ class MotionCore:
             if checked is None:
                 return False, reason
             target = np.array(checked)
-            refused = self._zone_stop or (self._zones.target(target) if self._zones is not None else None)
+            refused = self._zone_refusal(target)
             if refused:
-                self._zone_stop = None
                 return False, refused
             if synchronized is not None:
                 self._sync = bool(synchronized)
@@ -624,6 +656,25 @@ class MotionCore:
             self._target = target
             self._target_pending = True  # planned by the next step()
             return True, ""
+
+    def _zone_refusal(self, target: np.ndarray) -> ZoneReason | None:
+        """Why the cell refuses an Alter target (lock held): the pose is in its way, or the
+        guard stopped the arm on the way to this same target (the refusal stays, with the same
+        reason, until the target changes: no true/ERROR for ever on a stream aimed at a zone)."""
+        if self._zones is None:
+            return None
+        if self._zone_blocked is not None and np.array_equal(self._zone_blocked[0], target):
+            return self._zone_blocked[1]
+        self._zone_blocked = None
+        if self._zone_stop is not None:  # the stop is told once, with the next target
+            why, self._zone_stop = self._zone_stop, None
+            if self._target is not None and np.array_equal(self._target, target):
+                self._zone_blocked = (target, why)
+            return why
+        refused = self._zones.target(target)
+        if refused is not None:
+            self._zone_blocked = (target, refused)
+        return refused
 
     def heartbeat(self) -> None:
         """The client is alive (keeps the Alter watchdog quiet without a new target)."""
@@ -663,8 +714,9 @@ class MotionCore:
             self._stop_motion = motion
             self._finish_stop_if_any()
             return motion
+        along = self._along if self._mode == "trajectory" else None
         self._samples = None  # a trajectory in progress is abandoned
-        brake = self._plan_stop()
+        brake = self._plan_stop(along)
         if brake is None:
             self._gen = None
             self._ebrake = True
@@ -741,10 +793,15 @@ class MotionCore:
         lo, hi = trajectory_extrema(traj, 0.0)
         return all(within(lo, hi, lim.turn_min, lim.turn_max, self._q) for lim in lims)
 
-    def _plan_stop(self) -> ruckig.Trajectory | None:
+    def _plan_stop(self, along: np.ndarray | None = None) -> ruckig.Trajectory | LineBrake | None:
         # a stop may use everything the monitor allows (the old limits during a
-        # transition): the shortest stop is the safest
+        # transition): the shortest stop is the safest. On a straight trajectory it runs
+        # along the path (whose poses the cell checked), when it fits on it
         mon = self._monitor.enforced
+        if along is not None:
+            brake = line_brake(self._q, self._qd, self._qdd, along, mon.vmax, mon.amax, mon.jmax)
+            if brake is not None:
+                return brake
         for sync in (ruckig.Synchronization.Phase, ruckig.Synchronization.No):
             inp = self._gen_input(mon, None)
             inp.synchronization = sync
@@ -754,7 +811,10 @@ class MotionCore:
         return None
 
     def _alter_pace(self) -> float:
-        return max(ALTER_FEED_MIN, self._feed_target)
+        pace = max(ALTER_FEED_MIN, self._feed_target)
+        if self._zones is not None and self._zones.escaping:  # a way out is slow (ZoneGuard.escape_share)
+            pace = min(pace, self._zones.escape_share(self._q, self._lim.vmax))
+        return pace
 
     def _plan_target(self) -> ruckig.Trajectory | None:
         pace = self._alter_pace()
@@ -948,7 +1008,7 @@ class MotionCore:
             return None
         v = (qn - self._q) / self.dt if qd is None else np.asarray(qd, float)
         a = (v - self._v_fd) / self.dt if qdd is None else np.asarray(qdd, float)
-        return self._zones.setpoint(qn, v, a, self._monitor.enforced, along=along)
+        return self._zones.setpoint(qn, v, a, self._monitor.enforced, along=along, prev=self._q)
 
     def _apply_clamped(self, qn: np.ndarray, breach: Breach, source: str) -> None:
         """Apply the admissible sample closest to qn (the monitor's last resort), then stop."""

@@ -84,6 +84,7 @@ class DriverService:
         self.robot = robot
         self.cell = cell or default_cell(robot)
         self.zones = ZoneGuard(robot, self.cell)
+        self.cell.unchecked = list(self.zones.unchecked)  # GetCell says which pairs are not measured, and why
         self.core = MotionCore(robot, dummy=dummy, alter_timeout_s=alter_timeout_s, on_event=self._on_event,
                                zones=self.zones)
         self._clearance_t = -math.inf  # driver clock of the last clearance published
@@ -286,6 +287,16 @@ class DriverService:
             self.core.stop("planner went away")
 
     def start(self) -> None:
+        cell = self.cell
+        # shown at the default level, as the gateway's and the router's start lines: which cell this run guards
+        log.warning("cell %s: %d zones, %d tool shapes, margin %g mm, sha256 %s", cell.source, len(cell.zones),
+                    len(cell.tool), cell.margin_mm, cell.sha256 or "(none)")
+        for warning in self.zones.warnings:
+            log.warning("cell %s: %s", cell.source, warning)
+        log.info("cell %s: one setpoint's check takes up to %.2f ms here; pairs not measured: %s", cell.source,
+                 self.zones.worst_check_s * 1e3, "; ".join(cell.unchecked) or "none")
+        if where := self.zones.observe(self.core.state().q):
+            log.warning("cell %s: the robot is at a pose where %s", cell.source, where)
         self.bus.on_liveliness(self._on_liveliness)
         self.link.start()
         self.bus.serve({"ping": self.ping, "state": self.state, "execute": self.execute,

@@ -165,14 +165,27 @@ class PlannerService:
         self._push_limits()
         self.cell.fetch()
 
-    def _planning_config(self) -> MotionSettings:
-        """The configuration with the Adept's speed/acceleration percentages applied."""
-        if not self.robot.is_adept:
+    def _planning_config(self, start: Sequence[float] | None = None) -> MotionSettings:
+        """The configuration with the Adept's speed/acceleration percentages applied, and,
+        for a motion from ``start`` where a part is within a zone's margin, the slow speed
+        of a way out (``rob6.cell.guard.ESCAPE_SPEED_MM_S``)."""
+        share = self._escape_share(start) if start is not None else 1.0
+        if not self.robot.is_adept and share == 1.0:
             return self.config
         scaled = self.config.copy()
-        scaled.speed = [v * self.adept["speed"] / 100.0 for v in scaled.speed]
-        scaled.accel = [a * min(self.adept["accel"], self.adept["decel"]) / 100.0 for a in scaled.accel]
+        if self.robot.is_adept:
+            scaled.speed = [v * self.adept["speed"] / 100.0 for v in scaled.speed]
+            scaled.accel = [a * min(self.adept["accel"], self.adept["decel"]) / 100.0 for a in scaled.accel]
+        if share < 1.0:
+            log.info("a part is within a zone's margin: the way out runs at %.1f %% of the speed limits", 100 * share)
+            scaled.speed = [v * share for v in scaled.speed]
         return scaled
+
+    def _escape_share(self, start: Sequence[float]) -> float:
+        try:
+            return self.cell.escape_share(start, JointLimits.from_config(self.config))
+        except CellUnknown as exc:
+            raise MotionRefused(str(exc)) from None
 
     # ------------------------------------------------------------------ modes
     def mode(self, req: ModeRequest, ctx: Context) -> Ack:
@@ -346,7 +359,7 @@ class PlannerService:
         else:
             raise MotionRefused(f"unknown motion {req.kind}")
         pattern = req.pattern if req.kind == "MovePTPJointsStatus" else None
-        plan = self.planner.plan_ptp(start, target, self._planning_config(), pattern=pattern)
+        plan = self.planner.plan_ptp(start, target, self._planning_config(start), pattern=pattern)
         if not plan.ok:
             raise MotionRefused(plan.reason)
         assert plan.trajectory is not None  # a sampled plan that is ok has one
@@ -415,7 +428,7 @@ class PlannerService:
             return np.array([[np.nan] * 6 if s[index] is None else s[index] for s in reply.solutions])
 
         plan = plan_lin(self.planner, start, pose0, np.asarray(req.pose, float).reshape(3, 4),
-                        self._planning_config(), ik_fn)
+                        self._planning_config(start), ik_fn)
         if not plan.ok:
             raise MotionRefused(plan.reason)
         assert plan.trajectory is not None  # a LIN plan that is ok has one

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -73,6 +74,11 @@ class PathCheck:
         refusal = self._guard().path(trajectory.q, trajectory.qd, trajectory.qdd, trajectory.dt, limits.vmax,
                                      limits.amax, limits.jmax)
         return refusal.message() if refusal is not None else ""
+
+    def escape_share(self, joints: Sequence[float], limits: JointLimits) -> float:
+        """The share of the speed limits a motion from ``joints`` may use: below 1 on a way
+        out of a zone's margin (``Guard.escape_share``)."""
+        return self._guard().escape_share(np.asarray(joints, float), limits.vmax)
 
     def pose(self, joints: list[float]) -> str:
         """IsPossible: why the arm may not be at ``joints`` (a zone of the lab's cell file, or

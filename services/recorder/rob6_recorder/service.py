@@ -100,7 +100,8 @@ class RecorderService:
                 return
             self._cell = cell
             self.recorder.submit(CELL_TOPIC, time.time_ns(), cell, latched=True)
-        log.info("recording the cell %s: %d zones, %d tool shapes", cell.source, len(cell.zones), len(cell.tool))
+        log.info("recording the cell %s: %d zones, %d tool shapes, sha256 %s", cell.source, len(cell.zones),
+                 len(cell.tool), cell.sha256 or "(none)")
 
     def on_sample(self, key: str, payload: bytes) -> None:
         """A live publication (a control message, the planner's settings)."""

@@ -1,8 +1,9 @@
 """The cell as Pinocchio/coal geometry: the arm's capsules, the tool, the zones, and their distances.
 
-The arm's parts are the links of the robot's URDF (``rob6/urdf``, the live view's drawing):
-each visual cylinder becomes the capsule that covers it (radius plus the cell's
-``arm_padding_mm``), the base box stays a box. The tool's spheres and capsules ride on the
+The arm's parts are the links of the robot's URDF (``rob6/urdf``), each made of the shapes
+that enclose the real arm (``rob6.cell.arms``: capsules, spheres, the base's box), grown by
+the cell's padding for that part (``arm_padding``); the URDF's cylinders are the live view's
+drawing only. The tool's spheres and capsules ride on the
 flange frame. A keep-out half-space is a coal ``Halfspace``, a keep-out box a ``Box``, a
 keep-in box the six half-spaces outside its faces. The pairs measured: every moving part
 against every zone it does not ignore (the base never: it cannot move), and, with
@@ -26,7 +27,8 @@ import pinocchio as pin
 
 from ..messages import Cell, Zone
 from ..robots import RobotModel
-from .file import ARM_PARTS
+from .arms import ArmShape, arm_shapes
+from .file import CellError
 
 N_JOINTS = 6
 #: the joint a part rides on: base 0, link_k k, the tool 6 (on the flange)
@@ -64,16 +66,17 @@ class CellModel:
         self._part_of: list[str] = []  # geometry object -> its part
         self._extent: dict[str, float] = {}  # part -> farthest point from its joint's origin (m)
         self._joint: dict[str, int] = {}  # part -> the joint it rides on
-        visual = pin.buildGeomFromUrdfString(self.model, urdf, pin.GeometryType.VISUAL)
-        pad = cell.arm_padding_mm / 1000.0
-        for obj in visual.geometryObjects:
-            link = obj.name.rsplit("_", 1)[0]
-            part = "base" if link == "base_link" else link
-            if part not in ARM_PARTS:  # the flange plate: part of link_6
-                part = f"link_{N_JOINTS}"
-            self._add(part, obj.parentJoint, obj.placement, _covering(obj.geometry, pad))
+        for part, shapes in arm_shapes(robot.geometry).items():
+            joint = 0 if part == "base" else self.model.getJointId(f"joint_{part.removeprefix('link_')}")
+            for piece in shapes:
+                geometry, placement = _arm_shape(piece, arm_padding(cell, part))
+                self._add(part, joint, placement, geometry)
         flange = self.model.frames[self.model.getFrameId("flange")]
+        self.warnings: list[str] = []  # said at start (the driver's log)
         for shape in cell.tool:
+            if max(shape.a[2], shape.b[2] if shape.b is not None else -math.inf) > 0.0:
+                self.warnings.append(f"tool shape {shape.name!r} reaches z > 0 of the flange frame, inside the wrist: "
+                                     f"a tool sticks out along -z (docs/SAFETY_ZONES.md)")
             geometry, local = _tool_shape(shape.radius, shape.a, shape.b)
             self._add(shape.name, TOOL_JOINT, flange.placement * local, geometry)
         self.parts = list(dict.fromkeys(self._part_of))
@@ -84,6 +87,7 @@ class CellModel:
                 zone_objects.append((zone, self.geometry.addGeometryObject(
                     pin.GeometryObject(f"zone:{zone.name}", 0, placement, geometry))))
         self.pairs: list[Pair] = []
+        self.unchecked: list[str] = []  # pairs of parts not measured, each with why (GetCell lists them)
         self._pair_parts: list[tuple[int, int]] = []  # indices into parts; -1: a zone
         parts_index = {name: i for i, name in enumerate(self.parts)}
         for k in range(first_zone):
@@ -115,9 +119,12 @@ class CellModel:
 
     def _self_pairs(self, count: int, parts_index: dict[str, int]) -> None:
         """Every two parts' objects, but those within ``NEAR_IN_CHAIN`` of each other along
-        the chain, parts touching at the zero position and the file's allowed pairs."""
+        the chain, two links of the arm touching at the zero position and the file's allowed
+        pairs: each of those is listed in ``unchecked`` with why. A tool shape touching a link
+        at the zero position is refused (``CellError``) unless the file allows the pair."""
         allowed = {frozenset(pair) for pair in self.cell.allowed_pairs}
         tool = {shape.name for shape in self.cell.tool}
+        skipped: dict[frozenset[str], str] = {}
 
         def place(part: str) -> int:  # along the chain: the base 0, link_k k, the tool after link_6
             return N_JOINTS + 1 if part in tool else self._joint[part]
@@ -129,7 +136,13 @@ class CellModel:
         for a in range(count):
             for b in range(a + 1, count):
                 pa, pb = self._part_of[a], self._part_of[b]
-                if frozenset((pa, pb)) in allowed or abs(place(pa) - place(pb)) <= NEAR_IN_CHAIN:
+                if pa == pb:
+                    continue
+                if frozenset((pa, pb)) in allowed:
+                    skipped[frozenset((pa, pb))] = "allowed by the cell file"
+                    continue
+                if abs(place(pa) - place(pb)) <= NEAR_IN_CHAIN:
+                    skipped[frozenset((pa, pb))] = "near in the chain: the joint between them keeps them apart"
                     continue
                 candidates.append((a, b))
                 probe.addCollisionPair(pin.CollisionPair(a, b))
@@ -138,12 +151,23 @@ class CellModel:
         touching = {frozenset((self._part_of[a], self._part_of[b]))
                     for (a, b), result in zip(candidates, probe_data.distanceResults, strict=True)
                     if result.min_distance <= self.cell.margin_mm / 1000.0}
+        for names in touching:
+            shape = next((name for name in sorted(names) if name in tool), None)
+            if shape is not None:
+                other = next(iter(names - {shape}), shape)
+                raise CellError(f"cell file {self.cell.source}: tool shape {shape!r} touches {other} at the zero "
+                                f"position (within the {self.cell.margin_mm:g} mm margin), so the pair cannot be "
+                                f"checked: move or shrink the shape, or add [{other}, {shape}] to arm: allowed_pairs "
+                                f"if they may touch")
+            skipped[names] = "touching at the zero position (the model's shapes overlap there)"
         for pair in candidates:
             # the one further along the chain first: "tool tip with base"
             a, b = sorted(pair, key=lambda k: -place(self._part_of[k]))
             pa, pb = self._part_of[a], self._part_of[b]
             if frozenset((pa, pb)) not in touching:
                 self._pair(a, b, Pair(pa, pb, ""), parts_index[pa], parts_index[pb])
+        self.unchecked = [f"{' with '.join(sorted(pair, key=lambda p: -place(p)))}: {why}"
+                          for pair, why in sorted(skipped.items(), key=lambda item: sorted(item[0]))]
 
     def _levers(self) -> np.ndarray:
         """(parts, 6): how far (mm) a point of the part can move per radian of each joint, in
@@ -199,13 +223,18 @@ class CellModel:
         return needed
 
 
-def _covering(geometry: coal.CollisionGeometry, pad: float) -> coal.CollisionGeometry:
-    """The capsule that covers a URDF cylinder (padded), or the box itself."""
-    if isinstance(geometry, coal.Cylinder):
-        return coal.Capsule(geometry.radius + pad, 2.0 * geometry.halfLength)
-    if isinstance(geometry, coal.Box):
-        return coal.Box(*(2.0 * geometry.halfSide + 2.0 * pad))
-    raise ValueError(f"the URDF has a {type(geometry).__name__}: only cylinders and boxes are expected")
+def arm_padding(cell: Cell, part: str) -> float:
+    """The padding (mm) the cell adds around ``part`` of the arm: its own, or the cell's default."""
+    return cell.arm_padding_parts.get(part, cell.arm_padding_mm)
+
+
+def _arm_shape(shape: ArmShape, pad_mm: float) -> tuple[coal.CollisionGeometry, pin.SE3]:
+    """A shape of the arm (``rob6.cell.arms``), grown by ``pad_mm`` on every side, in its joint's frame (m)."""
+    if shape.kind == "box":
+        assert shape.size is not None
+        size = (np.array(shape.size) + 2.0 * pad_mm) / 1000.0
+        return coal.Box(*size), pin.SE3(np.eye(3), np.array(shape.a) / 1000.0)
+    return _tool_shape(shape.radius + pad_mm, list(shape.a), None if shape.b is None else list(shape.b))
 
 
 def _tool_shape(radius_mm: float, a_mm: list[float], b_mm: list[float] | None) -> tuple[coal.CollisionGeometry, pin.SE3]:
