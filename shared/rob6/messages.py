@@ -193,7 +193,8 @@ class LinkStatus(Struct):
     """The driver's link to the robot (``driver/link`` operation)."""
 
     link: str  # sim | rsi
-    state: str  # connected | lost | waiting | stopped (rsi: RSI switched off after the driver's Stop)
+    state: str  # connected | lost | waiting | stopped (rsi: RSI switched off after the driver's Stop) | refused
+    # (rsi: the run's cycle is not the robot's; the driver answers Stop)
     address: str = ""  # where the driver listens (rsi: udp HOST:PORT)
     peer: str = ""  # the controller's address
     packets: int = 0  # cycles the plant ran (rsi: packets answered)
@@ -211,6 +212,7 @@ class LinkEvent(Struct):
 
     t: float  # wall time, epoch seconds
     event: str  # waiting | run_start | restart | late | lost | back | trip | stop_sent | stopped | garbage
+    # | wrong_cycle (rsi: a run refused, its packets faster than the robot's cycle)
     message: str
     link: str = "rsi"
     cycle: int = 0  # the driver cycle it happened at

@@ -27,6 +27,8 @@ from tests.controllers.sim_process import SimProcess, Status
 DEPLOY = Path(os.environ.get("ROB6_KUKA_DEPLOY", Path(__file__).resolve().parents[2] / "deploy" / "kuka"))
 #: the KSS releases running RSI 3.x
 RSI3_KSS = ("8.3", "8.4")
+#: the KSS release running RSI 4.0 (its own .rsix format: deploy/kuka/rsi40)
+RSI40_KSS = "8.5"
 #: RSI's Timeout (``--timeout``) for tests of the whole system: a CI machine is no real-time
 #: PC, and the late packets it makes would add up to the shipped Timeout (100 a run) over a
 #: long session. The Timeout rule is tested in test_kuka_rsi_sim, the shipped value read there.
@@ -49,8 +51,8 @@ def install(dest: Path, kss: str = "8.6", robot: str = "kr16rt", deploy: Path = 
     """Install deploy/kuka on a controller as its README says; (program .src, SensorInterface).
 
     KRC:\\R1\\Program gets rob6_rsi.src/.dat (rob6IpoFast FALSE for kr3/kr16); SensorInterface
-    the Ethernet configuration and the context: rob6_rsi.rsix, or on RSI 3.x the three files
-    of rsi3/ with rob6Context[]="rob6_rsi.rsi"."""
+    the Ethernet configuration and the context: rob6_rsi.rsix (RSI 4.1, 5.x), rsi40/rob6_rsi.rsix
+    (RSI 4.0), or on RSI 3.x the three files of rsi3/ with rob6Context[]="rob6_rsi.rsi"."""
     program, sensor = dest / "Program", dest / "SensorInterface"
     program.mkdir(parents=True)
     sensor.mkdir(parents=True)
@@ -64,6 +66,8 @@ def install(dest: Path, kss: str = "8.6", robot: str = "kr16rt", deploy: Path = 
         for path in sorted((deploy / "rsi3").iterdir()):
             shutil.copy(path, sensor)
         edit(dat, r'rob6Context\[\]="rob6_rsi"', 'rob6Context[]="rob6_rsi.rsi"')
+    elif kss == RSI40_KSS:
+        shutil.copy(deploy / "rsi40" / "rob6_rsi.rsix", sensor)
     else:
         shutil.copy(deploy / "rob6_rsi.rsix", sensor)
     return program / "rob6_rsi.src", sensor

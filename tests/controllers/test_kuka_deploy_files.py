@@ -15,7 +15,7 @@ import pytest
 from kuka_rsi_sim.machine import MACHINES
 from tests.controllers.rsi_controller import DEPLOY
 
-FILES = ["rob6_rsi.src", "rob6_rsi.dat", "rob6_rsi_ethernet.xml", "rob6_rsi.rsix",
+FILES = ["rob6_rsi.src", "rob6_rsi.dat", "rob6_rsi_ethernet.xml", "rob6_rsi.rsix", "rsi40/rob6_rsi.rsix",
          "rsi3/rob6_rsi.rsi", "rsi3/rob6_rsi.rsi.diagram", "rsi3/rob6_rsi.rsi.xml"]
 
 
@@ -27,8 +27,11 @@ def test_plain_ascii_with_crlf(name: str) -> None:
 
 
 def parameters(fmt: str) -> dict[str, dict[str, str]]:
-    """object type -> parameter name -> value, of the .rsix or the RSI 3.x .rsi.xml"""
-    if fmt == "rsix":
+    """object type -> parameter name -> value, of the .rsix (RSI 4.1), RSI 4.0's .rsix or the RSI 3.x .rsi.xml"""
+    if fmt == "rsi40":
+        objects = ET.parse(DEPLOY / "rsi40" / "rob6_rsi.rsix").getroot().iter("RsiObject")
+        param_tag = "Parameter"
+    elif fmt == "rsix":
         root = ET.parse(DEPLOY / "rob6_rsi.rsix").getroot()
         objects = root.iter("{RsiDriver}RsiObject")
         param_tag = "{RsiDriver}Parameter"
@@ -40,13 +43,14 @@ def parameters(fmt: str) -> dict[str, dict[str, str]]:
             for obj in objects}
 
 
-def test_both_formats_carry_the_same_signal_flow() -> None:
-    rsix, rsi3 = parameters("rsix"), parameters("rsi3")
-    assert set(rsix) == set(rsi3) == {"ETHERNET", "STOP", "AXISCORR", "AXISCORRMON"}
+@pytest.mark.parametrize("fmt", ["rsi3", "rsi40"])
+def test_every_format_carries_the_same_signal_flow(fmt: str) -> None:
+    rsix, other_fmt = parameters("rsix"), parameters(fmt)
+    assert set(rsix) == set(other_fmt) == {"ETHERNET", "STOP", "AXISCORR", "AXISCORRMON"}
     for obj, params in rsix.items():
-        assert set(params) == set(rsi3[obj]), obj
+        assert set(params) == set(other_fmt[obj]), obj
         for name, value in params.items():
-            other = rsi3[obj][name]
+            other = other_fmt[obj][name]
             assert value == other or float(value) == float(other), (obj, name, value, other)
 
 
@@ -55,7 +59,10 @@ def wires(fmt: str) -> dict[tuple[str, int], str]:
     receive = {int(e.attrib["INDX"]): e.attrib["TAG"]
                for e in ET.parse(DEPLOY / "rob6_rsi_ethernet.xml").getroot().iter("ELEMENT")
                if e.attrib["INDX"] != "INTERNAL"}
-    if fmt == "rsix":
+    if fmt == "rsi40":
+        objects, base = ET.parse(DEPLOY / "rsi40" / "rob6_rsi.rsix").getroot().iter("RsiObject"), 0
+        input_tag, out_obj = "Input", "OutObjId"
+    elif fmt == "rsix":
         objects, base = ET.parse(DEPLOY / "rob6_rsi.rsix").getroot().iter("{RsiDriver}RsiObject"), 0
         input_tag, out_obj = "{RsiDriver}Input", "OutObjId"
     else:
@@ -70,12 +77,27 @@ def wires(fmt: str) -> dict[tuple[str, int], str]:
     return out
 
 
-@pytest.mark.parametrize("fmt", ["rsix", "rsi3"])
+@pytest.mark.parametrize("fmt", ["rsix", "rsi40", "rsi3"])
 def test_each_format_wires_stop_to_stop_and_ak_an_to_axis_n(fmt: str) -> None:
     """The wires by name: the Stop element to the Stop object's input, AK.A<n> to AXISCORR's
     input of axis n, nothing else (an index slipped by one in either format shows here)."""
     expected = {("STOP", 0): "Stop", **{("AXISCORR", n): f"AK.A{n + 1}" for n in range(6)}}
     assert wires(fmt) == expected
+
+
+def test_the_rsi40_editor_draws_the_wires_the_objects_have() -> None:
+    """RSI 4.0's <Editor> (kuka_experimental PR #155) draws each wire as a Link from an
+    Ethernet port Out<n> (1-based) to an input port (Stop: In1 as in RSIVisual's RSI 3.x model;
+    AxisCorr: CorrA<n>): the drawing must show the wiring the objects run."""
+    root = ET.parse(DEPLOY / "rsi40" / "rob6_rsi.rsix").getroot()
+    ports = {"Stop": ["In1"], "AxisCorr": [f"CorrA{n}" for n in range(1, 7)]}
+    inputs = {(o.attrib["ObjId"], ports[o.attrib["ObjType"]][int(i.attrib["InIdx"])]):
+              (i.attrib["OutObjId"], f"Out{int(i.attrib['OutIdx']) + 1}")
+              for o in root.iter("RsiObject") for i in o.iter("Input")}
+    links = {(k.attrib["To"], k.attrib["ToPort"]): (k.attrib["From"], k.attrib["FromPort"]) for k in root.iter("Link")}
+    assert links == inputs
+    nodes = {n.attrib["Name"]: n.attrib["Type"] for n in root.iter("Node")}
+    assert nodes == {o.attrib["ObjId"]: o.attrib["ObjType"] for o in root.iter("RsiObject")}
 
 
 def test_every_correction_holds_its_value_when_an_answer_is_late() -> None:
@@ -103,12 +125,13 @@ def test_windows_let_every_correction_inside_the_axis_range_pass(machine: str) -
     the range: each must span the range width, so that the software limit switches (the
     robot's machine data) limit the motion and not RSI."""
     m = MACHINES[machine]
-    params = parameters("rsix")
-    for n in range(6):
-        width = m.upper[n] - m.lower[n]
-        assert float(params["AXISCORR"][f"LowerLimA{n + 1}"]) <= -width
-        assert float(params["AXISCORR"][f"UpperLimA{n + 1}"]) >= width
-        assert float(params["AXISCORRMON"][f"MaxA{n + 1}"]) >= width
+    for fmt in ("rsix", "rsi40", "rsi3"):
+        params = parameters(fmt)
+        for n in range(6):
+            width = m.upper[n] - m.lower[n]
+            assert float(params["AXISCORR"][f"LowerLimA{n + 1}"]) <= -width, (fmt, n)
+            assert float(params["AXISCORR"][f"UpperLimA{n + 1}"]) >= width, (fmt, n)
+            assert float(params["AXISCORRMON"][f"MaxA{n + 1}"]) >= width, (fmt, n)
 
 
 def test_the_readme_names_the_files_and_settings_it_ships() -> None:

@@ -26,7 +26,7 @@ from typing import Any
 
 import pytest
 
-from tests.controllers.rsi_controller import RSI3_KSS, RsiController, RsiControllerError, edit, install
+from tests.controllers.rsi_controller import DEPLOY, RSI3_KSS, RsiController, RsiControllerError, edit, install
 from tests.controllers.sim_process import Status
 
 HOME = [0.0, -90.0, 90.0, 0.0, 0.0, 0.0]
@@ -196,7 +196,7 @@ def ended(st: Status) -> bool:
 
 
 # ---------------------------------------------------------------------------- start-up, every generation
-@pytest.mark.parametrize("kss", ["8.3", "8.4", "8.6", "8.7"])
+@pytest.mark.parametrize("kss", ["8.3", "8.4", "8.5", "8.6", "8.7"])
 def test_the_shipped_files_run_on_each_kss(pc: Responder, kss: str) -> None:
     """Installed as the README says for that KSS, the program runs: RSI_CREATE loads the
     context of that RSI generation, RSI_ON starts the packets, zero correction holds the arm."""
@@ -214,7 +214,7 @@ def test_the_shipped_files_run_on_each_kss(pc: Responder, kss: str) -> None:
         st = kuka.status()
         assert st["state"] == "running" and st["program"] == "running" and st["runs"] == 1
         assert st["trips"] == [] and st["messages"] == [] and st["timeout"] == 100
-        assert st["rsi"] == ("RSI 3.x" if kss in RSI3_KSS else "RSI 4.1" if kss == "8.6" else "RSI 5.x")
+        assert st["rsi"] == {"8.3": "RSI 3.x", "8.4": "RSI 3.x", "8.5": "RSI 4.0", "8.6": "RSI 4.1", "8.7": "RSI 5.x"}[kss]
         assert st["replies_ok"] + st["late_total"] >= 19
         assert st["rtt_ms"]["n"] >= 19 and st["rtt_ms"]["p50"] > 0
 
@@ -232,12 +232,36 @@ def test_start_pose_outside_limits_refused(pc: Responder) -> None:
         sim(pc, "--start-pose", "0,-90,-120,0,0,0", robot="kr3").start()
 
 
-def test_kss_8_5_refuses_the_rsi_4_1_context(pc: Responder) -> None:
-    """RSI 4.0 stores contexts in another format than 4.1's .rsix: RSI_CREATE fails, HALT."""
-    with sim(pc, kss="8.5") as kuka:
-        st = kuka.wait_for(lambda s: s["program"].startswith("HALT"), what="the program to halt")
+@pytest.mark.parametrize(("kss", "other", "why"), [
+    ("8.5", "rob6_rsi.rsix", "rob6_rsi.rsix is in RSI 4.1/5.x's format (SchemaVersion '2.0.0'); RSI 4.0 reads"),
+    ("8.6", "rsi40/rob6_rsi.rsix", "rob6_rsi.rsix is in RSI 4.0's format (Version '0.1.0'); RSI 4.1 and 5.x read"),
+])
+def test_rsi_4_0_and_4_1_refuse_each_others_context(pc: Responder, tmp_path: Path, kss: str, other: str,
+                                                     why: str) -> None:
+    """RSI 4.0 (KSS 8.5) and 4.1 both load <name>.rsix, each in its own format (kx#58; the 4.0
+    format: kuka_experimental PR #155): the other one's file fails RSI_CREATE, HALT."""
+    files = installed(tmp_path, kss)
+    (files[1] / "rob6_rsi.rsix").write_bytes((DEPLOY / other).read_bytes())
+    with sim(pc, kss=kss, files=files) as kuka:
+        st = halted(kuka)
         assert st["runs"] == 0 and pc.packets == []
-        assert "RSI 4.0 stores contexts in another format" in st["messages"][0]
+        assert why in st["messages"][0]
+
+
+def test_is_public_fails_rsi_create_on_rsi_4_0(pc: Responder, tmp_path: Path) -> None:
+    """RSI 4.0's generated file (kuka_experimental PR #155) has no IsPublic: the stand-in refuses
+    an attribute no reference file of the generation shows."""
+    files = installed(tmp_path, "8.5")
+    edit(context_file(files), r'(Name="Mode")', r'IsPublic="false" \1')
+    with sim(pc, kss="8.5", files=files) as kuka:
+        assert "attribute(s) ['IsPublic']" in halted(kuka)["messages"][0]
+
+
+def test_rsi_4_0_needs_a_node_for_each_object(pc: Responder, tmp_path: Path) -> None:
+    files = installed(tmp_path, "8.5")
+    edit(context_file(files), r'\s*<Node [^>]*Name="Stop_1"[^>]*/>', "")
+    with sim(pc, kss="8.5", files=files) as kuka:
+        assert "<Editor> has no Node for ['Stop_1']" in halted(kuka)["messages"][0]
 
 
 def test_rsi3_needs_the_rsi_name_the_readme_tells_to_set(pc: Responder, tmp_path: Path) -> None:

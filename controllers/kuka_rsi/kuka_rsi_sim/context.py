@@ -6,8 +6,12 @@
   ``ObjID``, ``ParamID``, indices from 1).
 * RSI 4.1 and 5.x (KSS 8.6, 8.7): ``RSI_CREATE("<name>")`` loads ``<name>.rsix``
   (``<RsiContext SchemaVersion="2.0.0">``, ``ObjTypeId``, ``ObjId``, ``ParamId``, indices from 0).
-* RSI 4.0 (KSS 8.5): another format again, of which no public sample was found: the stand-in
-  refuses every context there.
+* RSI 4.0 (KSS 8.5): ``RSI_CREATE("<name>")`` loads ``<name>.rsix`` too, in its own format
+  (kuka_experimental PR #155, "RobotSensorInterface 4.0 B3083", tested on KSS 8.5):
+  ``<RsiContext Version="0.1.0">`` and ``<RsiObjects>`` with no namespace, the 4.1 names
+  (``ObjTypeId``, ``ObjId``, ``ParamId``, indices from 0) and no ``IsPublic``, and an
+  ``<Editor>`` section whose ``Node`` elements name each object. Each format is refused by
+  the other generation.
 
 A file of another generation's format, an attribute or a parameter that no reference file
 shows, or an object the stand-in does not model makes RSI_CREATE fail (``ContextError``).
@@ -52,7 +56,14 @@ ATTRIBUTES = {
           "Parameter": {"Name", "ParamID", "ParamValue", "IsRuntime"}},
     "4": {"RsiObject": {"ObjTypeId", "ObjType", "ObjId"}, "Input": {"InIdx", "OutObjId", "OutIdx"},
           "Parameter": {"IsRuntime", "IsPublic", "Name", "ParamId", "ParamValue"}},
+    "4.0": {"RsiObject": {"ObjTypeId", "ObjType", "ObjId"}, "Input": {"InIdx", "OutObjId", "OutIdx"},
+            "Parameter": {"IsRuntime", "Name", "ParamId", "ParamValue"}},
 }
+TYPE_NAMES["4.0"] = TYPE_NAMES["4"]
+#: the Version of an RSI 4.0 context (kuka_experimental PR #155)
+RSIX40_VERSION = "0.1.0"
+#: the sections of an RSI 4.0 context's <Editor> (kuka_experimental PR #155)
+RSIX40_EDITOR = {"Comments", "Connectors", "FunctionBlocks", "Groups", "Links", "Nodes", "Toolboxes"}
 STOP_EXIT_MOVECORR = 4  # the Stop object's Mode ExitMoveCorr: RSI_MOVECORR returns
 RSI3_MODEL_NS = "{http://schemas.microsoft.com/dsltools/RSIVisual}"
 RSIX_NS, RSIX_DRIVER = "{RsiContext}", "{RsiDriver}"
@@ -100,12 +111,8 @@ def load_context(name: str, sensor_dir: Path, gen: str) -> SignalFlow:
         objects = _load_rsi3(name, sensor_dir)
         base, family = 1, "3"
     elif gen == "4.0":
-        path = sensor_dir / f"{name}.rsix"
-        if not path.is_file():
-            raise ContextError(f"context {name}: {path.name} not found in SensorInterface")
-        raise ContextError(f"{path.name} is in RSI 4.1/5.x's format (SchemaVersion {RSIX_SCHEMA}); RSI 4.0 "
-                           f"stores contexts in another format: build the context with this controller's "
-                           f"RSIVisual (deploy/kuka/README.md)")
+        objects = _load_rsix40(name, sensor_dir)
+        base, family = 0, "4.0"
     else:
         objects = _load_rsix(name, sensor_dir)
         base, family = 0, "4"
@@ -178,6 +185,10 @@ def _load_rsix(name: str, sensor_dir: Path) -> dict[str, _Object]:
             if name.endswith(".rsi") else ""
         raise ContextError(f"context {name}: {path.name} not found in SensorInterface{hint}")
     root = _parse(path)
+    if root.tag == "RsiContext" and root.get("Version") is not None:
+        raise ContextError(f"{path.name} is in RSI 4.0's format (Version {root.get('Version')!r}); RSI 4.1 and "
+                           f"5.x read <RsiContext SchemaVersion=\"{RSIX_SCHEMA}\" xmlns=\"RsiContext\"> "
+                           f"(deploy/kuka/README.md)")
     if root.tag != f"{RSIX_NS}RsiContext":
         raise ContextError(f"{path.name}: root <{root.tag}>, expected <RsiContext xmlns=\"RsiContext\">")
     if root.get("SchemaVersion") != RSIX_SCHEMA:
@@ -194,6 +205,48 @@ def _load_rsix(name: str, sensor_dir: Path) -> dict[str, _Object]:
             raise ContextError(f"{path.name}: unknown element <{element.tag}> in <RsiObjects>")
         obj = _object(element, "4", path.name, "ObjTypeId", "ObjId", "ParamId", "OutObjId", RSIX_DRIVER)
         objects[obj.obj_id] = obj
+    return objects
+
+
+def _load_rsix40(name: str, sensor_dir: Path) -> dict[str, _Object]:
+    path = sensor_dir / f"{name}.rsix"
+    if not path.is_file():
+        hint = " (RSI 4.0 loads <name>.rsix: RSI_CREATE(\"rob6_rsi\"), not \"rob6_rsi.rsi\")" \
+            if name.endswith(".rsi") else ""
+        raise ContextError(f"context {name}: {path.name} not found in SensorInterface{hint}")
+    root = _parse(path)
+    if root.tag == f"{RSIX_NS}RsiContext":
+        raise ContextError(f"{path.name} is in RSI 4.1/5.x's format (SchemaVersion {root.get('SchemaVersion')!r}); "
+                           f"RSI 4.0 reads <RsiContext Version=\"{RSIX40_VERSION}\"> with no namespace "
+                           f"(deploy/kuka/rsi40)")
+    if root.tag != "RsiContext":
+        raise ContextError(f"{path.name}: root <{root.tag}>, expected <RsiContext Version=\"{RSIX40_VERSION}\">")
+    if root.get("Version") != RSIX40_VERSION:
+        raise ContextError(f"{path.name}: Version {root.get('Version')!r}, expected {RSIX40_VERSION!r}")
+    extra = sorted(set(root.attrib) - {"Version"})
+    if extra:
+        raise ContextError(f"{path.name}: <RsiContext> has unknown attribute(s) {extra}")
+    sections: dict[str, list[ET.Element]] = {}
+    for child in root:
+        if child.tag not in ("RsiObjects", "Editor"):
+            raise ContextError(f"{path.name}: unknown element <{child.tag}> in <RsiContext>")
+        sections.setdefault(child.tag, []).append(child)
+    if len(sections.get("RsiObjects", [])) != 1 or len(sections.get("Editor", [])) > 1:
+        raise ContextError(f"{path.name}: expected one <RsiObjects> and at most one <Editor>")
+    objects = {}
+    for element in sections["RsiObjects"][0]:
+        if element.tag != "RsiObject":
+            raise ContextError(f"{path.name}: unknown element <{element.tag}> in <RsiObjects>")
+        obj = _object(element, "4.0", path.name, "ObjTypeId", "ObjId", "ParamId", "OutObjId", "")
+        objects[obj.obj_id] = obj
+    for editor in sections.get("Editor", []):
+        unknown = sorted({c.tag for c in editor} - RSIX40_EDITOR)
+        if unknown:
+            raise ContextError(f"{path.name}: unknown element(s) {unknown} in <Editor>")
+        nodes = {n.get("Name") for n in editor.iter("Node")}
+        missing = sorted(o for o in objects if o not in nodes)
+        if missing:
+            raise ContextError(f"{path.name}: <Editor> has no Node for {missing}")
     return objects
 
 

@@ -27,10 +27,12 @@ class Machine:
         return tuple(hi - lo for lo, hi in zip(self.lower, self.upper, strict=True))
 
 
+# The KR 16 a KR C4 drives is the KR 16-2: axis ranges and speeds of ros-industrial/kuka_experimental
+# kuka_kr16_support/urdf/kr16_2_macro.xacro (A5 +-130: rob6's kr16 stops at +-125, inside them).
 _KR16: dict[str, Any] = dict(
     rated=(156.0, 156.0, 156.0, 330.0, 330.0, 615.0),
-    lower=(-185.0, -155.0, -130.0, -350.0, -125.0, -350.0),
-    upper=(185.0, 35.0, 154.0, 350.0, 125.0, 350.0),
+    lower=(-185.0, -155.0, -130.0, -350.0, -130.0, -350.0),
+    upper=(185.0, 35.0, 154.0, 350.0, 130.0, 350.0),
     d1=675.0, a1=260.0, a2=680.0, a3=-35.0, d4=670.0, d6=158.0,
 )
 # The KR 3 a KR C4 drives is the KR 3 R540 (KR AGILUS): axis ranges and speeds of

@@ -29,7 +29,7 @@ VEL_ABS_TOLERANCE = 2e-4
 
 MAX_TRIPS_KEPT = 100
 #: the message of the ETHERNET object stopping RSI after Timeout late packets, by generation
-TIMEOUT_ERROR = {"3": "RSIBad", "4.1": "RSITimeout", "5.0": "RSITimeout"}
+TIMEOUT_ERROR = {"3": "RSIBad", "4.0": "RSITimeout", "4.1": "RSITimeout", "5.0": "RSITimeout"}
 #: T1: the flange's Cartesian velocity is monitored at 250 mm/s (the ri README, Testing)
 T1_VELOCITY_MM_S = 250.0
 

@@ -33,6 +33,14 @@ step faster than an axis can move, and stops RSI after ``Timeout`` late packets)
 * Packets that queued up while the driver could not run are skipped: only the newest
   is answered (the others are late anyway). Duplicated and reordered (older) packets
   are not answered.
+* A run whose packets come faster than the robot's cycle (``IPOC``, a millisecond time
+  stamp, 4 ms on from the last packet while a 12 ms kr3/kr16 driver plans 12 ms steps:
+  the program's ``rob6IpoFast`` is TRUE) is refused: rob6 would command three times its
+  planned speeds. Every packet of that run is answered with the arm where it stands and
+  ``<Stop>1</Stop>`` (RSI_MOVECORR returns, the program ends without a fault), motion
+  commands are refused with one line saying both cycles and what to set, state
+  ``refused``, then ``stopped`` once the packets stop; the next run (the operator's
+  restart) is checked again.
 
 Statistics: packet in (kernel receive time stamp) -> answer sent, as a histogram
 (``status()``), and the ``late``/``missed`` counts published in every joint state.
@@ -114,6 +122,7 @@ class RsiLink(Link):
         self.core = core
         self.publish = publish
         self.on_event = on_event
+        self.robot = robot
         self.sen_type = sen_type.encode("ascii")
         self.cycle_s = core.dt
         self._rated = speed_si(robot.speed_bound)  # deg/s: the fastest the axes go
@@ -152,7 +161,7 @@ class RsiLink(Link):
         self._aspos_arr = np.zeros(6)
         self._delay = 0
         self._stamp = 0
-        self._stamp_step = max(1, round(self.cycle_s * 1000))  # IPOC counts ms; learnt if finer
+        self._stamp_step = max(1, round(self.cycle_s * 1000))  # IPOC counts ms
         self._expected_late = 0
         self._expected_age = 0
         self._unexplained = 0
@@ -289,8 +298,12 @@ class RsiLink(Link):
         new_run = (self._aspos is None or pkt.aspos != self._aspos or pkt.delay < self._delay or stamp_gone_back
                    or self._jumped(pkt))
         hold = False
-        if new_run:
+        if new_run or self.state == "stopped":  # after a refused run: the operator's restart
             self._begin_run(pkt, addr)
+        elif self.state == "refused":  # the rest of a refused run: Stop until RSI is off
+            self._delay, self._stamp = pkt.delay, max(self._stamp, pkt.stamp)
+            self._answer_refused(pkt, addr)
+            return
         elif self.state != "connected":  # packets are back in the same run
             self.late += pkt.delay - self._delay
             self.missed += max(0, round((pkt.stamp - self._stamp) / self._stamp_step) - 1)
@@ -305,7 +318,9 @@ class RsiLink(Link):
                 self.stale += 1
                 return
             diff = pkt.stamp - self._stamp
-            self._stamp_step = min(self._stamp_step, diff)
+            if diff < self._stamp_step:  # the controller's cycle is finer than the robot's
+                self._refuse(pkt, addr, diff)
+                return
             gap = round(diff / self._stamp_step) - 1
             if gap > 0:
                 self.missed += gap
@@ -358,6 +373,32 @@ class RsiLink(Link):
         return any(abs(a - b) > 2.0 * v * seconds + JUMP_TOL_DEG
                    for a, b, v in zip(pkt.aipos, self.q_actual, self._rated, strict=True))
 
+    def _refuse(self, pkt: RobPacket, addr: tuple[str, int], step_ms: int) -> None:
+        """This run's cycle is not the robot's: refuse the run in one line and stop it."""
+        expected = self._stamp_step
+        name = self.robot.name
+        if name.endswith("rt"):
+            advice = "make ROB6_ROBOT and rob6IpoFast in rob6_rsi.dat agree (deploy/kuka/README.md)"
+        else:
+            advice = (f"set ROB6_ROBOT={name}rt (4 ms, #IPO_FAST), or rob6IpoFast FALSE in rob6_rsi.dat "
+                      f"(#IPO, 12 ms: KSS 8.5 and later only)")
+        reason = (f"RSI run refused: ROB6_ROBOT={name} expects a packet every {expected} ms, the controller "
+                  f"sends one every {step_ms} ms: {advice}")
+        self._delay, self._stamp = pkt.delay, pkt.stamp
+        self.state = "refused"
+        self.core.offline(reason)
+        self._report("wrong_cycle", f"driver: {reason}", logging.ERROR, pkt)
+        self._answer_refused(pkt, addr)
+        self.publish(self.core.state())
+
+    def _answer_refused(self, pkt: RobPacket, addr: tuple[str, int]) -> None:
+        """The arm held where the run found it, and Stop: RSI_MOVECORR returns."""
+        ak = (self._setpoint - self._aspos_arr).tolist()
+        self.sock.sendto(format_sen(self.sen_type, ak, pkt.ipoc, True), addr)
+        self.packets += 1
+        self._heard = time.monotonic()
+        self.q_actual = list(pkt.aipos)
+
     def _begin_run(self, pkt: RobPacket, addr: tuple[str, int]) -> None:
         """A new RSI run: the core at rest where the arm stands (AIPos), AK = AIPos - ASPos."""
         previous = self._aspos
@@ -366,7 +407,6 @@ class RsiLink(Link):
         self.late += pkt.delay
         self._aspos = pkt.aspos
         self._aspos_arr = np.array(pkt.aspos)
-        self._stamp_step = max(1, round(self.cycle_s * 1000))
         self._expected_late = self._unexplained = 0
         moving = self._moving_when_lost or (was == "connected" and self.core.state().moving)
         self._moving_when_lost = False
@@ -402,7 +442,11 @@ class RsiLink(Link):
     def _on_silence(self) -> None:
         """No packet for ``lost_after_s``: the link is lost (or still not there), or after
         our Stop the controller switched RSI off."""
-        if self.state == "connected" and self._stopping:
+        if self.state == "refused":  # the controller left RSI_MOVECORR: a packet now is a new run
+            self.state = "stopped"
+            self._report("stopped", "driver: the controller left RSI_MOVECORR and switched RSI off (the run was "
+                         "refused)", logging.INFO)
+        elif self.state == "connected" and self._stopping:
             self.state = "stopped"
             self.core.offline("RSI stopped by the driver")
             self._report("stopped", "driver: the controller left RSI_MOVECORR and switched RSI off", logging.INFO)
