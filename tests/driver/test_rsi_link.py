@@ -145,10 +145,10 @@ def test_start_steps_and_late_answers(rig: Rig) -> None:
 
 def test_lost_and_back_in_the_same_run_continues_from_aipos(rig: Rig) -> None:
     core, link, ctl, states, events = rig
-    ctl.cycle()
+    last = ctl.cycle()
     motion = ptp(core, (20.0, -90.0, 90.0, 0.0, 0.0, 0.0))
-    for _ in range(100):
-        last = ctl.cycle()
+    for _ in range(100):  # the arm follows the answers, a cycle behind (AIPos as a real one reports it)
+        last = ctl.cycle(aipos=np.array(HOME) + last)
     motion.wait(2.0)  # the link is lost (no packet for 0.3 s): the motion ends with the error
     assert motion.ok is False and motion.error.startswith("RSI link lost: no packet from the controller at 127.0.0.1:")
     assert link.state == "lost"
@@ -180,14 +180,27 @@ def test_a_restart_rebases_on_the_new_start_pose(rig: Rig) -> None:
     assert np.array_equal(ctl.cycle(aipos=new_start, aspos=new_start), np.zeros(6))
 
 
+def test_an_arm_moved_farther_than_its_axes_can_between_two_packets_starts_a_new_run(rig: Rig) -> None:
+    """The operator jogged the arm and restarted RSI at the same start pose, with no late
+    packet in the run before and a pause shorter than the lost-link time: AIPos has moved
+    farther than the axes can in that time, so it is a new run (AK = 0 there), not the old
+    setpoint answered (a step of degrees: 'Command velocity' on the controller)."""
+    core, link, ctl, states, events = rig
+    ctl.cycle()
+    jogged = (3.0, -87.0, 90.0, 0.0, 2.0, 0.0)
+    answer = ctl.cycle(aipos=jogged)
+    assert np.allclose(answer, np.array(jogged) - HOME) and link.runs == 2
+    assert core.state().q.tolist() == list(jogged)
+
+
 def test_a_new_run_starts_where_the_arm_stands_whatever_aspos(rig: Rig) -> None:
     """RSI_OFF/RSI_ON without a motion keeps the old programmed ASPos while the arm stands
     where the corrections put it: AK = AIPos - ASPos holds it there (zero would jump back)."""
     core, link, ctl, states, events = rig
-    ctl.cycle()
+    last = ctl.cycle()
     motion = ptp(core, (5.0, -90.0, 90.0, 0.0, 0.0, 0.0))
-    while not motion.done.is_set():
-        last = ctl.cycle()
+    while not motion.done.is_set():  # the arm follows the answers, a cycle behind
+        last = ctl.cycle(aipos=np.array(HOME) + last)
     assert motion.ok and last[0] == pytest.approx(5.0)
     stands = (5.0, -90.0, 90.0, 0.0, 0.0, 0.0)
     ctl.cycle(aipos=stands, delay=3)  # a few late ones in this run

@@ -38,11 +38,11 @@ POSITION_TOL = 1.5e-3
 LEAD_US = 48_000
 
 
-def kawasaki_system(ports: tuple[int, int], **kwargs: Any) -> AbstractContextManager[System]:
-    """The driver on the program's port and its state port."""
+def kawasaki_system(ports: tuple[int, int], cell: Path | None = None, **kwargs: Any) -> AbstractContextManager[System]:
+    """The driver on the program's port and its state port (and the cell file ``cell``)."""
     return running("kaw_fs", dummy=False, extra_env={
         "ROB6_LINK": "kawasaki", "ROB6_KAS_HOST": "127.0.0.1", "ROB6_KAS_PORT": str(ports[0]),
-        "ROB6_KAS_STATE_PORT": str(ports[1])}, **kwargs)
+        "ROB6_KAS_STATE_PORT": str(ports[1]), **({"ROB6_CELL": str(cell)} if cell else {})}, **kwargs)
 
 
 def controller(ports: tuple[int, int], *args: str) -> KawasakiController:
@@ -86,12 +86,26 @@ def test_ptp_lin_alter_over_the_kawasaki_link_within_limits(tmp_path: Path) -> N
     RIG.assert_recorded(tmp_path, "kawasaki")  # complete: the launcher stops the recorder last
 
 
+#: the fault tests' cell: the floor without self-collision. The range test folds JT3 to the
+#: controller's limit, where the FS03N's estimated shapes (rob6/cell/arms/REFERENCES.md) have
+#: the forearm within the margin of the column: the cell's guard would refuse the path before
+#: the link's own range check is reached
+FLOOR_ONLY = """\
+zones:
+  - {name: floor, keep: out, half_space: {point: [0, 0, 0], normal: [0, 0, 1]}, ignore: [link_1]}
+arm:
+  self_collision: false
+"""
+
+
 @pytest.fixture(scope="module")
-def kawasaki() -> Iterator[tuple[System, tuple[int, int]]]:
+def kawasaki(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[System, tuple[int, int]]]:
     """One rob6 system on the kawasaki link for the fault tests; each test brings its own controller."""
     first, second = free_tcp_ports(2)
     port = (first, second)
-    with kawasaki_system(port) as system:
+    cell = tmp_path_factory.mktemp("kawasaki") / "floor-only.yaml"
+    cell.write_text(FLOOR_ONLY)
+    with kawasaki_system(port, cell) as system:
         yield system, port
 
 
