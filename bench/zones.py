@@ -19,6 +19,7 @@ import numpy as np
 from harness.ports import free_port
 from harness.system import running
 from rob6.cell import CellModel, Guard, default_cell, load_cell
+from rob6.cell.file import DEFAULT_FILE
 from rob6.messages import Cell, LinkQuery
 from rob6.robots import get_robot
 from rob6.units import UNIT_CYCLE_S
@@ -33,6 +34,7 @@ from .links import ControllerSim
 from .tables import Table
 
 RSI_CYCLE_MS = 4.0
+BUSY = "10 boxes and a tool"
 #: the long PTP whose check runs beside the RSI cycle (issue 56's figure: a 22 s PTP)
 LONG_PTP_S = 22.0
 ROBOT = "kr16"
@@ -60,7 +62,7 @@ def _cells() -> dict[str, Cell]:
     with tempfile.TemporaryDirectory() as directory:
         path = Path(directory) / "busy.yaml"
         path.write_text(busy_cell())
-        return {"default (floor, self-collision)": default_cell(robot), "10 boxes and a tool": load_cell(path)}
+        return {"default (floor, self-collision)": default_cell(robot), BUSY: load_cell(path)}
 
 
 def _us(fn: Callable[[], object], count: int) -> tuple[float, float]:
@@ -154,17 +156,18 @@ def path_rows(repeat: int) -> list[tuple[object, ...]]:
     return rows
 
 
-def rsi_long_ptp() -> dict[str, float]:
-    """A 22 s PTP on kr16rt over RSI (kuka-rsi-sim, KSS 8.6) with ten boxes and a tool: the
-    late packets the controller counted from the move's request to its end (the driver checks
-    the trajectory's poses as it takes it, beside the RSI thread), and what that check costs."""
+def rsi_long_ptp(cell_name: str) -> dict[str, float]:
+    """A 22 s PTP on kr16rt over RSI (kuka-rsi-sim, KSS 8.6) with the cell ``cell_name``
+    (``_cells``): the late packets the controller counted from the move's request to its end
+    (the driver checks the trajectory's poses as it takes it, beside the RSI thread), and what
+    that check costs."""
     robot = get_robot("kr16rt")
     udp = free_port(socket.SOCK_DGRAM)
     start, end = np.array([-60.0, -80.0, 100.0, 0.0, 30.0, 0.0]), np.array([60.0, -80.0, 100.0, 0.0, 30.0, 0.0])
     speed = [120.0 / LONG_PTP_S * UNIT_CYCLE_S] * 6  # deg per 12 ms: 120 deg of A1 in some 22 s
     with tempfile.TemporaryDirectory() as logs:
-        cell = Path(logs) / "busy.yaml"
-        cell.write_text(busy_cell())
+        cell = Path(logs) / "cell.yaml"
+        cell.write_text(busy_cell() if cell_name == BUSY else DEFAULT_FILE.read_text())
         with running("kr16rt", dummy=False, log_dir=logs, extra_env={
                 "ROB6_LINK": "rsi", "ROB6_RSI_LISTEN": f"127.0.0.1:{udp}", "ROB6_CELL": str(cell)}) as system:
             bus = system.bus("bench")
@@ -190,7 +193,7 @@ def rsi_long_ptp() -> dict[str, float]:
     plan = TrajectoryPlanner(robot).plan_ptp(start, end, config)
     assert plan.ok and plan.trajectory is not None
     q = plan.trajectory.q
-    zones = ZoneGuard(robot, _cells()["10 boxes and a tool"])
+    zones = ZoneGuard(robot, _cells()[cell_name])
     check = _us(lambda: zones.trajectory(q, robot.cycle_s), 5)
     return {"seconds": took, "late": late, "samples": len(q), "check_ms": check[0] / 1000}
 
@@ -203,10 +206,11 @@ def zones_table(table: Table, count: int = 2000) -> None:
           ("cell", "p50", "p99", "p99 of the cycle"), core_rows(count))
     table(f"Safety zones: the planner's check of a PTP ({ROBOT}), ms", ("what", "length", "p50", "p99"),
           path_rows(max(20, count // 100)))
-    run = rsi_long_ptp()
-    table("Safety zones: a long PTP over RSI (kr16rt, kuka-rsi-sim, 10 boxes and a tool)",
-          ("PTP", "samples", "the driver's check of its poses, ms (p50)", "late packets (controller)", "goal"),
-          [(f"{run['seconds']:.1f} s", run["samples"], f"{run['check_ms']:.1f}", run["late"], "0")])
+    runs = {name: rsi_long_ptp(name) for name in _cells()}
+    table("Safety zones: a long PTP over RSI (kr16rt, kuka-rsi-sim)",
+          ("cell", "PTP", "samples", "the driver's check of its poses, ms (p50)", "late packets (controller)", "goal"),
+          [(name, f"{run['seconds']:.1f} s", run["samples"], f"{run['check_ms']:.1f}", run["late"], "0")
+           for name, run in runs.items()])
 
 
 if __name__ == "__main__":
