@@ -1,16 +1,23 @@
-"""The simulated arm: the MOVEs the V+ program issues, played out in real time.
+"""The simulated arm: the MOVEs the V+ program issues, planned at 100 % and played at the monitor speed.
 
 Each ``MOVE`` (``adept_ros.v2`` line 599) is a joint-interpolated segment from the
-previous point, at the speed ``SPEED 100 ALWAYS`` and ``ACCEL 100, 100`` give (lines
-546-547) times the pendant's monitor speed: the joints together along a straight line in
-joint space, the slowest joint at its rated speed; the point's velocity and duration play
-no part. V+ plans a MOVE behind the running motion and returns from it when it begins
-(forward processing), so at most one MOVE waits beyond the one running (``room``). The joints follow the segments like servos:
-they accelerate and brake at their limits (both scaled by the monitor speed), never run
-past a point they have to stop at, and round the corner to the next segment when it was
-issued before the running one ended (continuous path). When it came later, the arm stops
-at the point first and then goes (an underrun, when it happens within a stream). Everything is in the controller's
-joint convention, degrees, driven by the caller's clock.
+previous point, planned with what ``SPEED 100 ALWAYS`` and ``ACCEL (1) 100, 100`` give
+(lines 546-547): the joints together along a straight line in joint space, the slowest
+joint at its rated speed, no shorter than the minimum time of a motion; the point's
+velocity and duration play no part. V+ plans a MOVE behind the running motion and returns
+from it when it begins (forward processing), so at most one MOVE waits beyond the one
+running (``room``). The joints follow the segments like servos: they accelerate and brake
+at their limits, never run past a point they have to stop at, and round the corner to the
+next segment when it was issued before the running one ended (continuous path). When it
+came later, the arm stops at the point first and then goes (an underrun, when it happens
+within a stream).
+
+The monitor speed is time scaling (V+ Operating System Reference, monitor command SPEED):
+the same motion, every part of it lasting 1/s as long, so speeds fall with s and
+accelerations with s². The arm runs on a plan clock that advances s times as fast as the
+caller's (``rate``; changed at once by ``set_monitor_speed``); a controller stop (E-stop,
+drives off) brakes on the caller's clock. Everything is in the controller's joint
+convention, degrees.
 """
 
 from __future__ import annotations
@@ -20,7 +27,7 @@ from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from .convention import MAX_ACCEL_DEG_S2, MAX_SPEED_DEG_S, N_JOINTS
+from .convention import ACCEL_TIME_S, MAX_SPEED_DEG_S, N_JOINTS
 
 DT = 0.002  # integration step, s
 KP = 50.0  # 1/s: how firmly the joints close the last bit of a gap
@@ -39,10 +46,14 @@ class Move:
 
 
 class Arm:
-    def __init__(self, q0: Sequence[float], now: float, *, monitor_speed: float = 100.0) -> None:
-        share = monitor_speed / 100.0
-        self.vcap = [v * share for v in MAX_SPEED_DEG_S]
-        self.acap = [a * share for a in MAX_ACCEL_DEG_S2]
+    def __init__(self, q0: Sequence[float], now: float, *, monitor_speed: float = 100.0,
+                 accel_time_s: float = ACCEL_TIME_S, min_move_s: float = 0.0) -> None:
+        # the 100 % profile: rated speeds, full speed in accel_time_s
+        self.vcap = list(MAX_SPEED_DEG_S)
+        self.acap = [v / accel_time_s for v in MAX_SPEED_DEG_S]
+        self.min_move_s = min_move_s  # V+'s shortest joint motion (plan seconds)
+        self.rate = monitor_speed / 100.0  # plan seconds per second of the caller's clock
+        self.tau = 0.0  # the plan clock
         self.q = [float(x) for x in q0]
         self.v = [0.0] * N_JOINTS
         self.ref = list(self.q)  # where the commanded path is now
@@ -50,7 +61,7 @@ class Arm:
         self.open = False  # a stream is under way: running dry is an underrun
         self.executed = 0
         self.underruns = 0
-        self.longest_segment_s = 0.0  # the longest segment's time at full speed
+        self.longest_segment_s = 0.0  # the longest segment's time at full speed, at the monitor speed
         self.longest_segment_deg = 0.0  # ... and its largest joint travel
         self.ran_on_s = 0.0  # from the arrival of the last point (or stop) to rest, the last time
         self.max_ran_on_s = 0.0
@@ -61,6 +72,11 @@ class Arm:
         self._ran_dry = False  # the path reached its last point with nothing issued after it
         self._decel: tuple[float, ...] | None = None  # braking to rest, per joint (E-stop, drives off)
         self._last_word_t: float | None = None  # arrival of the last point or stop before rest
+        self._started_t: float | None = None  # when the arm last left rest (the caller's clock)
+        self.last_motion_s = 0.0  # from leaving rest to rest, the last time (the caller's clock)
+        self.ran_on_deg = 0.0  # the largest joint travel from the last point's arrival to rest, the last time
+        self.max_ran_on_deg = 0.0
+        self._word_q: list[float] | None = None  # where the arm was when the last point arrived
 
     # ---- commands --------------------------------------------------------
     @property
@@ -77,9 +93,28 @@ class Arm:
         """A point that moves nothing arrived (a stop): the arm runs on from here."""
         self._last_word_t = arrived_t
 
-    def brake(self, decel: Iterable[float]) -> int:
-        """The controller's own stop (E-stop, drives off): every issued MOVE dropped, the
-        joints braked to rest with these decelerations (deg/s²); how many were dropped."""
+    def bytes_came(self) -> None:
+        """Bytes arrived on the motion connection now (the arm advanced to now): the run-on
+        in degrees is counted from where the arm is."""
+        self._word_q = list(self.q)
+
+    def here(self, now: float) -> list[float]:
+        """The joints at ``now``, between two steps of the plan's clock (a step lasts DT / rate)."""
+        ahead = min(max(0.0, now - self.t), DT / self.rate)
+        return [q + v * self.rate * ahead for q, v in zip(self.q, self.v, strict=True)]
+
+    def set_monitor_speed(self, monitor_speed: float, now: float) -> None:
+        """The pendant's monitor speed changes: it takes effect at once (V+ SPEED)."""
+        self.advance(now)
+        self.rate = monitor_speed / 100.0
+
+    def brake(self, decel: Iterable[float], now: float) -> int:
+        """The controller's own stop (E-stop, drives off) at ``now``: every issued MOVE dropped,
+        the joints braked to rest with these decelerations (deg/s²) from where they are (within
+        the plan clock's step); how many were dropped."""
+        self.advance(now)
+        if self._decel is None:
+            self.q, self.t = self.here(now), max(self.t, now)
         dropped = len(self.queue) + (self._seg is not None)
         self.queue.clear()
         self._seg = None
@@ -109,8 +144,10 @@ class Arm:
         )
 
     def segment_time(self, start: Sequence[float], target: Sequence[float]) -> float:
-        """How long the path takes from start to target at full speed (the slowest joint's time)."""
-        return max(abs(b - a) / v for a, b, v in zip(start, target, self.vcap, strict=True))
+        """How long the path takes from start to target at 100 % (the slowest joint's time,
+        at least the minimum time of a motion), plan seconds."""
+        travel = max(abs(b - a) / v for a, b, v in zip(start, target, self.vcap, strict=True))
+        return max(travel, self.min_move_s) if travel > 0 else 0.0
 
     # ---- time ----------------------------------------------------------------
     def advance(self, now: float) -> None:
@@ -119,17 +156,38 @@ class Arm:
             return
         if now - self.t > MAX_CATCH_UP_S:
             self.t = now - MAX_CATCH_UP_S
-        while self.t + DT <= now:
-            self._step(self.t, DT)
-            self.t += DT
+        while True:
+            # a step of DT on the plan's clock lasts DT / rate on the caller's: the monitor speed
+            # stretches time, the motion stays the same; a controller stop brakes on the caller's
+            braking = self._decel is not None
+            wall = DT if braking else DT / self.rate
+            if self.t + wall > now:
+                return
+            if self._started_t is None:
+                self._started_t = self.t
+            if braking:
+                self._brake_step(DT)
+            else:
+                self._step(self.tau, DT)
+                self.tau += DT
+            self.t += wall
             if not self.in_motion:
                 self._rested(self.t)
+                self.t = max(self.t, now)
+                return
 
     def _rested(self, t: float) -> None:
         if self._last_word_t is not None:
             self.ran_on_s = max(0.0, t - self._last_word_t)
             self.max_ran_on_s = max(self.max_ran_on_s, self.ran_on_s)
             self._last_word_t = None
+        if self._word_q is not None:
+            self.ran_on_deg = max(abs(a - b) for a, b in zip(self.q, self._word_q, strict=True))
+            self.max_ran_on_deg = max(self.max_ran_on_deg, self.ran_on_deg)
+            self._word_q = None
+        if self._started_t is not None:
+            self.last_motion_s = t - self._started_t
+            self._started_t = None
         self._ran_dry = False
 
     def _stopped_at_point(self) -> bool:
@@ -152,7 +210,7 @@ class Arm:
                 move = self.queue.popleft()
                 travel = max(abs(b - a) for a, b in zip(self.ref, move.q, strict=True))
                 duration = self.segment_time(self.ref, move.q)
-                self.longest_segment_s = max(self.longest_segment_s, duration)
+                self.longest_segment_s = max(self.longest_segment_s, duration / self.rate)
                 self.longest_segment_deg = max(self.longest_segment_deg, travel)
                 self._seg = (list(self.ref), move, start, duration)
             r0, move, ts, duration = self._seg
@@ -169,16 +227,20 @@ class Arm:
                 if self.open:
                     self.underruns += 1
 
+    def _brake_step(self, dt: float) -> None:
+        """One step of a controller stop: every joint braked at its deceleration (velocities
+        kept in plan terms: the wall's velocity is v * rate)."""
+        assert self._decel is not None
+        for i in range(N_JOINTS):
+            a = self._decel[i] * dt / self.rate
+            self.v[i] -= max(-a, min(a, self.v[i]))
+            self.q[i] += self.v[i] * self.rate * dt
+        if not any(self.v):
+            self._decel = None
+            self.ref = list(self.q)
+
     def _step(self, t0: float, dt: float) -> None:
-        if self._decel is not None:
-            for i in range(N_JOINTS):
-                a = self._decel[i] * dt
-                self.v[i] -= max(-a, min(a, self.v[i]))
-                self.q[i] += self.v[i] * dt
-            if not any(self.v):
-                self._decel = None
-                self.ref = list(self.q)
-            return
+        """One step of the plan clock (dt plan seconds): the path played on, the joints following."""
         rdot = self._play(t0, t0 + dt)
         for i in range(N_JOINTS):
             e = self.ref[i] - self.q[i]
@@ -191,8 +253,9 @@ class Arm:
             dv = max(-a * dt, min(a * dt, math.copysign(speed, e) - self.v[i]))
             self.v[i] += dv
             self.q[i] += self.v[i] * dt
-            self.peak_speed[i] = max(self.peak_speed[i], abs(self.v[i]))
-            self.peak_accel[i] = max(self.peak_accel[i], abs(dv) / dt)
+            # as the caller's clock sees them: speeds times the rate, accelerations times its square
+            self.peak_speed[i] = max(self.peak_speed[i], abs(self.v[i]) * self.rate)
+            self.peak_accel[i] = max(self.peak_accel[i], abs(dv) / dt * self.rate**2)
         if rdot is None and self._stopped_at_point():  # the servo's last bit: at the point
             self.q = list(self.ref)
             self.v = [0.0] * N_JOINTS
