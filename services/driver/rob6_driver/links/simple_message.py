@@ -27,8 +27,10 @@ A motion's stream
 Each point waits for its acknowledgement. The Adept's V+ program reads a point only when
 its previous MOVE has begun (one motion runs, the next is planned behind it), so its
 acknowledgements come at the arm's pace: the base (``streamed_points.py``) merges what was made meanwhile, never
-beyond two periods of the core's full speed, and slows the core (time scaling) when the
-answers fall behind, so the arm and rob6's setpoints stay together at any monitor speed.
+beyond two periods of the core's full speed nor ``MAX_SEGMENT_DEG`` on any joint (a point
+never goes farther than half of that, however fast a client let the core move), and slows
+the core (time scaling) when the answers fall behind, so the arm and rob6's setpoints stay
+together at any monitor speed.
 
 A motion connection begins with the *opening* (``Codec.opening``): the program discards
 the first four bytes of a connection, and the opening reads right whether they are rob6's
@@ -58,7 +60,8 @@ connections are up, STATUS is clear and the robot is at rest (two state messages
 the fault, the same position in both): the core continues from the robot's actual
 position, never from where an interrupted motion would have been. When the stream was
 cut mid-motion the link sends a stop (sequence -4) as soon as it can; the V+ program
-answers it and halts nothing: the MOVEs it has issued (at most three short segments) run out.
+answers it and halts nothing: the MOVEs it has issued (at most three segments of at most
+``MAX_SEGMENT_DEG``) run out.
 
 Joints: rob6 (rob6server's convention, degrees) versus the controller's (radians on the
 wire), see ``to_controller_deg`` and deploy/adept/README.md.
@@ -139,6 +142,12 @@ CONTROLLER_RANGE_DEG = np.array([(-170.0, 170.0), (-190.0, 45.0), (-29.0, 256.0)
 #: rated joint speeds of the Viper s850, deg/s (Adept's data sheet): the maximum the
 #: points' velocity fraction refers to
 RATED_SPEED_DEG_S = np.array([250.0, 250.0, 250.0, 375.0, 375.0, 600.0])
+#: the longest segment one point may span, per joint, deg: what rob6's default speeds (a
+#: tenth of the rated ones) move in two default periods (96 ms), whatever speed limits a
+#: client sets. The program holds up to three MOVEs (running, planned, in the task), and a
+#: stop halts none of them: after a client vanishes the arm runs on at most three of these,
+#: at any monitor speed (which stretches the time of a stop, never its distance)
+MAX_SEGMENT_DEG = np.array([2.4, 2.4, 2.4, 3.6, 3.6, 5.76])
 #: decimals (deg) of the positions read from the wire
 WIRE_DECIMALS = 4
 
@@ -192,6 +201,7 @@ class AdeptSettings:
 class AdeptLink(StreamedPointsLink):
     kind = "simple_message"
     arrival_tol_deg = ARRIVAL_TOL_DEG
+    max_segment_deg = MAX_SEGMENT_DEG
 
     def __init__(self, core: MotionCore, robot: RobotModel, settings: AdeptSettings, publish: Publish,
                  on_event: Callable[[LinkEvent], None] | None = None, **timeouts: Unpack[Timeouts]) -> None:
