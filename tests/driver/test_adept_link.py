@@ -353,6 +353,26 @@ def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig: Rig) -> None:
     assert [e.event for e in events].count("back") >= 1
 
 
+def test_a_late_acknowledgement_while_the_arm_moves_is_no_lost_link(rig: Rig) -> None:
+    """The program answers a point when the MOVE before it has begun: at a low monitor speed
+    that is a whole MOVE of the arm, longer than the deadline. While STATUS says the arm is
+    in motion, waiting on is right; the motion arrives on the first connection."""
+    fake, core, link, events = rig
+    link.start()
+    online(core, link)
+    fake.in_motion = 1
+    fake.ack_delay = 1.2  # more than twice the 0.5 s deadline, every time
+    motion, _ = ptp(core, [3.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert motion.wait(60) and motion.ok, motion.error
+    wait(lambda: fake.points and fake.points[-1].sequence == -3 and link.packets == len(fake.points),
+         timeout=30, what="the last point answered")
+    fake.in_motion = 0  # the arm at its point
+    assert motion.final is not None and link.settle(motion.final.q) == ""
+    assert (link.state, link.runs, fake.connections["motion"]) == ("connected", 1, 1)
+    assert "lost" not in [e.event for e in events]
+    assert link.status().latency_us[2] > 1e6  # the answers did come late
+
+
 def test_a_silent_state_port_is_a_lost_link(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()

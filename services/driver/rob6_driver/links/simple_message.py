@@ -47,9 +47,12 @@ the controller reports it at rest, and its JOINT_POSITION is the final setpoint 
 error the gateway shows as ``ERROR: driver: ...``:
 
 * no connection yet: ``robot not connected (waiting for simple_message at HOST:11000/11002)``;
-* a connection lost (closed, no state message for ``state_timeout_s``, no acknowledgement
-  for ``ack_timeout_s``): ``simple_message link lost: ...``; rob6 reconnects every
-  ``retry_s``;
+* a connection lost (closed, no state message for ``state_timeout_s``, neither an
+  acknowledgement nor the arm moving for ``ack_timeout_s``): ``simple_message link lost:
+  ...``; rob6 reconnects every ``retry_s``. The answer to a point comes when the MOVE
+  before it has begun, so it may take a whole MOVE of the arm (seconds at a low monitor
+  speed, or when the operator lowers it mid-stream): while the state port shows the arm
+  moving (STATUS in motion, or its position changing) a late answer is no lost link;
 * STATUS: ``robot reports an E-stop``, ``robot reports drives off``,
   ``robot reports controller error N``;
 * a point refused (reply code other than 1), or the robot not at the target when it
@@ -70,6 +73,7 @@ wire), see ``to_controller_deg`` and deploy/adept/README.md.
 from __future__ import annotations
 
 import logging
+import math
 import select
 import socket
 import time
@@ -102,7 +106,15 @@ from .simple_message_codec import (
     RobotStatus,
     SimpleMessageError,
 )
-from .streamed_points import Joints, LinkDown, StreamedPointsLink, Timeouts, check_address, check_period
+from .streamed_points import (
+    REST_TOL_DEG,
+    Joints,
+    LinkDown,
+    StreamedPointsLink,
+    Timeouts,
+    check_address,
+    check_period,
+)
 from .streaming import endpoint_name as _name, send_all as _send_all
 
 log = logging.getLogger("rob6.driver")
@@ -228,6 +240,7 @@ class AdeptLink(StreamedPointsLink):
         self._sequence = 0  # the number of the motion's next point
         self._rest_q: Joints = core.state().q
         self._talked = False  # a request went out on the current motion connection
+        self._moving_seen = -math.inf  # when the state port last showed the arm moving (monotonic)
         self.stops = 0
         waiting = f"robot not connected (waiting for simple_message at {host}:{settings.motion_port}/{settings.state_port})"
         super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
@@ -391,11 +404,15 @@ class AdeptLink(StreamedPointsLink):
         if kind == JOINT_POSITION and isinstance(message.value, JointPosition):
             q = from_wire(message.value.joints)
             with self._cond:
+                if self._position is not None and np.abs(q - self._position).max() > REST_TOL_DEG:
+                    self._moving_seen = time.monotonic()
                 self._previous_position = self._position
                 self._position = q
                 self.q_actual = q.tolist()
         elif kind == STATUS and isinstance(message.value, RobotStatus):
             with self._cond:
+                if message.value.in_motion == TS_TRUE:
+                    self._moving_seen = time.monotonic()
                 self._robot_status = message.value
                 self._state_count += 1
                 self._evaluate()
@@ -502,8 +519,8 @@ class AdeptLink(StreamedPointsLink):
 
     def _await_reply(self, sock: socket.socket, buffer: bytearray, connected: float) -> tuple[int, int | None]:
         """The reply code of the request just sent and the sequence its body carries
-        (``LinkDown`` when none comes in time)."""
-        deadline = time.monotonic() + self.ack_timeout_s
+        (``LinkDown`` when for ``ack_timeout_s`` neither it came nor the arm moved)."""
+        sent = time.monotonic()
         while True:
             for payload in self._frames(buffer):
                 message = self.codec.decode(payload)
@@ -511,6 +528,8 @@ class AdeptLink(StreamedPointsLink):
                     return message.header.reply_code, self.codec.reply_sequence(message.body)
                 self._garbage(f"driver: ignored a message of type {message.header.msg_type} "
                               f"(comm type {message.header.comm_type}) on the motion port")
+            with self._cond:
+                deadline = max(sent, self._moving_seen) + self.ack_timeout_s
             remaining = deadline - time.monotonic()
             if self._closing.is_set():
                 raise LinkDown("closing")

@@ -353,6 +353,8 @@ class StreamedPointsLink(Link):
                                   f"target {target[j]:.3f})")
                         self._evaluate(reason)
                         return reason
+                elif moving and timeout is None:  # points still out, the arm running them (slowly)
+                    deadline = max(deadline, min(began + SETTLE_CAP_S, now + self.settle_max_s))
                 elif now > deadline + self.ack_timeout_s:
                     reason = "the robot did not take the motion's last points in time"
                     self._evaluate(reason)
