@@ -6,11 +6,14 @@ previous point, planned with what ``SPEED 100 ALWAYS`` and ``ACCEL (1) 100, 100`
 joint at its rated speed, no shorter than the minimum time of a motion; the point's
 velocity and duration play no part. V+ plans a MOVE behind the running motion and returns
 from it when it begins (forward processing), so at most one MOVE waits beyond the one
-running (``room``). The joints follow the segments like servos: they accelerate and brake
-at their limits, never run past a point they have to stop at, and round the corner to the
-next segment when it was issued before the running one ended (continuous path). When it
-came later, the arm stops at the point first and then goes (an underrun, when it happens
-within a stream).
+running (``room``). The issued segments form the path, run at a feed that ramps with the
+acceleration and always leaves room to stop at the path's last point (a MOVE is done when
+the path has passed its end); the joints follow it like servos, at most at their speed and
+acceleration, never past the point the path stops at, and round the corner to the next
+segment when it was issued before the running one ended (continuous path). When it came
+later, the arm stops at the point first and then goes (an underrun, when it happens within
+a stream). So the arm stays on the issued path: what it runs after its last MOVE is the
+rest of that path, never a lag behind it.
 
 The monitor speed is time scaling (V+ Operating System Reference, monitor command SPEED):
 the same motion, every part of it lasting 1/s as long, so speeds fall with s and
@@ -31,7 +34,7 @@ from .convention import ACCEL_TIME_S, MAX_SPEED_DEG_S, N_JOINTS
 
 DT = 0.002  # integration step, s
 KP = 50.0  # 1/s: how firmly the joints close the last bit of a gap
-BRAKE_MARGIN = 0.9  # brake planning uses 90 % of the deceleration, the rest absorbs the step
+BRAKE_MARGIN = 0.9  # the path's ramps and the servos' braking use 90 % of the acceleration, the rest closes the lag
 #: stopped at a point, for a MOVE that came late: this close (deg) and (nearly) at rest
 STOPPED_DEG = 1e-3
 MAX_CATCH_UP_S = 1.0  # a stalled process does not replay more than this
@@ -53,7 +56,8 @@ class Arm:
         self.acap = [v / accel_time_s for v in MAX_SPEED_DEG_S]
         self.min_move_s = min_move_s  # V+'s shortest joint motion (plan seconds)
         self.rate = monitor_speed / 100.0  # plan seconds per second of the caller's clock
-        self.tau = 0.0  # the plan clock
+        self.accel_time_s = accel_time_s
+        self._feed = 0.0  # the path's pace: the share of its segments' full speed
         self.q = [float(x) for x in q0]
         self.v = [0.0] * N_JOINTS
         self.ref = list(self.q)  # where the commanded path is now
@@ -68,7 +72,7 @@ class Arm:
         self.peak_speed = [0.0] * N_JOINTS  # the largest |velocity| each joint reached, deg/s
         self.peak_accel = [0.0] * N_JOINTS  # ... and |acceleration| outside a controller stop, deg/s²
         self.t = now
-        self._seg: tuple[list[float], Move, float, float] | None = None  # (from, move, t0, T)
+        self._seg: tuple[list[float], Move, float, float] | None = None  # (from, move, done share, T)
         self._ran_dry = False  # the path reached its last point with nothing issued after it
         self._decel: tuple[float, ...] | None = None  # braking to rest, per joint (E-stop, drives off)
         self._last_word_t: float | None = None  # arrival of the last point or stop before rest
@@ -118,6 +122,7 @@ class Arm:
         dropped = len(self.queue) + (self._seg is not None)
         self.queue.clear()
         self._seg = None
+        self._feed = 0.0
         self.open = False
         if not any(self.v):  # already at rest: nothing to brake, it stays where it is
             self._decel = None
@@ -168,8 +173,7 @@ class Arm:
             if braking:
                 self._brake_step(DT)
             else:
-                self._step(self.tau, DT)
-                self.tau += DT
+                self._step(DT)
             self.t += wall
             if not self.in_motion:
                 self._rested(self.t)
@@ -196,36 +200,80 @@ class Arm:
         return all(abs(v) <= a * DT and abs(r - q) <= STOPPED_DEG
                    for v, a, r, q in zip(self.v, self.acap, self.ref, self.q, strict=True))
 
-    def _play(self, t0: float, t: float) -> list[float] | None:
-        """Move the commanded path on to time t; its joint velocities, or None at rest."""
-        start = t0  # a MOVE found waiting starts at once
-        while True:
-            if self._seg is None:
-                if not self.queue:
+    def _remaining_s(self) -> float:
+        """The path still to run at full feed: the rest of the running segment and the issued ones."""
+        left = 0.0
+        at = self.ref
+        if self._seg is not None:
+            r0, move, u, duration = self._seg
+            left, at = (1.0 - u) * duration, list(move.q)
+        for m in self.queue:
+            left += self.segment_time(at, m.q)
+            at = list(m.q)
+        return left
+
+    def _play(self, dt: float) -> list[float] | None:
+        """Move the commanded path on by dt plan seconds; its joint velocities, or None at rest.
+
+        The path is the issued segments one after the other, run at a feed (the share of each
+        segment's full speed) that rises and falls at most 1 / accel_time per second (the
+        limiting joint at its acceleration) and always leaves room to stop at the path's end:
+        the arm stays on the path, never behind it by more than its servo's lag."""
+        while self._seg is None:
+            if not self.queue:
+                self._feed = 0.0
+                return None
+            if self._ran_dry:  # issued after the path had ended: the arm stops first, then goes
+                if not self._stopped_at_point():
                     return None
-                if self._ran_dry:  # issued after the path had ended: the arm stops first, then goes
-                    if not self._stopped_at_point():
-                        return None
-                    self._ran_dry = False
-                move = self.queue.popleft()
-                travel = max(abs(b - a) for a, b in zip(self.ref, move.q, strict=True))
-                duration = self.segment_time(self.ref, move.q)
-                self.longest_segment_s = max(self.longest_segment_s, duration / self.rate)
-                self.longest_segment_deg = max(self.longest_segment_deg, travel)
-                self._seg = (list(self.ref), move, start, duration)
-            r0, move, ts, duration = self._seg
-            if duration > 0 and t < ts + duration:
-                f = (t - ts) / duration
-                self.ref = [a + (b - a) * f for a, b in zip(r0, move.q, strict=True)]
-                return [(b - a) / duration for a, b in zip(r0, move.q, strict=True)]
+                self._ran_dry = False
+            move = self.queue.popleft()
+            travel = max(abs(b - a) for a, b in zip(self.ref, move.q, strict=True))
+            duration = self.segment_time(self.ref, move.q)
+            self.longest_segment_s = max(self.longest_segment_s, duration / self.rate)
+            self.longest_segment_deg = max(self.longest_segment_deg, travel)
+            if duration <= 0:  # nowhere to go: done at once
+                self.executed += 1
+                self._ended()
+                continue
+            self._seg = (list(self.ref), move, 0.0, duration)
+        alpha = BRAKE_MARGIN / self.accel_time_s  # the servo keeps some acceleration to close its lag
+        brake = math.sqrt(2.0 * alpha * self._remaining_s())
+        self._feed = max(min(1.0, self._feed + alpha * dt, brake), min(brake, alpha * dt))
+        advance = self._feed * dt  # seconds of the path at full feed
+        while self._seg is not None:
+            r0, move, u, duration = self._seg
+            left = (1.0 - u) * duration
+            if advance < left:
+                u += advance / duration
+                self._seg = (r0, move, u, duration)
+                self.ref = [a + (b - a) * u for a, b in zip(r0, move.q, strict=True)]
+                return [(b - a) / duration * self._feed for a, b in zip(r0, move.q, strict=True)]
+            advance -= left
             self.ref = list(move.q)
             self._seg = None
             self.executed += 1
-            start = ts + duration  # the next MOVE continues where this one ended
             if not self.queue:
-                self._ran_dry = True
-                if self.open:
-                    self.underruns += 1
+                self._ended()
+                return None
+            move = self.queue.popleft()  # the next MOVE continues where this one ended
+            duration = self.segment_time(self.ref, move.q)
+            travel = max(abs(b - a) for a, b in zip(self.ref, move.q, strict=True))
+            self.longest_segment_s = max(self.longest_segment_s, duration / self.rate)
+            self.longest_segment_deg = max(self.longest_segment_deg, travel)
+            if duration > 0:
+                self._seg = (list(self.ref), move, 0.0, duration)
+            else:
+                self.executed += 1
+        return None
+
+    def _ended(self) -> None:
+        """The path reached its last issued point."""
+        self._feed = 0.0
+        if not self.queue:
+            self._ran_dry = True
+            if self.open:
+                self.underruns += 1
 
     def _brake_step(self, dt: float) -> None:
         """One step of a controller stop: every joint braked at its deceleration (velocities
@@ -239,16 +287,17 @@ class Arm:
             self._decel = None
             self.ref = list(self.q)
 
-    def _step(self, t0: float, dt: float) -> None:
+    def _step(self, dt: float) -> None:
         """One step of the plan clock (dt plan seconds): the path played on, the joints following."""
-        rdot = self._play(t0, t0 + dt)
+        rdot = self._play(dt)
+        end = self.queue[-1].q if self.queue else self._seg[1].q if self._seg is not None else self.ref
         for i in range(N_JOINTS):
             e = self.ref[i] - self.q[i]
             a = self.acap[i]
             speed = min(
                 self.vcap[i],
-                math.sqrt(2.0 * BRAKE_MARGIN * a * abs(e)),  # can still stop at the path
                 (abs(rdot[i]) if rdot else 0.0) + KP * abs(e),
+                math.sqrt(2.0 * BRAKE_MARGIN * a * abs(end[i] - self.q[i])),  # never past the point the path stops at
             )
             dv = max(-a * dt, min(a * dt, math.copysign(speed, e) - self.v[i]))
             self.v[i] += dv
