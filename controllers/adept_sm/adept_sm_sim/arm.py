@@ -66,7 +66,7 @@ class Arm:
         self.executed = 0
         self.underruns = 0
         self.longest_segment_s = 0.0  # the longest segment's time at full speed, at the monitor speed
-        self.longest_segment_deg = 0.0  # ... and its largest joint travel
+        self.longest_segment_deg = [0.0] * N_JOINTS  # each joint's largest travel in one MOVE
         self.ran_on_s = 0.0  # from the arrival of the last point (or stop) to rest, the last time
         self.max_ran_on_s = 0.0
         self.peak_speed = [0.0] * N_JOINTS  # the largest |velocity| each joint reached, deg/s
@@ -102,11 +102,6 @@ class Arm:
         in degrees is counted from where the arm is."""
         self._word_q = list(self.q)
 
-    def here(self, now: float) -> list[float]:
-        """The joints at ``now``, between two steps of the plan's clock (a step lasts DT / rate)."""
-        ahead = min(max(0.0, now - self.t), DT / self.rate)
-        return [q + v * self.rate * ahead for q, v in zip(self.q, self.v, strict=True)]
-
     def set_monitor_speed(self, monitor_speed: float, now: float) -> None:
         """The pendant's monitor speed changes: it takes effect at once (V+ SPEED)."""
         self.advance(now)
@@ -114,11 +109,9 @@ class Arm:
 
     def brake(self, decel: Iterable[float], now: float) -> int:
         """The controller's own stop (E-stop, drives off) at ``now``: every issued MOVE dropped,
-        the joints braked to rest with these decelerations (deg/s²) from where they are (within
-        the plan clock's step); how many were dropped."""
+        the joints braked to rest with these decelerations (deg/s²) from where they are; how
+        many were dropped."""
         self.advance(now)
-        if self._decel is None:
-            self.q, self.t = self.here(now), max(self.t, now)
         dropped = len(self.queue) + (self._seg is not None)
         self.queue.clear()
         self._seg = None
@@ -228,10 +221,7 @@ class Arm:
                     return None
                 self._ran_dry = False
             move = self.queue.popleft()
-            travel = max(abs(b - a) for a, b in zip(self.ref, move.q, strict=True))
-            duration = self.segment_time(self.ref, move.q)
-            self.longest_segment_s = max(self.longest_segment_s, duration / self.rate)
-            self.longest_segment_deg = max(self.longest_segment_deg, travel)
+            duration = self._count(move)
             if duration <= 0:  # nowhere to go: done at once
                 self.executed += 1
                 self._ended()
@@ -257,15 +247,20 @@ class Arm:
                 self._ended()
                 return None
             move = self.queue.popleft()  # the next MOVE continues where this one ended
-            duration = self.segment_time(self.ref, move.q)
-            travel = max(abs(b - a) for a, b in zip(self.ref, move.q, strict=True))
-            self.longest_segment_s = max(self.longest_segment_s, duration / self.rate)
-            self.longest_segment_deg = max(self.longest_segment_deg, travel)
+            duration = self._count(move)
             if duration > 0:
                 self._seg = (list(self.ref), move, 0.0, duration)
             else:
                 self.executed += 1
         return None
+
+    def _count(self, move: Move) -> float:
+        """A MOVE begins from where the path is: its time at 100 % (the longest segments noted)."""
+        duration = self.segment_time(self.ref, move.q)
+        self.longest_segment_s = max(self.longest_segment_s, duration / self.rate)
+        self.longest_segment_deg = [max(m, abs(b - a)) for m, a, b in
+                                    zip(self.longest_segment_deg, self.ref, move.q, strict=True)]
+        return duration
 
     def _ended(self) -> None:
         """The path reached its last issued point."""

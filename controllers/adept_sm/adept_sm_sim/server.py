@@ -229,7 +229,7 @@ class Controller:
 
     def state_frames(self) -> bytes:
         self.advance()
-        joints = [math.radians(x) for x in self.arm.here(time.monotonic())]
+        joints = [math.radians(x) for x in self.arm.q]
         return self.codec.joint_position(joints) + self.status_frame()
 
     async def serve_state(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -447,12 +447,11 @@ class Controller:
     def status(self) -> dict[str, Any]:
         self.advance()
         arm = self.arm
-        here = arm.here(time.monotonic())
-        q = [round(x, 6) for x in here]
+        q = [round(x, 6) for x in arm.q]
         lat = sorted(self.latencies_ms)
         return {
             "ok": True,
-            "position_rob6_deg": [round(x, 6) for x in controller_to_rob6(here)],
+            "position_rob6_deg": [round(x, 6) for x in controller_to_rob6(arm.q)],
             "position_controller_deg": q,
             "velocity_controller_deg_s": [round(x * arm.rate, 4) for x in arm.v],
             "queue_length": len(arm.queue),
@@ -463,7 +462,7 @@ class Controller:
             "task_errors": self.task_errors,
             "underruns": arm.underruns,
             "longest_segment_s": round(arm.longest_segment_s, 4),
-            "longest_segment_deg": round(arm.longest_segment_deg, 4),
+            "longest_segment_deg": [round(x, 4) for x in arm.longest_segment_deg],
             "ran_on_s": round(arm.ran_on_s, 4),
             "max_ran_on_s": round(arm.max_ran_on_s, 4),
             "ran_on_deg": round(arm.ran_on_deg, 4),

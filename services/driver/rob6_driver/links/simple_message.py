@@ -469,12 +469,14 @@ class AdeptLink(StreamedPointsLink):
 
     def _open_motion(self, sock: socket.socket, buffer: bytearray, connected: float) -> bool:
         """Begin a motion connection with the opening (``Codec.opening``) once the arm can
-        take it (its position known, drives on, no E-stop: the opening may be a MOVE to
-        where it stands), and its rest when it was read from its first byte; False when the
+        take it and is at rest (drives on, no E-stop, two state messages at the same position
+        and not in motion: the opening may be a MOVE to where it stands, queued behind any
+        MOVE still running, so a position taken while it moves would send it back), with its
+        latest position, and its rest when it was read from its first byte; False when the
         link closes meanwhile. ``LinkDown`` when the controller closes or does not answer."""
         while True:
             with self._cond:
-                ready = self._state_up and self._position is not None and self._controller_fault() == ""
+                ready = self._state_up and self._controller_fault() == "" and self._at_rest()
                 here = self._position
             if self._closing.is_set():
                 return False
