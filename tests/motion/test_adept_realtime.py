@@ -186,8 +186,10 @@ def assert_stopped_within_bound(ctl: AdeptController, client: Client, monitor: s
     """The arm at rest where rob6's setpoint rests; after rob6's last point it ran on at most
     three of the longest segments, in degrees at any monitor speed and in their time at this
     one; no segment longer than the link's bound."""
-    st = ctl.wait_for(lambda s: not s["in_motion"], timeout=60, what="the arm at rest")
-    assert np.allclose(st["position_rob6_deg"], joints(client), atol=POSITION_TOL)
+    # at rest where rob6 rests (at 100 % the arm also rests at points between rob6's late ones)
+    st = ctl.wait_for(lambda s: not s["in_motion"] and np.allclose(s["position_rob6_deg"], joints(client),
+                                                                     atol=POSITION_TOL),
+                      timeout=60, what="the arm at rest where rob6's setpoint rests")
     assert np.all(np.array(st["longest_segment_deg"]) <= MAX_SEGMENT_DEG + 1e-3), st["longest_segment_deg"]
     distance, seconds = run_on_bound(monitor)
     assert st["ran_on_deg"] <= distance + 1e-3, (st["ran_on_deg"], distance)
@@ -297,17 +299,18 @@ def test_a_long_ptp_at_monitor_speed_1_arrives_with_no_false_link_lost(adept: tu
 
 
 def test_lowering_the_monitor_speed_mid_stream_is_no_lost_link(adept: tuple[System, int, int]) -> None:
-    """The operator turns the monitor speed from 100 % down to 2 % while a PTP streams (V+:
+    """The operator turns the monitor speed from 100 % down to 1 % while a PTP streams (V+:
     it takes effect at once): the answers slow down with the arm, the link waits while it
     moves, and the PTP arrives."""
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
+        assert client.ask("SetAdeptSpeed 100") == "true\n"
         runs = link_status(system).runs
         target = [20.0, 0.0, 0.0, 0.0, 0.0, 0.0]
         client.send("MovePTPJoints " + fmt(target) + "\n")
         ctl.wait_for(lambda s: s["position_rob6_deg"][0] > 4.0, timeout=30, what="the arm under way")
-        ctl.monitor_speed(2)
+        ctl.monitor_speed(1)
         assert client.read_lines(1, timeout=180) == "true\n"
         st = ctl.status()
         assert np.allclose(st["position_rob6_deg"], target, atol=POSITION_TOL) and not st["in_motion"]
