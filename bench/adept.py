@@ -3,8 +3,8 @@
 The whole system on ``--link simple_message`` against adept-sm-sim (TCP, playing
 ``adept_ros.v2``: every point a MOVE planned at 100 % and stretched by the monitor speed,
 one MOVE ahead), at each monitor speed in turn after ``SetAdeptSpeed 100``, with rob6's
-default speed limits and with them raised to the protocol's bound (``SetJointsMaxSpeed``,
-ten times): a long PTP (its arrival against the plan's own duration, the points merged,
+default speed and acceleration limits and with them raised to the protocol's bounds
+(``SetJointsMaxSpeed``, ``SetJointsMaxAcceleration``): a long PTP (its arrival against the plan's own duration, the points merged,
 the longest segment in degrees against ``MAX_SEGMENT_DEG``, the acknowledgements'
 latency, lost links), a client that vanishes mid-move (how far and how long the arm ran
 on after rob6's last point, against the stated bound), and, at the default limits, Alter
@@ -76,6 +76,8 @@ def _ready(system: System, sim: ControllerSim, raised: bool) -> None:
         assert client.ask("SetAdeptSpeed 100") == "true\n"
         limits = ROBOT.speed_bound if raised else ROBOT.default_speed
         assert client.ask("SetJointsMaxSpeed " + _fmt(list(limits))) == "true\n"
+        accel = [ROBOT.max_accel_bound] * 6 if raised else list(ROBOT.default_accel)
+        assert client.ask("SetJointsMaxAcceleration " + _fmt(accel)) == "true\n"
         assert client.ask("MovePTPJoints " + _fmt(START), timeout=120) == "true\n"
 
 
@@ -150,7 +152,7 @@ def adept_table(seconds: float, table: Table) -> dict[tuple[float, bool], dict[s
     table("The Adept over simple_message, paced by its acknowledgements: ad850 against adept-sm-sim (adept_ros.v2: "
           f"every point a MOVE planned at 100 % and stretched by the monitor speed), SetAdeptSpeed 100; a PTP of "
           f"{travel:.0f} deg, a client vanishing mid-move, MoveRTJoints every 16 ms for {seconds:.0f} s (default "
-          "limits only); at rob6's default speed limits and at SetJointsMaxSpeed's bound (ten times)",
+          "limits only); at rob6's default speed and acceleration limits and at their protocol bounds (raised)",
           ("measure", *(f"{m:g} %{', raised' if r else ''}" for m, r in cases), "goal"), [
               ("PTP: planned -> arrived (true), s", *each(lambda _m, r: f"{r['planned']:.2f} -> {r['arrived']:.2f}"),
                "arrives; slower only as the arm is"),

@@ -409,18 +409,19 @@ def test_late_acknowledgements_merge_points_and_keep_the_timing(rig: Rig) -> Non
 
 
 def test_segments_stay_within_their_degrees_when_a_client_raises_the_speed_limits(rig: Rig) -> None:
-    """SetJointsMaxSpeed up to the protocol's bound (ten times the defaults): the core moves
-    ten times as far per period, yet no point goes farther than MAX_SEGMENT_DEG on any joint
+    """SetJointsMaxSpeed and SetJointsMaxAcceleration up to the protocol's bounds (ten and
+    four times the defaults): the core moves several times as far per period, yet no point goes farther than MAX_SEGMENT_DEG on any joint
     from the one before it, late acknowledgements or not (the program runs every MOVE it has
     taken, a stop halts none)."""
     fake, core, link, _ = rig
     link.start()
     online(core, link)
-    assert core.set_limits(max_speed=ROBOT.speed_bound) == (True, "")
+    fastest = [ROBOT.max_accel_bound] * 6
+    assert core.set_limits(max_speed=ROBOT.speed_bound, max_accel=fastest) == (True, "")
     config = MotionSettings(ROBOT)
-    config.speed = list(ROBOT.speed_bound)
+    config.speed, config.accel = list(ROBOT.speed_bound), fastest
     fake.ack_delay = 0.05  # a period: points made meanwhile wait, and may merge
-    target = [60.0, -30.0, 40.0, 50.0, -40.0, 90.0]
+    target = [120.0, -30.0, 40.0, 100.0, -40.0, 180.0]
     motion, _ = ptp(core, target, config)
     assert motion.wait(30) and motion.ok
     assert motion.final is not None and link.settle(motion.final.q) == ""

@@ -162,8 +162,6 @@ RATED_DEG_S = np.array([250.0, 250.0, 250.0, 375.0, 375.0, 600.0])
 #: path uses 90 %; and its servo's last approach to a point (within 1e-3 deg)
 ACCEL_DEG_S2 = 0.9 * RATED_DEG_S / 0.25
 SERVO_TAIL_S = 0.1
-#: the stand-in's servo settles onto a point within one step's travel (controllers/adept_sm/README.md)
-SETTLE_JITTER_DEG = 0.01
 
 
 def segment_bound_s(monitor: str) -> float:
@@ -258,14 +256,15 @@ def test_an_old_clients_stop_brings_the_arm_to_rest_within_the_bound(paced: tupl
 
 
 def test_raised_speed_limits_keep_segments_and_the_run_on_in_degrees(adept: tuple[System, int, int]) -> None:
-    """SetJointsMaxSpeed at the protocol's bound (ten times the defaults): rob6's core may move
-    ten times as far per period, yet no MOVE goes farther than MAX_SEGMENT_DEG, and a client
+    """SetJointsMaxSpeed and SetJointsMaxAcceleration at the protocol's bounds: rob6's core may
+    move many times as far per period, yet no MOVE goes farther than MAX_SEGMENT_DEG, and a client
     that vanishes leaves the arm no farther to run than at the defaults."""
     system, motion, state = adept
     with controller(motion, state) as ctl, system.client() as client:
         connected(client, ctl, system)
         assert client.ask("SetAdeptSpeed 100") == "true\n"
         assert client.ask("SetJointsMaxSpeed " + fmt(list(ROBOT.speed_bound))) == "true\n"
+        assert client.ask("SetJointsMaxAcceleration " + fmt([ROBOT.max_accel_bound] * 6)) == "true\n"
         try:
             assert reply(client, "MovePTPJoints " + fmt(START), timeout=60) == "true\n"
             target = list(START)
@@ -328,6 +327,7 @@ def test_a_reconnect_mid_motion_at_3_percent_never_moves_the_arm_backwards(adept
     with controller(motion, state, "--monitor-speed", "3", "--connect-read", "client",
                     "--restart-s", "0.1") as ctl, system.client() as client:
         connected(client, ctl, system)
+        assert client.ask("SetAdeptSpeed 100") == "true\n"  # segments of MAX_SEGMENT_DEG: the arm at speed
         client.send("MovePTPJoints " + fmt([30.0, 0.0, 0.0, 0.0, 0.0, 0.0]) + "\n")
         ctl.wait_for(lambda s: s["position_rob6_deg"][0] > 1.0, timeout=60, what="the arm under way")
         assert ctl.drop_connection("motion")
@@ -337,12 +337,12 @@ def test_a_reconnect_mid_motion_at_3_percent_never_moves_the_arm_backwards(adept
             nonlocal furthest
             st = ctl.status()
             j1 = st["position_rob6_deg"][0]
-            assert j1 >= furthest - SETTLE_JITTER_DEG, f"J1 went back from {furthest} to {j1}"
+            assert j1 >= furthest - POSITION_TOL, f"J1 went back from {furthest} to {j1}"
             furthest = max(furthest, j1)
             return bool(st["clients"]["motion"] and not st["in_motion"] and st["points_received"] > 0)
         wait_until(settled, timeout=120, what="rob6 reconnected, the arm at rest")
         here = connected(client, ctl, system)
-        assert here[0] == pytest.approx(furthest, abs=SETTLE_JITTER_DEG)
+        assert here[0] == pytest.approx(furthest, abs=POSITION_TOL)
         for _ in range(20):  # and it stays there
             settled()
         assert ctl.status()["task_errors"] == 0

@@ -286,6 +286,8 @@ class Arm:
         """One step of the plan clock (dt plan seconds): the path played on, the joints following."""
         rdot = self._play(dt)
         end = self.queue[-1].q if self.queue else self._seg[1].q if self._seg is not None else self.ref
+        last_leg = not self.queue  # the path's last segment, or its end: it stops at `end`
+        before = list(self.q)
         for i in range(N_JOINTS):
             e = self.ref[i] - self.q[i]
             a = self.acap[i]
@@ -297,6 +299,8 @@ class Arm:
             dv = max(-a * dt, min(a * dt, math.copysign(speed, e) - self.v[i]))
             self.v[i] += dv
             self.q[i] += self.v[i] * dt
+            if last_leg and (end[i] - self.q[i]) * (end[i] - before[i]) < 0:  # never past where the path stops
+                self.q[i], self.v[i] = end[i], 0.0
             # as the caller's clock sees them: speeds times the rate, accelerations times its square
             self.peak_speed[i] = max(self.peak_speed[i], abs(self.v[i]) * self.rate)
             self.peak_accel[i] = max(self.peak_accel[i], abs(dv) / dt * self.rate**2)
