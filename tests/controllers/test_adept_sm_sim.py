@@ -355,6 +355,24 @@ def test_the_monitor_speed_stretches_time() -> None:
     assert short[30.0] == pytest.approx(short[100.0] / 0.3, rel=0.05), short
 
 
+def test_the_acceleration_and_the_minimum_motion_time_are_options() -> None:
+    """The two figures a first session measures (deploy/adept/README.md section 6): the
+    Viper's acceleration at 100 % (``--accel-time``, seconds to full speed) and V+'s shortest
+    joint motion (``--min-move-s``). A short MOVE, all ramps, lasts √2 as long with half the
+    acceleration, and never less than the minimum (on the arm's clock)."""
+    lasted: dict[tuple[str, ...], float] = {}
+    for options in ((), ("--accel-time", "0.5"), ("--min-move-s", "0.4")):
+        with AdeptController(*options) as ctl:
+            motion = Motion(ctl.motion, ">")
+            assert motion.point(0, (2.4, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+            st = ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"], timeout=30)
+            lasted[options] = st["last_motion_s"]
+            if options == ("--accel-time", "0.5"):
+                assert st["peak_accel_deg_s2"][0] <= 250 / 0.5 + 1e-3
+    assert lasted[("--accel-time", "0.5")] == pytest.approx(math.sqrt(2) * lasted[()], rel=0.1), lasted
+    assert lasted[("--min-move-s", "0.4")] >= 0.4, lasted
+
+
 def test_a_lower_monitor_speed_takes_effect_at_once_mid_motion() -> None:
     """The monitor speed changed on the pendant applies at once (V+ Operating System
     Reference, SPEED: "takes effect immediately"), also to the motion under way."""
