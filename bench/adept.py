@@ -87,7 +87,10 @@ def run_at(system: System, motion: int, state: int, monitor: float, seconds: flo
     try:
         _ready(system, sim, raised)
         before_link, before = _link(system, reset=True), sim.status()
-        planned = TrajectoryPlanner(ROBOT).plan_ptp(START, LONG, MotionSettings(ROBOT)).trajectory
+        config = MotionSettings(ROBOT)
+        if raised:
+            config.speed, config.accel = list(ROBOT.speed_bound), [ROBOT.max_accel_bound] * 6
+        planned = TrajectoryPlanner(ROBOT).plan_ptp(START, LONG, config).trajectory
         assert planned is not None
         with system.client() as client:
             began = time.perf_counter()
