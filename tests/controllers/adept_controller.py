@@ -43,3 +43,7 @@ class AdeptController(PointsControllerProcess):
     def drop_connection(self, port: str) -> bool:
         dropped: bool = self._ok({"cmd": "drop_connection", "port": port})["dropped"]
         return dropped
+
+    def monitor_speed(self, percent: float) -> None:
+        """The pendant's monitor speed changes now (V+: at once, also mid-motion)."""
+        self._ok({"cmd": "monitor_speed", "percent": percent})

@@ -329,20 +329,70 @@ def test_a_late_move_stops_the_arm_at_its_point_then_goes() -> None:
         assert close_to(st["position_rob6_deg"], (40, 0, 0, 0, 0, 0), 1e-4)
 
 
-def test_monitor_speed_scales_speed_and_acceleration() -> None:
-    """SPEED 100 ALWAYS and ACCEL 100, 100 (lines 546-547): every MOVE at the monitor speed's
-    share of the rated speeds and accelerations (250 deg/s and 1000 deg/s² for J1 at 100)."""
-    for monitor in (10.0, 100.0):
+def test_the_monitor_speed_stretches_time() -> None:
+    """SPEED 100 ALWAYS and ACCEL (1) 100, 100 (lines 546-547) plan every MOVE at 100 %; the
+    monitor speed s is time scaling (V+ Operating System Reference, SPEED): the same motion,
+    every part of it 1/s as long, so speeds fall with s and accelerations with s² (250 deg/s
+    and 1000 deg/s² for J1 at 100). A short MOVE, its ramps dominating, lasts 1/s as long on
+    the arm's clock; a long one reaches the speed's share, never more."""
+    short: dict[float, float] = {}
+    for monitor in (100.0, 30.0):
         with AdeptController("--monitor-speed", str(monitor)) as ctl:
             motion = Motion(ctl.motion, ">")
-            t0 = time.monotonic()
-            assert motion.point(0, (90, 0, 0, 0, 0, 0), dur=0.01, vel=1.0) == (SUCCESS, 0)  # both ignored
-            st = ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"], timeout=30)
             share = monitor / 100.0
+            assert motion.point(0, (2.4, 0, 0, 0, 0, 0), dur=0.01, vel=1.0) == (SUCCESS, 0)  # both ignored
+            st = ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"], timeout=30)
+            short[monitor] = st["last_motion_s"]
+            t0 = time.monotonic()
+            assert motion.point(1, (92.4, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+            st = ctl.wait_for(lambda s: s["points_executed"] == 2 and not s["in_motion"], timeout=30)
             assert time.monotonic() - t0 >= 90 / (250 * share)  # never faster than its speed
             assert 0.95 * 250 * share <= st["peak_speed_deg_s"][0] <= 250 * share + 1e-6
-            assert 0.9 * 1000 * share <= st["peak_accel_deg_s2"][0] <= 1000 * share + 1e-3
+            assert 0.9 * 1000 * share**2 <= st["peak_accel_deg_s2"][0] <= 1000 * share**2 + 1e-3
             assert st["longest_segment_s"] == pytest.approx(90 / (250 * share), rel=1e-3)
+    # ramps included: at 100 % a 2.4 deg MOVE lasts about 0.1 s, at 30 % 1/0.3 of that
+    assert 0.08 <= short[100.0] <= 0.2, short
+    assert short[30.0] == pytest.approx(short[100.0] / 0.3, rel=0.05), short
+
+
+def test_the_acceleration_and_the_minimum_motion_time_are_options() -> None:
+    """The two figures a first session measures (deploy/adept/README.md section 6): the
+    Viper's acceleration at 100 % (``--accel-time``, seconds to full speed) and V+'s shortest
+    joint motion (``--min-move-s``). A short MOVE, all ramps, lasts √2 as long with half the
+    acceleration, and never less than the minimum (on the arm's clock)."""
+    lasted: dict[tuple[str, ...], float] = {}
+    for options in ((), ("--accel-time", "0.5"), ("--min-move-s", "0.4")):
+        with AdeptController(*options) as ctl:
+            motion = Motion(ctl.motion, ">")
+            assert motion.point(0, (2.4, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+            st = ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"], timeout=30)
+            lasted[options] = st["last_motion_s"]
+            if options == ("--accel-time", "0.5"):
+                assert st["peak_accel_deg_s2"][0] <= 250 / 0.5 + 1e-3
+    assert lasted[("--accel-time", "0.5")] == pytest.approx(math.sqrt(2) * lasted[()], rel=0.1), lasted
+    assert lasted[("--min-move-s", "0.4")] >= 0.4, lasted
+
+
+def test_a_lower_monitor_speed_takes_effect_at_once_mid_motion() -> None:
+    """The monitor speed changed on the pendant applies at once (V+ Operating System
+    Reference, SPEED: "takes effect immediately"), also to the motion under way."""
+    with AdeptController("--monitor-speed", "100", "--state-period", "0.02") as ctl:
+        state = State(ctl.state, ">")
+        motion = Motion(ctl.motion, ">")
+        assert motion.point(0, (150, 0, 0, 0, 0, 0)) == (SUCCESS, 0)
+        state.wait("joints", lambda j: j[0] < math.radians(-20))  # the controller's J1 is -q1
+        ctl.monitor_speed(5)
+        mark = state.count()
+        st = ctl.status()
+        assert st["monitor_speed"] == 5.0 and st["in_motion"]
+        # at 5 % J1 moves at most 12.5 deg/s: the arm is far from its point a second later
+        state.wait("joints", lambda _j: True, since=mark)
+        time.sleep(1.0)
+        later = ctl.status()
+        assert later["in_motion"] and later["points_executed"] == 0
+        assert abs(later["velocity_controller_deg_s"][0]) <= 250 * 0.05 + 1e-6
+        ctl.monitor_speed(100)
+        ctl.wait_for(lambda s: s["points_executed"] == 1 and not s["in_motion"], timeout=30)
 
 
 def test_a_point_the_arm_cannot_reach_is_answered_then_its_move_ends_the_task() -> None:

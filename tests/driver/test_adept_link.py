@@ -24,7 +24,14 @@ from pytest import FixtureRequest
 
 from rob6.messages import LinkEvent
 from rob6.robots import get_robot
-from rob6_driver.links.simple_message import RATED_SPEED_DEG_S, AdeptLink, AdeptSettings, from_wire, to_wire
+from rob6_driver.links.simple_message import (
+    MAX_SEGMENT_DEG,
+    RATED_SPEED_DEG_S,
+    AdeptLink,
+    AdeptSettings,
+    from_wire,
+    to_wire,
+)
 from rob6_driver.motion import Motion, MotionCore
 from rob6_planner.config import MotionSettings
 from rob6_planner.trajectory import TrajectoryPlanner
@@ -346,6 +353,26 @@ def test_no_acknowledgement_is_a_lost_link_that_comes_back(rig: Rig) -> None:
     assert [e.event for e in events].count("back") >= 1
 
 
+def test_a_late_acknowledgement_while_the_arm_moves_is_no_lost_link(rig: Rig) -> None:
+    """The program answers a point when the MOVE before it has begun: at a low monitor speed
+    that is a whole MOVE of the arm, longer than the deadline. While STATUS says the arm is
+    in motion, waiting on is right; the motion arrives on the first connection."""
+    fake, core, link, events = rig
+    link.start()
+    online(core, link)
+    fake.in_motion = 1
+    fake.ack_delay = 1.2  # more than twice the 0.5 s deadline, every time
+    motion, _ = ptp(core, [3.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert motion.wait(60) and motion.ok, motion.error
+    wait(lambda: fake.points and fake.points[-1].sequence == -3 and link.packets == len(fake.points),
+         timeout=30, what="the last point answered")
+    fake.in_motion = 0  # the arm at its point
+    assert motion.final is not None and link.settle(motion.final.q) == ""
+    assert (link.state, link.runs, fake.connections["motion"]) == ("connected", 1, 1)
+    assert "lost" not in [e.event for e in events]
+    assert link.status().latency_us[2] > 1e6  # the answers did come late
+
+
 def test_a_silent_state_port_is_a_lost_link(rig: Rig) -> None:
     fake, core, link, events = rig
     link.start()
@@ -379,6 +406,30 @@ def test_late_acknowledgements_merge_points_and_keep_the_timing(rig: Rig) -> Non
         (samples - 1) * core.dt + core.held_back_s + link.period_s + link.lead_s + core.dt, abs=core.dt + 1e-6)
     assert link.longest_segment_s <= 2 * link.period_s + 1e-9
     assert np.allclose(fake.points[-1].q, [8.0, 0.0, 4.0, 0.0, 0.0, 0.0], atol=1e-4)
+
+
+def test_segments_stay_within_their_degrees_when_a_client_raises_the_speed_limits(rig: Rig) -> None:
+    """SetJointsMaxSpeed and SetJointsMaxAcceleration up to the protocol's bounds (ten and
+    four times the defaults): the core moves several times as far per period, yet no point goes farther than MAX_SEGMENT_DEG on any joint
+    from the one before it, late acknowledgements or not (the program runs every MOVE it has
+    taken, a stop halts none)."""
+    fake, core, link, _ = rig
+    link.start()
+    online(core, link)
+    fastest = [ROBOT.max_accel_bound] * 6
+    assert core.set_limits(max_speed=ROBOT.speed_bound, max_accel=fastest) == (True, "")
+    config = MotionSettings(ROBOT)
+    config.speed, config.accel = list(ROBOT.speed_bound), fastest
+    fake.ack_delay = 0.05  # a period: points made meanwhile wait, and may merge
+    target = [120.0, -30.0, 40.0, 100.0, -40.0, 180.0]
+    motion, _ = ptp(core, target, config)
+    assert motion.wait(30) and motion.ok
+    assert motion.final is not None and link.settle(motion.final.q) == ""
+    assert link.late > 0
+    steps = [np.abs(b.q - a.q) for a, b in itertools.pairwise(fake.points)]
+    assert np.all(np.max(steps, axis=0) <= MAX_SEGMENT_DEG + 1e-3)
+    assert np.max(np.max(steps, axis=0) / MAX_SEGMENT_DEG) >= 0.9  # the bound is what held them
+    assert np.allclose(fake.points[-1].q, target, atol=1e-4)
 
 
 def test_a_robot_that_stops_short_fails_the_motion_and_is_taken_where_it_is(rig: Rig) -> None:

@@ -44,7 +44,7 @@ def test_a_cancelled_goal_brings_the_arm_to_rest_within_the_bound(adept: tuple[S
     system, motion, state = adept
     with controller(motion, state, "--monitor-speed", monitor) as ctl, system.client() as client:
         connected(client, ctl, system)
-        assert client.ask("MovePTPJoints " + " ".join(map(str, START))) == "true\n"
+        assert client.ask("MovePTPJoints " + " ".join(map(str, START)), timeout=120) == "true\n"
         peer = Peer()
         try:
             target = [START[0] + 40.0, *START[1:]]

@@ -8,7 +8,7 @@ import sys
 
 import click
 
-from .convention import limit_violation, rob6_to_controller
+from .convention import ACCEL_TIME_S, limit_violation, rob6_to_controller
 from .server import Config, Controller, event, run
 
 
@@ -68,7 +68,11 @@ def _ranges(value: str) -> tuple[range, ...]:
 @click.option("--state-period", default=0.1, show_default=True,
               type=click.FloatRange(0.001, 60.0), help="Seconds between state messages.")
 @click.option("--monitor-speed", default=100.0, show_default=True, type=click.FloatRange(1.0, 100.0),
-              help="The pendant's monitor speed, percent: scales the joints' speeds and accelerations.")
+              help="The pendant's monitor speed, percent: every motion planned at 100 % and lasting 100/s times as long.")
+@click.option("--accel-time", default=ACCEL_TIME_S, show_default=True, type=click.FloatRange(0.01, 5.0),
+              help="Seconds from rest to full speed at 100 % (the Viper's ACCEL 100, to be measured).")
+@click.option("--min-move-s", default=0.0, show_default=True, type=click.FloatRange(0.0, 5.0),
+              help="V+'s shortest joint motion, seconds at 100 % (to be measured; 0: none).")
 @click.option("--connect-read", default="client", show_default=True, type=click.Choice(["client", "notice"]),
               help="The four bytes the program reads on a new motion connection: the client's first "
                    "(client) or something V+ delivers itself (notice).")
@@ -77,8 +81,8 @@ def _ranges(value: str) -> tuple[range, ...]:
 @click.option("--installed", default="1-8,1001-1012", show_default=True,
               help="The digital signals the controller has, as ranges (soft signals 2001-2512 always).")
 def main(host: str, motion_port: int, state_port: int, io_port: str, control: str, byte_order: str,
-         start_pose: str, state_period: float, monitor_speed: float, connect_read: str, restart_s: float,
-         installed: str) -> None:
+         start_pose: str, state_period: float, monitor_speed: float, accel_time: float, min_move_s: float,
+         connect_read: str, restart_s: float, installed: str) -> None:
     """A simulated Adept Viper s850 controller running the ROS-Industrial V+ server
     (simple_message over TCP), for testing rob6's simple_message link."""
     control_host, control_port = _host_port(control)
@@ -87,6 +91,7 @@ def main(host: str, motion_port: int, state_port: int, io_port: str, control: st
         host=host, motion_port=motion_port, state_port=state_port, io_port=io,
         control_host=control_host, control_port=control_port, byte_order=byte_order,
         start_pose_ctrl=_pose(start_pose), state_period=state_period, monitor_speed=monitor_speed,
+        accel_time_s=accel_time, min_move_s=min_move_s,
         connect_read=connect_read, restart_s=restart_s, installed=_ranges(installed),
     )
     try:

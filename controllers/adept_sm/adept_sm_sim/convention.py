@@ -40,9 +40,10 @@ CONTROLLER_LIMITS_DEG = (
 #: Rated joint speeds of the Viper s850, deg/s (V+ "SPEED 100" at monitor speed 100).
 MAX_SPEED_DEG_S = (250.0, 250.0, 250.0, 375.0, 375.0, 600.0)
 
-#: Joint accelerations at monitor speed 100: Adept publishes none; full speed in 0.25 s is
-#: plausible for the Viper and is what the simulator assumes (also its normal deceleration).
-MAX_ACCEL_DEG_S2 = tuple(4.0 * v for v in MAX_SPEED_DEG_S)
+#: Seconds from rest to full speed at 100 % (``ACCEL 100``): Adept publishes no joint
+#: accelerations; 0.25 s is plausible for the Viper and is the stand-in's default
+#: (``--accel-time``), a figure a first session measures (deploy/adept/README.md section 6).
+ACCEL_TIME_S = 0.25
 
 #: E-stop: the controller brakes as hard as it can, from full speed to rest in 0.1 s.
 ESTOP_DECEL_DEG_S2 = tuple(10.0 * v for v in MAX_SPEED_DEG_S)

@@ -36,8 +36,9 @@ from typing import Any
 from . import codec as sm
 from .arm import Arm, Move
 from .convention import (
+    ACCEL_TIME_S,
     ESTOP_DECEL_DEG_S2,
-    MAX_ACCEL_DEG_S2,
+    MAX_SPEED_DEG_S,
     controller_to_rob6,
     limit_violation,
 )
@@ -71,6 +72,10 @@ class Config:
     start_pose_ctrl: tuple[float, ...] = (0.0, 0.0, 90.0, 0.0, 0.0, 0.0)
     state_period: float = 0.1
     monitor_speed: float = 100.0
+    #: seconds from rest to full speed at 100 % (the Viper's acceleration, to be measured)
+    accel_time_s: float = ACCEL_TIME_S
+    #: V+'s shortest joint motion, seconds at 100 % (to be measured; 0: none)
+    min_move_s: float = 0.0
     #: "client": the four bytes read on connecting are the client's first; "notice": V+'s own
     connect_read: str = "client"
     #: seconds the supervisor takes to restart an ended motion or state task
@@ -87,7 +92,8 @@ class Inbox:
     """What arrived on a connection, stamped with when (V+'s TCP buffer): the program
     takes it at its own pace."""
 
-    def __init__(self, reader: asyncio.StreamReader) -> None:
+    def __init__(self, reader: asyncio.StreamReader, on_data: Callable[[], None] = lambda: None) -> None:
+        self.on_data = on_data
         self.data = bytearray()
         self.taken = 0  # bytes taken so far
         self.stamps: deque[tuple[int, float]] = deque()  # (bytes received in all, when)
@@ -100,6 +106,7 @@ class Inbox:
             while chunk := await reader.read(4096):
                 self.data += chunk
                 self.stamps.append((self.taken + len(self.data), time.monotonic()))
+                self.on_data()
                 self.more.set()
         except (ConnectionError, OSError):
             pass
@@ -128,7 +135,9 @@ class Controller:
     def __init__(self, cfg: Config) -> None:
         self.cfg = cfg
         self.codec = sm.Codec(cfg.byte_order)
-        self.arm = Arm(cfg.start_pose_ctrl, time.monotonic(), monitor_speed=cfg.monitor_speed)
+        self.arm = Arm(cfg.start_pose_ctrl, time.monotonic(), monitor_speed=cfg.monitor_speed,
+                       accel_time_s=cfg.accel_time_s, min_move_s=cfg.min_move_s)
+        self.monitor_speed = cfg.monitor_speed
         self.e_stopped = False
         self.drives_powered = True
         self.slow_ack_ms = 0.0
@@ -172,7 +181,7 @@ class Controller:
 
     def halt(self, why: str, decel: Iterable[float]) -> None:
         self.advance()
-        dropped = self.arm.brake(decel)
+        dropped = self.arm.brake(decel, time.monotonic())
         self.room.set()
         event(f"{why}: the arm brakes, {dropped} issued MOVE(s) dropped")
 
@@ -208,7 +217,7 @@ class Controller:
             if on:
                 event("drives on")
             else:
-                self.halt("drives off", MAX_ACCEL_DEG_S2)
+                self.halt("drives off", [v / self.cfg.accel_time_s for v in MAX_SPEED_DEG_S])
 
     # ---- wire: state port (task 1) ----------------------------------------------
     def status_frame(self) -> bytes:
@@ -248,7 +257,7 @@ class Controller:
     async def serve_motion(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         if not self._claim("motion", writer):
             return
-        inbox = Inbox(reader)
+        inbox = Inbox(reader, self._bytes_came)
         try:
             await self._motion_task(inbox, writer)
         except TaskEnds as exc:
@@ -262,6 +271,10 @@ class Controller:
             inbox.close()
             self.arm.close_stream()
             self._release("motion", writer)
+
+    def _bytes_came(self) -> None:
+        self.advance()
+        self.arm.bytes_came()
 
     async def _motion_task(self, inbox: Inbox, writer: asyncio.StreamWriter) -> None:
         """``ros.srv.cmd`` from line 539 on: the discarded four bytes, then point after point."""
@@ -440,7 +453,7 @@ class Controller:
             "ok": True,
             "position_rob6_deg": [round(x, 6) for x in controller_to_rob6(arm.q)],
             "position_controller_deg": q,
-            "velocity_controller_deg_s": [round(x, 4) for x in arm.v],
+            "velocity_controller_deg_s": [round(x * arm.rate, 4) for x in arm.v],
             "queue_length": len(arm.queue),
             "points_received": self.received,
             "points_acknowledged": self.acknowledged,
@@ -449,9 +462,13 @@ class Controller:
             "task_errors": self.task_errors,
             "underruns": arm.underruns,
             "longest_segment_s": round(arm.longest_segment_s, 4),
-            "longest_segment_deg": round(arm.longest_segment_deg, 4),
+            "longest_segment_deg": [round(x, 4) for x in arm.longest_segment_deg],
             "ran_on_s": round(arm.ran_on_s, 4),
             "max_ran_on_s": round(arm.max_ran_on_s, 4),
+            "ran_on_deg": round(arm.ran_on_deg, 4),
+            "max_ran_on_deg": round(arm.max_ran_on_deg, 4),
+            "last_motion_s": round(arm.last_motion_s, 4),
+            "monitor_speed": self.monitor_speed,
             "peak_speed_deg_s": [round(x, 4) for x in arm.peak_speed],
             "peak_accel_deg_s2": [round(x, 3) for x in arm.peak_accel],
             "in_motion": arm.in_motion,
@@ -501,12 +518,19 @@ class Controller:
                 raise ValueError('"slow_ack" needs "ms" between 0 and 60000')
             self.slow_ack_ms = float(ms)
             event(f"acknowledgements delayed by {ms} ms")
+        elif cmd == "monitor_speed":
+            percent = req.get("percent")
+            if not isinstance(percent, (int, float)) or isinstance(percent, bool) or not 1 <= percent <= 100:
+                raise ValueError('"monitor_speed" needs "percent" between 1 and 100')
+            self.monitor_speed = float(percent)
+            self.arm.set_monitor_speed(self.monitor_speed, time.monotonic())
+            event(f"monitor speed {percent:g} %")
         elif cmd == "quit":
             self.done.set()
         else:
             raise ValueError(
                 f"unknown cmd {cmd!r}; known: status, estop, estop_release, drives, drop_connection, "
-                "slow_ack, quit"
+                "slow_ack, monitor_speed, quit"
             )
         return {"ok": True}
 

@@ -27,8 +27,10 @@ A motion's stream
 Each point waits for its acknowledgement. The Adept's V+ program reads a point only when
 its previous MOVE has begun (one motion runs, the next is planned behind it), so its
 acknowledgements come at the arm's pace: the base (``streamed_points.py``) merges what was made meanwhile, never
-beyond two periods of the core's full speed, and slows the core (time scaling) when the
-answers fall behind, so the arm and rob6's setpoints stay together at any monitor speed.
+beyond two periods of the core's full speed nor ``MAX_SEGMENT_DEG`` on any joint (a point
+never goes farther than half of that, however fast a client let the core move), and slows
+the core (time scaling) when the answers fall behind, so the arm and rob6's setpoints stay
+together at any monitor speed.
 
 A motion connection begins with the *opening* (``Codec.opening``): the program discards
 the first four bytes of a connection, and the opening reads right whether they are rob6's
@@ -45,9 +47,12 @@ the controller reports it at rest, and its JOINT_POSITION is the final setpoint 
 error the gateway shows as ``ERROR: driver: ...``:
 
 * no connection yet: ``robot not connected (waiting for simple_message at HOST:11000/11002)``;
-* a connection lost (closed, no state message for ``state_timeout_s``, no acknowledgement
-  for ``ack_timeout_s``): ``simple_message link lost: ...``; rob6 reconnects every
-  ``retry_s``;
+* a connection lost (closed, no state message for ``state_timeout_s``, neither an
+  acknowledgement nor the arm moving for ``ack_timeout_s``): ``simple_message link lost:
+  ...``; rob6 reconnects every ``retry_s``. The answer to a point comes when the MOVE
+  before it has begun, so it may take a whole MOVE of the arm (seconds at a low monitor
+  speed, or when the operator lowers it mid-stream): while the state port shows the arm
+  moving (STATUS in motion, or its position changing) a late answer is no lost link;
 * STATUS: ``robot reports an E-stop``, ``robot reports drives off``,
   ``robot reports controller error N``;
 * a point refused (reply code other than 1), or the robot not at the target when it
@@ -58,7 +63,8 @@ connections are up, STATUS is clear and the robot is at rest (two state messages
 the fault, the same position in both): the core continues from the robot's actual
 position, never from where an interrupted motion would have been. When the stream was
 cut mid-motion the link sends a stop (sequence -4) as soon as it can; the V+ program
-answers it and halts nothing: the MOVEs it has issued (at most three short segments) run out.
+answers it and halts nothing: the MOVEs it has issued (at most three segments of at most
+``MAX_SEGMENT_DEG``) run out.
 
 Joints: rob6 (rob6server's convention, degrees) versus the controller's (radians on the
 wire), see ``to_controller_deg`` and deploy/adept/README.md.
@@ -67,6 +73,7 @@ wire), see ``to_controller_deg`` and deploy/adept/README.md.
 from __future__ import annotations
 
 import logging
+import math
 import select
 import socket
 import time
@@ -99,7 +106,15 @@ from .simple_message_codec import (
     RobotStatus,
     SimpleMessageError,
 )
-from .streamed_points import Joints, LinkDown, StreamedPointsLink, Timeouts, check_address, check_period
+from .streamed_points import (
+    REST_TOL_DEG,
+    Joints,
+    LinkDown,
+    StreamedPointsLink,
+    Timeouts,
+    check_address,
+    check_period,
+)
 from .streaming import endpoint_name as _name, send_all as _send_all
 
 log = logging.getLogger("rob6.driver")
@@ -139,6 +154,12 @@ CONTROLLER_RANGE_DEG = np.array([(-170.0, 170.0), (-190.0, 45.0), (-29.0, 256.0)
 #: rated joint speeds of the Viper s850, deg/s (Adept's data sheet): the maximum the
 #: points' velocity fraction refers to
 RATED_SPEED_DEG_S = np.array([250.0, 250.0, 250.0, 375.0, 375.0, 600.0])
+#: the longest segment one point may span, per joint, deg: what rob6's default speeds (a
+#: tenth of the rated ones) move in two default periods (96 ms), whatever speed limits a
+#: client sets. The program holds up to three MOVEs (running, planned, in the task), and a
+#: stop halts none of them: after a client vanishes the arm runs on at most three of these,
+#: at any monitor speed (which stretches the time of a stop, never its distance)
+MAX_SEGMENT_DEG = np.array([2.4, 2.4, 2.4, 3.6, 3.6, 5.76])
 #: decimals (deg) of the positions read from the wire
 WIRE_DECIMALS = 4
 
@@ -192,6 +213,7 @@ class AdeptSettings:
 class AdeptLink(StreamedPointsLink):
     kind = "simple_message"
     arrival_tol_deg = ARRIVAL_TOL_DEG
+    max_segment_deg = MAX_SEGMENT_DEG
 
     def __init__(self, core: MotionCore, robot: RobotModel, settings: AdeptSettings, publish: Publish,
                  on_event: Callable[[LinkEvent], None] | None = None, **timeouts: Unpack[Timeouts]) -> None:
@@ -218,6 +240,7 @@ class AdeptLink(StreamedPointsLink):
         self._sequence = 0  # the number of the motion's next point
         self._rest_q: Joints = core.state().q
         self._talked = False  # a request went out on the current motion connection
+        self._moving_seen = -math.inf  # when the state port last showed the arm moving (monotonic)
         self.stops = 0
         waiting = f"robot not connected (waiting for simple_message at {host}:{settings.motion_port}/{settings.state_port})"
         super().__init__(core, robot, settings, publish, on_event, waiting, **timeouts)
@@ -381,11 +404,15 @@ class AdeptLink(StreamedPointsLink):
         if kind == JOINT_POSITION and isinstance(message.value, JointPosition):
             q = from_wire(message.value.joints)
             with self._cond:
+                if self._position is not None and np.abs(q - self._position).max() > REST_TOL_DEG:
+                    self._moving_seen = time.monotonic()
                 self._previous_position = self._position
                 self._position = q
                 self.q_actual = q.tolist()
         elif kind == STATUS and isinstance(message.value, RobotStatus):
             with self._cond:
+                if message.value.in_motion == TS_TRUE:
+                    self._moving_seen = time.monotonic()
                 self._robot_status = message.value
                 self._state_count += 1
                 self._evaluate()
@@ -442,12 +469,14 @@ class AdeptLink(StreamedPointsLink):
 
     def _open_motion(self, sock: socket.socket, buffer: bytearray, connected: float) -> bool:
         """Begin a motion connection with the opening (``Codec.opening``) once the arm can
-        take it (its position known, drives on, no E-stop: the opening may be a MOVE to
-        where it stands), and its rest when it was read from its first byte; False when the
+        take it and is at rest (drives on, no E-stop, two state messages at the same position
+        and not in motion: the opening may be a MOVE to where it stands, queued behind any
+        MOVE still running, so a position taken while it moves would send it back), with its
+        latest position, and its rest when it was read from its first byte; False when the
         link closes meanwhile. ``LinkDown`` when the controller closes or does not answer."""
         while True:
             with self._cond:
-                ready = self._state_up and self._position is not None and self._controller_fault() == ""
+                ready = self._state_up and self._controller_fault() == "" and self._at_rest()
                 here = self._position
             if self._closing.is_set():
                 return False
@@ -492,8 +521,8 @@ class AdeptLink(StreamedPointsLink):
 
     def _await_reply(self, sock: socket.socket, buffer: bytearray, connected: float) -> tuple[int, int | None]:
         """The reply code of the request just sent and the sequence its body carries
-        (``LinkDown`` when none comes in time)."""
-        deadline = time.monotonic() + self.ack_timeout_s
+        (``LinkDown`` when for ``ack_timeout_s`` neither it came nor the arm moved)."""
+        sent = time.monotonic()
         while True:
             for payload in self._frames(buffer):
                 message = self.codec.decode(payload)
@@ -501,6 +530,8 @@ class AdeptLink(StreamedPointsLink):
                     return message.header.reply_code, self.codec.reply_sequence(message.body)
                 self._garbage(f"driver: ignored a message of type {message.header.msg_type} "
                               f"(comm type {message.header.comm_type}) on the motion port")
+            with self._cond:
+                deadline = max(sent, self._moving_seen) + self.ack_timeout_s
             remaining = deadline - time.monotonic()
             if self._closing.is_set():
                 raise LinkDown("closing")

@@ -16,7 +16,7 @@ writes big-endian (``LNGB``/``FLTB``), hence the default.
 Bodies rob6 uses:
 
 * JOINT_TRAJ_PT (11): int32 sequence, float32 joints[10] (rad), float32 velocity
-  (fraction of the maximum), float32 duration (s) -- 56 bytes. Special sequences:
+  (fraction of the maximum), float32 duration (s) -- 52 bytes. Special sequences:
   -1 start of a trajectory download, -2 start of streaming, -3 end of a trajectory,
   -4 stop.
 * JOINT_POSITION (10): int32 sequence, float32 joints[10] (rad) -- 44 bytes.

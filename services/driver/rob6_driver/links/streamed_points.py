@@ -10,6 +10,9 @@ Each point waits for its answer before the next goes out; points made meanwhile 
 merged into one (the newest position, durations summed; ``late`` counts them), but never
 into a segment longer than what the core moves at its full speed in ``MAX_SEGMENT_PERIODS``
 periods: what a controller has taken runs out even after a stop, so no segment may be long.
+A link may also bound segments in degrees per joint (``max_segment_deg``), whatever speed
+limits a client set: a point then goes no farther than its share of that bound (the cycle's
+move split along its line when the core runs fast), and points merge only within it.
 
 Pacing: a controller that answers only when its arm is ready for more (the Adept's V+
 program reads the next point when its previous MOVE has begun) holds rob6 back by its
@@ -148,6 +151,8 @@ class StreamedPointsLink(Link):
 
     #: arrival: the controller's position within this of the final setpoint (deg)
     arrival_tol_deg = 0.0
+    #: the longest segment per joint in degrees (rob6 joints), None: bounded in time only
+    max_segment_deg: Joints | None = None
 
     def __init__(self, core: MotionCore, robot: RobotModel, settings: StreamSettings, publish: Publish,
                  on_event: Callable[[LinkEvent], None] | None, waiting_reason: str,
@@ -180,6 +185,8 @@ class StreamedPointsLink(Link):
         self._paced = 0.0  # plan seconds the core has run since the last point (its feed, summed)
         self._span = 0.0  # ... and what it moved meanwhile, in seconds of its full speed
         self._outbox: deque[StreamedPoint] = deque()
+        self._pushed_q: Joints | None = None  # the last point made
+        self._taken_q: Joints | None = None  # the last point _merge gave out
         self._inflight = False
         self._stop_pending = False
         self._sent: Joints | None = None  # the last point the controller took (the subclass's joints)
@@ -346,6 +353,8 @@ class StreamedPointsLink(Link):
                                   f"target {target[j]:.3f})")
                         self._evaluate(reason)
                         return reason
+                elif moving and timeout is None:  # points still out, the arm running them (slowly)
+                    deadline = max(deadline, min(began + SETTLE_CAP_S, now + self.settle_max_s))
                 elif now > deadline + self.ack_timeout_s:
                     reason = "the robot did not take the motion's last points in time"
                     self._evaluate(reason)
@@ -389,12 +398,26 @@ class StreamedPointsLink(Link):
             self._resting(state.q)
 
     def _push(self, q: Joints, duration: float, final: bool = False) -> None:
+        """A point to ``q``; with ``max_segment_deg``, split along the line from the last
+        point into pieces of at most ``max_segment_deg / MAX_SEGMENT_PERIODS`` per joint."""
+        last, bound = self._pushed_q, self.max_segment_deg
+        pieces = 1
+        if bound is not None and last is not None:
+            pieces = max(1, math.ceil(float(np.max(np.abs(q - last) / (bound / MAX_SEGMENT_PERIODS))) - 1e-9))
+        span, paced = self._span / pieces, self._paced / pieces
+        for k in range(1, pieces + 1):
+            at = q if k == pieces or last is None else last + (q - last) * (k / pieces)
+            self._span, self._paced = span, paced
+            self._push_one(at, duration / pieces, final and k == pieces)
+
+    def _push_one(self, q: Joints, duration: float, final: bool) -> None:
         why = self._outside_range(q)
         if why:  # the core's limits allow more than the controller: never send it
             self._evaluate(f"refused to send a point outside the robot's range ({why})")
             return
         self._outbox.append(StreamedPoint(np.array(q, float), float(duration), final, self._number(final),
                                           self.core.t, self._span, self._paced))
+        self._pushed_q = self._outbox[-1].q
         self._paced = self._span = 0.0
         self._wake()
 
@@ -406,10 +429,15 @@ class StreamedPointsLink(Link):
         the arm's pace) (lock held, the outbox not empty). It is in flight from now on."""
         merged = [self._outbox.popleft()]
         span = merged[0].span
+        start = merged[0].q if self._taken_q is None else self._taken_q
         while self._outbox and not merged[-1].final and span + self._outbox[0].span <= self.max_segment_s + 1e-9:
+            if self.max_segment_deg is not None and np.any(
+                    np.abs(self._outbox[0].q - start) > self.max_segment_deg + 1e-9):
+                break
             p = self._outbox.popleft()
             merged.append(p)
             span += p.span
+        self._taken_q = merged[-1].q
         self.late += len(merged) - 1
         self.longest_segment_s = max(self.longest_segment_s, span)
         self._inflight = True
@@ -482,6 +510,7 @@ class StreamedPointsLink(Link):
                 self.state = "connected"
                 self._reason = ""
                 self._sent = None
+                self._pushed_q = self._taken_q = None
                 self._on_resync(position)
                 self.core.online(position, reason="resynchronized with the robot")
                 pose = " ".join(f"{x:.3f}" for x in position)
@@ -497,6 +526,7 @@ class StreamedPointsLink(Link):
         outstanding = self._open or bool(self._outbox) or self._inflight
         self._outbox.clear()
         self._open = False
+        self._pushed_q = self._taken_q = None
         if outstanding and self._sending_up():
             self._stop_pending = True
             self._wake()
