@@ -30,8 +30,10 @@ def kr16() -> Iterator[System]:
 
 def is_default_cell(cell: dict[str, Any], robot: str) -> bool:
     """GetCell's dict without ROB6_CELL: the default cell, with every field, defaults included
-    (a client needs no knowledge of them)."""
-    return (msgspec.convert(cell, Cell) == default_cell(get_robot(robot))
+    (a client needs no knowledge of them), and the pairs not measured, each with why."""
+    served = msgspec.convert(cell, Cell)  # with the pairs the driver does not measure, and why
+    return (msgspec.structs.replace(served, unchecked=[]) == default_cell(get_robot(robot))
+            and bool(served.unchecked) and all(": " in line for line in served.unchecked)
             and set(cell) == set(Cell.__struct_fields__) and cell["source"] == f"default {robot}"
             and all(set(zone) == set(Zone.__struct_fields__) for zone in cell["zones"]))
 

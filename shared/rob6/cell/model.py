@@ -65,6 +65,7 @@ class CellModel:
         self.geometry = pin.GeometryModel()
         self._part_of: list[str] = []  # geometry object -> its part
         self._extent: dict[str, float] = {}  # part -> farthest point from its joint's origin (m)
+        self._radial: dict[str, float] = {}  # part -> farthest point from its joint's axis (m)
         self._joint: dict[str, int] = {}  # part -> the joint it rides on
         for part, shapes in arm_shapes(robot.geometry).items():
             joint = 0 if part == "base" else self.model.getJointId(f"joint_{part.removeprefix('link_')}")
@@ -111,6 +112,7 @@ class CellModel:
         self._part_of.append(part)
         self._joint[part] = joint
         self._extent[part] = max(self._extent.get(part, 0.0), _reach(geometry, placement))
+        self._radial[part] = max(self._radial.get(part, 0.0), _radial(geometry, placement))
 
     def _pair(self, a: int, b: int, pair: Pair, part_a: int, part_b: int) -> None:
         self.geometry.addCollisionPair(pin.CollisionPair(a, b))
@@ -171,14 +173,19 @@ class CellModel:
 
     def _levers(self) -> np.ndarray:
         """(parts, 6): how far (mm) a point of the part can move per radian of each joint, in
-        any configuration: the link lengths from that joint to the part's joint, plus the part's
-        own reach."""
+        any configuration: for a joint before the part's own, the link lengths from that joint
+        to the part's joint plus the part's reach from its joint; for the part's own joint, the
+        part's farthest point from that joint's axis (it turns about it: a forearm spinning about
+        its own axis moves by its radius, not its length). Every joint turns about the z axis of
+        its frame (rob6/urdf)."""
         lengths = [float(np.linalg.norm(self.model.jointPlacements[j].translation)) for j in range(N_JOINTS + 1)]
         lever = np.zeros((len(self.parts), N_JOINTS))
         for i, part in enumerate(self.parts):
             joint = self._joint[part]
-            for j in range(1, joint + 1):
+            for j in range(1, joint):
                 lever[i, j - 1] = 1000.0 * (sum(lengths[j + 1:joint + 1]) + self._extent[part])
+            if joint >= 1:
+                lever[i, joint - 1] = 1000.0 * self._radial[part]
         return lever
 
     def _pair_levers(self) -> np.ndarray:
@@ -274,6 +281,22 @@ def _zone_shapes(zone: Zone) -> list[tuple[coal.CollisionGeometry, pin.SE3]]:
             # solid where outward . x > outward . centre + half: coal's Halfspace(n, d) is n . x < d
             shapes.append((coal.Halfspace(-outward, -(float(outward @ centre) + half[axis])), pin.SE3.Identity()))
     return shapes
+
+
+def _radial(geometry: coal.CollisionGeometry, placement: pin.SE3) -> float:
+    """The farthest a point of ``geometry`` (at ``placement`` in its joint's frame) is from that
+    joint's axis, the frame's z axis (m): a convex shape's farthest point from a line is at a
+    vertex (a box) or at an end of its segment plus the radius (a capsule, a sphere)."""
+    t, rotation = np.asarray(placement.translation), np.asarray(placement.rotation)
+    if isinstance(geometry, coal.Capsule):
+        half = rotation[:, 2] * float(geometry.halfLength)
+        return max(float(np.linalg.norm((t + half)[:2])), float(np.linalg.norm((t - half)[:2]))) + float(geometry.radius)
+    if isinstance(geometry, coal.Sphere):
+        return float(np.linalg.norm(t[:2])) + float(geometry.radius)
+    if isinstance(geometry, coal.Box):
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * np.asarray(geometry.halfSide)
+        return float(np.linalg.norm((t + corners @ rotation.T)[:, :2], axis=1).max())
+    raise ValueError(f"no radius about an axis for a {type(geometry).__name__}")
 
 
 def _reach(geometry: coal.CollisionGeometry, placement: pin.SE3) -> float:
