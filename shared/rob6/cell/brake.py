@@ -40,11 +40,11 @@ class LineBrake:
 
 
 def line_brake(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, end: np.ndarray, vmax: np.ndarray,
-               amax: np.ndarray, jmax: np.ndarray, reaction_s: float = 0.0) -> LineBrake | None:
+               amax: np.ndarray, jmax: np.ndarray) -> LineBrake | None:
     """The brake along the line from ``q`` to ``end`` (deg) from velocity ``qd`` and
     acceleration ``qdd`` (deg/s, deg/s^2) along it, with the joints' limits; None when the
-    state is not along the line towards ``end``, or when the brake (after ``reaction_s`` at
-    the present speed) would not come to rest before ``end``."""
+    state is not along the line towards ``end``, or when the brake would not come to rest
+    before ``end``."""
     direction = end - q
     length = float(np.linalg.norm(direction))
     if length < ON_LINE_TOL:
@@ -73,6 +73,6 @@ def line_brake(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, end: np.ndarray, 
     if result not in (ruckig.Result.Working, ruckig.Result.Finished):
         return None
     brake = LineBrake(q, unit, trajectory)
-    if brake.length < -ON_LINE_TOL or brake.length + sd * reaction_s > length + ON_LINE_TOL:
+    if brake.length < -ON_LINE_TOL or brake.length > length + ON_LINE_TOL:
         return None
     return brake

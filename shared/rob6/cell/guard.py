@@ -249,8 +249,10 @@ class Guard:
         bound = _brake_bound(qd, qdd, amax, jmax) + react
         if room > self.model.travel(bound).max():
             return None
-        if along is not None and line_brake(q, qd, qdd, along, vmax, amax, jmax, self.reaction_s) is not None:
-            return None  # the stop is the rest of a path whose poses are clear
+        if along is not None and line_brake(q, qd, qdd, along, vmax, amax, jmax) is not None:
+            # the stop is the rest of a path whose poses are clear; its reaction too: until the
+            # brake begins the arm follows the setpoints already sent, which lie on the path
+            return None
         # (2) the brake itself, as the driver plans it (phase-synchronised, else not)
         brakes = self._brakes(q, qd, qdd, vmax, amax, jmax)
         if d is None:
